@@ -1,0 +1,195 @@
+//! The `prtbake` command line: parses arguments, checks them, and hands a
+//! configuration to the library (`prtbake::cli`). Exit codes: 0 success,
+//! 1 a check failed (`verify`), 2 error (bad input, bad arguments, I/O).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use prtbake::bake::{BakeParams, Channels, DirectionPattern, Mode, Sampling};
+use prtbake::cli::{self, Outcome};
+use prtbake::mesh::UpAxis;
+
+#[derive(Parser)]
+#[command(name = "prtbake", version, about = "Precomputed radiance transfer, baked offline", propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Up {
+    Y,
+    Z,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SamplingArg {
+    Interior,
+    Vertex,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum PatternArg {
+    Sobol,
+    Random,
+}
+
+#[derive(clap::Args)]
+struct BakeArgs {
+    /// Mesh to bake (.obj, .gltf, .glb).
+    mesh: PathBuf,
+    /// Bundle to write (.prtb).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// SH order n: n² coefficients per channel.
+    #[arg(long, default_value_t = 3)]
+    order: usize,
+    /// Rays per sample point (≤ 65536).
+    #[arg(long, default_value_t = 256)]
+    rays: u32,
+    #[arg(long, default_value_t = 1)]
+    seed: u32,
+    /// Worker threads (0 = all cores). The output does not depend on it.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Up axis of OBJ files (glTF is always +Y up).
+    #[arg(long, value_enum, default_value_t = Up::Y)]
+    up: Up,
+    /// Interreflection bounces after the direct one.
+    #[arg(long, default_value_t = 0)]
+    bounces: u32,
+    /// Light enters only through windows: materials or groups matching this glob (repeatable);
+    /// glTF materials with KHR_materials_transmission count too.
+    #[arg(long = "window", value_name = "PATTERN")]
+    windows: Vec<String>,
+    /// Window mode even without --window (materials with the window role only).
+    #[arg(long)]
+    window_mode: bool,
+    /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
+    #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
+    sampling: SamplingArg,
+    /// Interior samples per vertex on average (spread by area, ≥ 1 per triangle).
+    #[arg(long, default_value_t = 2.0)]
+    samples_per_vertex: f32,
+    /// Colour channels: 1, 3, or auto (1 when every material is grey).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "1", "3"])]
+    channels: String,
+    /// Store each bounce separately as well as the total.
+    #[arg(long)]
+    store_bounces: bool,
+    /// Direction pattern (random is for comparison only).
+    #[arg(long, value_enum, default_value_t = PatternArg::Sobol)]
+    pattern: PatternArg,
+    /// Stats as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// No progress on stderr.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Bake per-vertex SH transfer of a mesh into a bundle.
+    Bake(BakeArgs),
+    /// Show what a bundle holds.
+    Inspect {
+        bundle: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Bake analytic scenes and compare with closed forms (exit 1 on failure).
+    Verify {
+        #[arg(long, default_value_t = 1024)]
+        rays: u32,
+        #[arg(long, default_value_t = 1)]
+        seed: u32,
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Generate the demo cabin, bake it in window mode and write a bundle and a summary.
+    Demo {
+        /// Output folder.
+        #[arg(short, long, default_value = "demo-out")]
+        output: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        #[arg(long)]
+        json: bool,
+        #[arg(long)]
+        quiet: bool,
+    },
+}
+
+fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
+    let channels = match a.channels.as_str() {
+        "1" => Channels::One,
+        "3" => Channels::Three,
+        _ => Channels::Auto,
+    };
+    let params = BakeParams {
+        order: a.order,
+        rays: a.rays,
+        seed: a.seed,
+        mode: if a.window_mode || !a.windows.is_empty() { Mode::Window } else { Mode::Open },
+        sampling: match a.sampling {
+            SamplingArg::Interior => Sampling::Interior { samples_per_vertex: a.samples_per_vertex, max_per_triangle: 256 },
+            SamplingArg::Vertex => Sampling::Vertex,
+        },
+        bounces: a.bounces,
+        channels,
+        store_bounces: a.store_bounces,
+        pattern: match a.pattern {
+            PatternArg::Sobol => DirectionPattern::Sobol,
+            PatternArg::Random => DirectionPattern::Random,
+        },
+        quiet: a.quiet || a.json,
+        ..BakeParams::default()
+    };
+    params.check()?;
+    Ok(cli::bake_cmd::BakeConfig {
+        input: a.mesh,
+        output: a.output,
+        up: match a.up {
+            Up::Y => UpAxis::Y,
+            Up::Z => UpAxis::Z,
+        },
+        params,
+        window_patterns: a.windows,
+        threads: a.threads,
+        json: a.json,
+    })
+}
+
+fn run(command: Command) -> anyhow::Result<Outcome> {
+    match command {
+        Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
+        Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
+        Command::Verify { rays, seed, threads, json } => {
+            cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)
+        }
+        Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
+    }
+}
+
+fn main() -> ExitCode {
+    let parsed = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() { 2 } else { 0 };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    match run(parsed.command) {
+        Ok(Outcome::Ok) => ExitCode::SUCCESS,
+        Ok(Outcome::CheckFailed) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,208 @@
+//! The baker: per-vertex SH transfer (and, in `sun`, shadow masks) traced on
+//! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
+//! arrays and statistics.
+
+pub mod progress;
+pub mod sampling;
+pub mod scene;
+pub mod surfaces;
+pub mod transfer;
+
+pub use sampling::DirectionPattern;
+pub use scene::{BuildQuality, Hit, Scene};
+pub use surfaces::Surfaces;
+pub use transfer::bake_transfer;
+
+use crate::sh;
+
+/// Which light reaches a point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Under an open sky: rays that escape the scene bring light; one-sided cosine.
+    Open,
+    /// Inside a cabin: only rays whose first hit is a window bring light; two-sided cosine |n·ω|.
+    Window,
+}
+
+/// Where rays are shot from.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "lowercase", tag = "kind")]
+pub enum Sampling {
+    /// Stratified points inside each triangle, about `samples_per_vertex` × vertex count
+    /// in all, spread by area (at least one, at most `max_per_triangle`, per triangle).
+    Interior { samples_per_vertex: f32, max_per_triangle: u32 },
+    /// The vertices themselves (leaks shadows where triangles overlap; for comparison).
+    Vertex,
+}
+
+impl Sampling {
+    /// The default interior sampling: two samples per vertex on average.
+    pub const fn interior() -> Sampling {
+        Sampling::Interior { samples_per_vertex: 2.0, max_per_triangle: 256 }
+    }
+}
+
+/// How many colour channels the transfer keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Channels {
+    /// One when every material is grey, three otherwise.
+    Auto,
+    One,
+    Three,
+}
+
+/// Parameters of a transfer bake.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct BakeParams {
+    /// SH order n: bands l < n, n² coefficients.
+    pub order: usize,
+    /// Rays per sample point (≤ 65,536, the Sobol limit per seed).
+    pub rays: u32,
+    /// Seed of every random stream.
+    pub seed: u32,
+    pub mode: Mode,
+    pub sampling: Sampling,
+    /// Interreflection bounces after the direct one (0 = shadowed transfer only).
+    pub bounces: u32,
+    pub channels: Channels,
+    /// Keep each bounce's transfer, not only the total.
+    pub store_bounces: bool,
+    pub pattern: DirectionPattern,
+    /// A sample is inside geometry when most of its probe rays hit back faces
+    /// closer than this fraction of the scene diagonal.
+    pub inside_distance: f32,
+    /// No progress line on stderr (not part of the bake: never stored).
+    #[serde(skip)]
+    pub quiet: bool,
+}
+
+impl Default for BakeParams {
+    fn default() -> Self {
+        BakeParams {
+            order: 3,
+            rays: 256,
+            seed: 1,
+            mode: Mode::Open,
+            sampling: Sampling::interior(),
+            bounces: 0,
+            channels: Channels::Auto,
+            store_bounces: false,
+            pattern: DirectionPattern::Sobol,
+            inside_distance: 0.05,
+            quiet: true,
+        }
+    }
+}
+
+impl BakeParams {
+    /// Checks ranges; called by [`bake_transfer`].
+    pub fn check(&self) -> Result<(), BakeError> {
+        if self.order == 0 || self.order > sh::MAX_ORDER {
+            return Err(BakeError::Params(format!("order {} is outside 1..={}", self.order, sh::MAX_ORDER)));
+        }
+        if self.rays == 0 || self.rays > sampling::MAX_RAYS_PER_POINT {
+            return Err(BakeError::Params(format!(
+                "rays per sample {} is outside 1..={}",
+                self.rays,
+                sampling::MAX_RAYS_PER_POINT
+            )));
+        }
+        if self.bounces > 16 {
+            return Err(BakeError::Params(format!("{} bounces is more than 16", self.bounces)));
+        }
+        if let Sampling::Interior { samples_per_vertex, max_per_triangle } = self.sampling {
+            if !(samples_per_vertex > 0.0 && samples_per_vertex.is_finite()) || max_per_triangle == 0 {
+                return Err(BakeError::Params("interior sampling needs a positive sample density".into()));
+            }
+        }
+        Ok(())
+    }
+
+    /// Channels the result will have for these surfaces.
+    pub fn channel_count(&self, surfaces: &Surfaces) -> usize {
+        match self.channels {
+            Channels::One => 1,
+            Channels::Three => 3,
+            Channels::Auto => {
+                if surfaces.all_grey() {
+                    1
+                } else {
+                    3
+                }
+            }
+        }
+    }
+}
+
+/// Errors of the baker.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("bad bake parameters: {0}")]
+    Params(String),
+    #[error(transparent)]
+    Pattern(#[from] surfaces::PatternError),
+}
+
+/// What a bake measured.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BakeStats {
+    pub triangles: u64,
+    pub vertices: u64,
+    pub window_triangles: u64,
+    /// Sample points (interior samples or vertices).
+    pub points: u64,
+    /// Interior samples rejected as lying inside geometry.
+    pub points_rejected: u64,
+    /// Vertices no sample reached (only on window or degenerate triangles): their transfer is zero.
+    pub vertices_without_samples: u64,
+    pub rays_per_bounce: Vec<u64>,
+    pub seconds_per_bounce: Vec<f64>,
+    pub rays: u64,
+    pub seconds: f64,
+    pub rays_per_second: f64,
+}
+
+/// A baked transfer: per vertex `[channel][coeff]`, vertex-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferResult {
+    pub order: usize,
+    pub channels: usize,
+    /// Sum of all bounces.
+    pub total: Vec<f32>,
+    /// Each bounce (0 = direct) when `store_bounces`, else empty.
+    pub bounces: Vec<Vec<f32>>,
+    pub stats: BakeStats,
+}
+
+impl TransferResult {
+    /// Coefficients of vertex `v`, channel `c`.
+    pub fn coefficients(&self, v: usize, c: usize) -> &[f32] {
+        let n = sh::coeff_count(self.order);
+        &self.total[(v * self.channels + c) * n..][..n]
+    }
+}
+
+/// Peak resident memory of this process in bytes (Linux `VmHWM`), if known.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Builds the scene and surfaces for `mesh` and bakes its transfer: the one
+/// path `prtbake bake`, `verify` and the tests share.
+pub fn bake_mesh(
+    mesh: &crate::mesh::Mesh,
+    params: &BakeParams,
+    window_patterns: &[String],
+) -> Result<(TransferResult, Surfaces, f64), BakeError> {
+    params.check()?;
+    let surfaces = Surfaces::resolve(mesh, window_patterns)?;
+    let scene = Scene::build(mesh, BuildQuality::Medium);
+    let build_seconds = scene.build_time.as_secs_f64();
+    let result = bake_transfer(mesh, &scene, &surfaces, params)?;
+    Ok((result, surfaces, build_seconds))
+}

@@ -1,0 +1,155 @@
+//! The `.prtb` bundle: a compact, versioned, checksummed container for a baked scene.
+//!
+//! A bundle holds the mesh, its materials, per-vertex SH transfer and sun masks
+//! with per-step sun/sky data, each in its own tagged section, zstd-compressed
+//! per section, CRC-32 per section and over the header and table.
+//! Little-endian everywhere. The byte layout is specified in docs/bundle-format.md.
+//!
+//! - `container`: header, section table, codecs, checksums (knows no content).
+//! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND.
+//! - `quantize`: f32 / f16 / i16-with-per-vertex-scale transfer storage.
+//!
+//! Decoding never panics on hostile bytes: counts are checked against section
+//! lengths before allocation and every failure is a [`BundleError`] naming the
+//! section and the problem.
+
+mod container;
+mod cursor;
+mod error;
+mod quantize;
+mod sections;
+mod types;
+
+#[cfg(test)]
+mod tests;
+
+use std::fs;
+use std::io::Write;
+use std::path::Path;
+
+pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
+pub use error::{BundleError, Tag};
+pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16};
+pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+
+use container::{write_container, Container};
+use sections::{ReadRules, MATL, META, MESH, SUND, SUNM, XFER};
+
+/// Encodes a bundle with the default options (zstd level 9 per section).
+///
+/// Deterministic: the same bundle gives the same bytes (fixed level, single-threaded
+/// zstd, no timestamps). Errors with [`BundleError::Invalid`] when the bundle would
+/// not read back: mesh invariants ([`crate::mesh::Mesh::validate`]), transfer or mask
+/// lengths that do not match the vertex count, non-finite transfer or sun values,
+/// f16 overflow, duplicate layer kinds, mask bits past the last step.
+pub fn encode_bundle(b: &Bundle) -> Result<Vec<u8>, BundleError> {
+    encode_bundle_with(b, EncodeOptions::default())
+}
+
+/// [`encode_bundle`] with explicit options (e.g. [`Compression::None`] for golden tests).
+pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>, BundleError> {
+    b.mesh.validate().map_err(|e| BundleError::Invalid(format!("mesh: {e}")))?;
+    let vertex_count = b.mesh.vertex_count();
+    let mut parts = vec![
+        (META, sections::encode_meta(&b.meta)?),
+        (MESH, sections::encode_mesh(&b.mesh)?),
+        (MATL, sections::encode_materials(&b.mesh.materials, &b.mesh.groups)?),
+    ];
+    if let Some(t) = &b.transfer {
+        parts.push((XFER, sections::encode_transfer(t, vertex_count)?));
+    }
+    if let Some(sun) = &b.sun {
+        parts.push((SUNM, sections::encode_sun_masks(sun, vertex_count)?));
+        parts.push((SUND, sections::encode_sun_data(sun)?));
+    }
+    write_container(&parts, options)
+}
+
+/// Decodes and fully checks a bundle (see "Reader rules" in docs/bundle-format.md).
+///
+/// Sections with unknown tags are skipped; a file of a later minor version is read
+/// for what this reader knows. Transfer data comes back dequantized to f32.
+pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
+    let container = Container::parse(bytes)?;
+    let rules = ReadRules { reject_reserved: container.reject_reserved() };
+    let section = |tag: [u8; 4]| container.find(tag).map(|info| container.payload(info)).transpose();
+    let required = |tag: [u8; 4]| section(tag)?.ok_or(BundleError::MissingSection(Tag(tag)));
+
+    let meta = sections::decode_meta(&required(META)?)?;
+    let (materials, groups) = sections::decode_materials(&required(MATL)?)?;
+    let mut mesh = sections::decode_mesh(&required(MESH)?, rules)?;
+    mesh.materials = materials;
+    mesh.groups = groups;
+    mesh.validate().map_err(|e| BundleError::malformed(MESH, e))?;
+    let vertex_count = mesh.vertex_count();
+
+    let transfer = match section(XFER)? {
+        Some(raw) => Some(sections::decode_transfer(&raw, vertex_count, rules)?),
+        None => None,
+    };
+    let sun = match (section(SUNM)?, section(SUND)?) {
+        (None, None) => None,
+        (Some(_), None) => return Err(BundleError::MissingSection(Tag(SUND))),
+        (None, Some(_)) => return Err(BundleError::MissingSection(Tag(SUNM))),
+        (Some(masks_raw), Some(data_raw)) => {
+            let (step_count, words_per_vertex, masks) = sections::decode_sun_masks(&masks_raw, vertex_count, rules)?;
+            let (sky_order, steps) = sections::decode_sun_data(&data_raw, rules)?;
+            if steps.len() != step_count as usize {
+                return Err(BundleError::malformed(SUND, format!("{} steps, but SUNM has {step_count}", steps.len())));
+            }
+            Some(SunSeries { sky_order, steps, words_per_vertex, masks })
+        }
+    };
+    Ok(Bundle { meta, mesh, transfer, sun })
+}
+
+/// The section table of a bundle, after the header checks (magic, version, header
+/// CRC, length, layout); payloads are neither decompressed nor CRC-checked.
+/// For `prtbake inspect`.
+pub fn list_sections(bytes: &[u8]) -> Result<Vec<SectionInfo>, BundleError> {
+    Container::parse(bytes).map(|c| c.sections)
+}
+
+/// Encodes `b` and writes it atomically: to `<path>.tmp-<pid>` in the same
+/// directory, fsync, then rename over `path` (then a best-effort fsync of the directory).
+/// On failure the temporary file is removed and `path` is untouched.
+pub fn write_bundle(path: &Path, b: &Bundle) -> Result<(), BundleError> {
+    let in_file = |source: BundleError| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) };
+    let io = |source: std::io::Error| BundleError::Io { path: path.to_path_buf(), source };
+    let bytes = encode_bundle(b).map_err(in_file)?;
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file path")))?;
+    let mut tmp_name = file_name.to_os_string();
+    tmp_name.push(format!(".tmp-{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+
+    let written = (|| {
+        let mut file = fs::File::create(&tmp)?;
+        file.write_all(&bytes)?;
+        file.sync_all()?;
+        fs::rename(&tmp, path)
+    })();
+    if let Err(e) = written {
+        let _ = fs::remove_file(&tmp);
+        return Err(io(e));
+    }
+    // Make the rename itself durable; not every platform can open a directory.
+    #[cfg(unix)]
+    {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        if let Ok(d) = fs::File::open(dir) {
+            let _ = d.sync_all();
+        }
+    }
+    Ok(())
+}
+
+/// Reads and decodes a bundle file; errors carry the path.
+pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
+    let bytes = fs::read(path).map_err(|source| BundleError::Io { path: path.to_path_buf(), source })?;
+    decode_bundle(&bytes).map_err(|source| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) })
+}

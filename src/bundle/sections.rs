@@ -1,0 +1,422 @@
+//! Typed encode/decode of each section's raw (decompressed) bytes.
+//!
+//! Decoders take untrusted bytes: every count is multiplied out with checked
+//! arithmetic and compared with the section length before anything is allocated,
+//! and each section must be consumed exactly. Layouts are documented in
+//! docs/bundle-format.md; the comments here name the fields in order.
+
+use glam::{Vec2, Vec3};
+
+use super::cursor::{pad_to, put_f32, put_f64, put_u16, put_u32, Cursor};
+use super::error::BundleError;
+use super::quantize::{decode_layer, encode_layer, layer_bytes};
+use super::types::{LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+use crate::mesh::{Material, MaterialRole, Mesh};
+
+pub(crate) const META: [u8; 4] = *b"META";
+pub(crate) const MESH: [u8; 4] = *b"MESH";
+pub(crate) const MATL: [u8; 4] = *b"MATL";
+pub(crate) const XFER: [u8; 4] = *b"XFER";
+pub(crate) const SUNM: [u8; 4] = *b"SUNM";
+pub(crate) const SUND: [u8; 4] = *b"SUND";
+
+const MESH_HAS_UVS: u32 = 1;
+const MESH_HAS_COLORS: u32 = 2;
+const STEP_NIGHT: u32 = 1;
+/// Fixed part of one SUND step record: f64 time, f32 × 3 dir, elev, azim, f32 × 3 rgb, u32 flags.
+const SUN_STEP_FIXED: u64 = 8 + 12 + 4 + 4 + 12 + 4;
+
+/// How strict to be with reserved fields (see `Container::reject_reserved`).
+#[derive(Clone, Copy)]
+pub(crate) struct ReadRules {
+    pub reject_reserved: bool,
+}
+
+fn invalid(what: impl Into<String>) -> BundleError {
+    BundleError::Invalid(what.into())
+}
+
+fn count_u32(n: usize, what: &str) -> Result<u32, BundleError> {
+    u32::try_from(n).map_err(|_| invalid(format!("{what} {n} does not fit in u32")))
+}
+
+/// Checked product/sum helper: `None` means the declared counts overflow u64.
+fn checked_len(parts: &[(u64, u64)]) -> Option<u64> {
+    parts.iter().try_fold(0u64, |acc, &(count, size)| acc.checked_add(count.checked_mul(size)?))
+}
+
+fn round_up4(n: u64) -> u64 {
+    n.div_ceil(4) * 4
+}
+fn round_up8(n: u64) -> u64 {
+    n.div_ceil(8) * 8
+}
+
+fn check_exact_len(cur: &Cursor, expected: Option<u64>, what: impl FnOnce() -> String) -> Result<(), BundleError> {
+    match expected {
+        Some(n) if n == cur.remaining() as u64 => Ok(()),
+        Some(n) => Err(cur.error(format!("{} needs {n} bytes, the section has {}", what(), cur.remaining()))),
+        None => Err(cur.error(format!("{}: size overflows", what()))),
+    }
+}
+
+// ---------------------------------------------------------------- META
+
+/// META: compact UTF-8 JSON of any value.
+pub(crate) fn encode_meta(meta: &serde_json::Value) -> Result<Vec<u8>, BundleError> {
+    serde_json::to_vec(meta).map_err(|e| invalid(format!("META does not serialize: {e}")))
+}
+
+pub(crate) fn decode_meta(raw: &[u8]) -> Result<serde_json::Value, BundleError> {
+    serde_json::from_slice(raw).map_err(|e| BundleError::malformed(META, format!("not valid UTF-8 JSON: {e}")))
+}
+
+// ---------------------------------------------------------------- MESH
+
+/// MESH: u32 V, u32 T, u32 flags, positions f32×3×V, normals f32×3×V, [uvs f32×2×V],
+/// [colors f32×3×V], indices u32×3×T, tri_material u16×T (pad 4), tri_group u32×T.
+pub(crate) fn encode_mesh(mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
+    let v = count_u32(mesh.vertex_count(), "vertex count")?;
+    let t = count_u32(mesh.triangle_count(), "triangle count")?;
+    let flags = if mesh.uvs.is_empty() { 0 } else { MESH_HAS_UVS } | if mesh.colors.is_empty() { 0 } else { MESH_HAS_COLORS };
+    let mut out = Vec::new();
+    put_u32(&mut out, v);
+    put_u32(&mut out, t);
+    put_u32(&mut out, flags);
+    mesh.positions.iter().chain(&mesh.normals).for_each(|p| p.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
+    mesh.uvs.iter().for_each(|uv| uv.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
+    mesh.colors.iter().for_each(|c| c.iter().for_each(|&x| put_f32(&mut out, x)));
+    mesh.indices.iter().for_each(|&i| put_u32(&mut out, i));
+    mesh.tri_material.iter().for_each(|&m| put_u16(&mut out, m));
+    pad_to(&mut out, 4);
+    mesh.tri_group.iter().for_each(|&g| put_u32(&mut out, g));
+    Ok(out)
+}
+
+fn vec3s(values: Vec<f32>) -> Vec<Vec3> {
+    values.chunks_exact(3).map(Vec3::from_slice).collect()
+}
+
+/// Geometry only: `materials` and `groups` come from MATL.
+pub(crate) fn decode_mesh(raw: &[u8], rules: ReadRules) -> Result<Mesh, BundleError> {
+    let mut cur = Cursor::new(raw, MESH);
+    let v = cur.u32("vertex count")? as u64;
+    let t = cur.u32("triangle count")? as u64;
+    let flags = cur.u32("flags")?;
+    if rules.reject_reserved && flags & !(MESH_HAS_UVS | MESH_HAS_COLORS) != 0 {
+        return Err(cur.error(format!("flags {flags:#x} set reserved bits")));
+    }
+    let has_uvs = flags & MESH_HAS_UVS != 0;
+    let has_colors = flags & MESH_HAS_COLORS != 0;
+    let expected = checked_len(&[
+        (v, 24 + if has_uvs { 8 } else { 0 } + if has_colors { 12 } else { 0 }),
+        (t, 12 + 4),
+        (round_up4(t.saturating_mul(2)), 1),
+    ]);
+    check_exact_len(&cur, expected, || format!("a mesh of {v} vertices and {t} triangles (flags {flags:#x})"))?;
+
+    let positions = vec3s(cur.f32s(3 * v, "positions")?);
+    let normals = vec3s(cur.f32s(3 * v, "normals")?);
+    let uvs = if has_uvs { cur.f32s(2 * v, "uvs")?.chunks_exact(2).map(Vec2::from_slice).collect() } else { Vec::new() };
+    let colors = if has_colors {
+        cur.f32s(3 * v, "colors")?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+    } else {
+        Vec::new()
+    };
+    let indices = cur.u32s(3 * t, "indices")?;
+    let tri_material = cur.u16s(t, "triangle materials")?;
+    cur.padding(4, "triangle materials")?;
+    let tri_group = cur.u32s(t, "triangle groups")?;
+    cur.finish()?;
+    Ok(Mesh { positions, normals, uvs, colors, indices, tri_material, tri_group, materials: Vec::new(), groups: Vec::new() })
+}
+
+// ---------------------------------------------------------------- MATL
+
+fn role_code(role: MaterialRole) -> u32 {
+    match role {
+        MaterialRole::Opaque => 0,
+        MaterialRole::Window => 1,
+        MaterialRole::Panel => 2,
+    }
+}
+
+fn put_name(out: &mut Vec<u8>, name: &str) -> Result<(), BundleError> {
+    put_u32(out, count_u32(name.len(), "name length")?);
+    out.extend_from_slice(name.as_bytes());
+    pad_to(out, 4);
+    Ok(())
+}
+
+fn read_name(cur: &mut Cursor, what: &str) -> Result<String, BundleError> {
+    let len = cur.u32(what)?;
+    let bytes = cur.take(len as u64, what)?;
+    let name = std::str::from_utf8(bytes).map_err(|_| cur.error(format!("{what} is not UTF-8")))?.to_string();
+    cur.padding(4, what)?;
+    Ok(name)
+}
+
+/// MATL: u32 material_count, u32 group_count; per material u32 role, f32×3 albedo,
+/// f32 transmittance, name; per group a name. A name is u32 byte length, UTF-8, pad 4.
+pub(crate) fn encode_materials(materials: &[Material], groups: &[String]) -> Result<Vec<u8>, BundleError> {
+    let mut out = Vec::new();
+    put_u32(&mut out, count_u32(materials.len(), "material count")?);
+    put_u32(&mut out, count_u32(groups.len(), "group count")?);
+    for m in materials {
+        put_u32(&mut out, role_code(m.role));
+        m.albedo.iter().for_each(|&a| put_f32(&mut out, a));
+        put_f32(&mut out, m.transmittance);
+        put_name(&mut out, &m.name)?;
+    }
+    for g in groups {
+        put_name(&mut out, g)?;
+    }
+    Ok(out)
+}
+
+pub(crate) fn decode_materials(raw: &[u8]) -> Result<(Vec<Material>, Vec<String>), BundleError> {
+    let mut cur = Cursor::new(raw, MATL);
+    let material_count = cur.u32("material count")? as u64;
+    let group_count = cur.u32("group count")? as u64;
+    // Smallest possible records (empty names) must fit before we reserve anything.
+    let minimum = checked_len(&[(material_count, 24), (group_count, 4)]).unwrap_or(u64::MAX);
+    if minimum > cur.remaining() as u64 {
+        return Err(cur.error(format!(
+            "{material_count} materials and {group_count} groups need at least {minimum} bytes, the section has {}",
+            cur.remaining()
+        )));
+    }
+    let mut materials = Vec::with_capacity(material_count as usize);
+    for i in 0..material_count {
+        let role = match cur.u32("material role")? {
+            0 => MaterialRole::Opaque,
+            1 => MaterialRole::Window,
+            2 => MaterialRole::Panel,
+            other => return Err(cur.error(format!("material {i} has unknown role {other}"))),
+        };
+        let albedo = [cur.f32("albedo")?, cur.f32("albedo")?, cur.f32("albedo")?];
+        let transmittance = cur.f32("transmittance")?;
+        let name = read_name(&mut cur, "material name")?;
+        materials.push(Material { name, albedo, role, transmittance });
+    }
+    let mut groups = Vec::with_capacity(group_count as usize);
+    for _ in 0..group_count {
+        groups.push(read_name(&mut cur, "group name")?);
+    }
+    cur.finish()?;
+    Ok((materials, groups))
+}
+
+// ---------------------------------------------------------------- XFER
+
+/// XFER: u32 order, u32 channels, u32 layer_count, u32 quantization; per layer
+/// u32 kind (0 total, 1 + b bounce b), u32 reserved, data (see `quantize`).
+pub(crate) fn encode_transfer(t: &Transfer, vertex_count: usize) -> Result<Vec<u8>, BundleError> {
+    if t.order == 0 || t.channels == 0 || t.layers.is_empty() {
+        return Err(invalid(format!(
+            "transfer needs order ≥ 1, channels ≥ 1 and a layer (order {}, channels {}, {} layers)",
+            t.order,
+            t.channels,
+            t.layers.len()
+        )));
+    }
+    let stride = t.values_per_vertex();
+    let expected = (vertex_count as u64).checked_mul(stride);
+    let mut out = Vec::new();
+    put_u32(&mut out, t.order);
+    put_u32(&mut out, t.channels);
+    put_u32(&mut out, count_u32(t.layers.len(), "layer count")?);
+    put_u32(&mut out, t.quantization.code());
+    for (i, layer) in t.layers.iter().enumerate() {
+        let code = layer.kind.code().ok_or_else(|| invalid(format!("layer {i}: bounce index too large")))?;
+        if t.layers[..i].iter().any(|l| l.kind == layer.kind) {
+            return Err(invalid(format!("transfer layer kind {:?} appears twice", layer.kind)));
+        }
+        if Some(layer.data.len() as u64) != expected {
+            return Err(invalid(format!(
+                "transfer layer {i} has {} values, expected {vertex_count} vertices × {stride}",
+                layer.data.len()
+            )));
+        }
+        if let Some(j) = layer.data.iter().position(|v| !v.is_finite()) {
+            return Err(invalid(format!("transfer layer {i} value {j} is not finite ({})", layer.data[j])));
+        }
+        if t.quantization == Quantization::F16 {
+            if let Some(j) = layer.data.iter().position(|v| !half::f16::from_f32(*v).is_finite()) {
+                return Err(invalid(format!("transfer layer {i} value {j} ({}) overflows f16", layer.data[j])));
+            }
+        }
+        put_u32(&mut out, code);
+        put_u32(&mut out, 0);
+        encode_layer(&layer.data, stride as usize, t.quantization, &mut out);
+    }
+    Ok(out)
+}
+
+pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules) -> Result<Transfer, BundleError> {
+    let mut cur = Cursor::new(raw, XFER);
+    let order = cur.u32("order")?;
+    let channels = cur.u32("channels")?;
+    let layer_count = cur.u32("layer count")? as u64;
+    let code = cur.u32("quantization")?;
+    let quantization = Quantization::from_code(code).ok_or_else(|| cur.error(format!("unknown quantization {code}")))?;
+    if order == 0 || channels == 0 || layer_count == 0 {
+        return Err(cur.error(format!("order {order}, channels {channels}, {layer_count} layers: each must be ≥ 1")));
+    }
+    let v = vertex_count as u64;
+    let stride = (channels as u64).checked_mul((order as u64) * (order as u64));
+    let per_layer = stride.and_then(|s| layer_bytes(v, s, quantization)).and_then(|n| n.checked_add(8));
+    let expected = per_layer.and_then(|n| n.checked_mul(layer_count));
+    check_exact_len(&cur, expected, || {
+        format!("{layer_count} {} layers of order {order} × {channels} channels for {v} vertices", quantization.name())
+    })?;
+    let stride = stride.unwrap_or(0); // checked just above
+
+    let mut layers: Vec<TransferLayer> = Vec::with_capacity(layer_count as usize);
+    for i in 0..layer_count {
+        let kind = LayerKind::from_code(cur.u32("layer kind")?);
+        let reserved = cur.u32("layer reserved")?;
+        if rules.reject_reserved && reserved != 0 {
+            return Err(cur.error(format!("layer {i}: reserved field is {reserved:#x}, must be 0")));
+        }
+        if layers.iter().any(|l| l.kind == kind) {
+            return Err(cur.error(format!("layer kind {kind:?} appears twice")));
+        }
+        let data = decode_layer(&mut cur, v, stride, quantization)?;
+        layers.push(TransferLayer { kind, data });
+    }
+    cur.finish()?;
+    Ok(Transfer { order, channels, quantization, layers })
+}
+
+// ---------------------------------------------------------------- SUNM
+
+/// SUNM: u32 step_count, u32 words_per_vertex, u32 vertex_count, u32 reserved, u32 words.
+pub(crate) fn encode_sun_masks(sun: &SunSeries, vertex_count: usize) -> Result<Vec<u8>, BundleError> {
+    let steps = count_u32(sun.steps.len(), "step count")?;
+    if sun.words_per_vertex != steps.div_ceil(32) {
+        return Err(invalid(format!("{} words per vertex for {steps} steps", sun.words_per_vertex)));
+    }
+    if Some(sun.masks.len()) != vertex_count.checked_mul(sun.words_per_vertex as usize) {
+        return Err(invalid(format!(
+            "{} mask words for {vertex_count} vertices × {} words",
+            sun.masks.len(),
+            sun.words_per_vertex
+        )));
+    }
+    if let Some(v) = first_vertex_with_padding_bits(&sun.masks, steps) {
+        return Err(invalid(format!("sun mask of vertex {v} has bits set past step {steps}")));
+    }
+    let mut out = Vec::with_capacity(16 + 4 * sun.masks.len());
+    put_u32(&mut out, steps);
+    put_u32(&mut out, sun.words_per_vertex);
+    put_u32(&mut out, count_u32(vertex_count, "vertex count")?);
+    put_u32(&mut out, 0);
+    sun.masks.iter().for_each(|&w| put_u32(&mut out, w));
+    Ok(out)
+}
+
+/// The first vertex whose last word has bits at steps ≥ `step_count`.
+fn first_vertex_with_padding_bits(masks: &[u32], step_count: u32) -> Option<usize> {
+    let words_per_vertex = step_count.div_ceil(32) as usize;
+    let used_bits = step_count % 32;
+    if used_bits == 0 || words_per_vertex == 0 {
+        return None;
+    }
+    let unused = !((1u32 << used_bits) - 1);
+    masks.chunks_exact(words_per_vertex).position(|words| words.last().is_some_and(|w| w & unused != 0))
+}
+
+/// Returns `(step_count, words_per_vertex, masks)`.
+pub(crate) fn decode_sun_masks(raw: &[u8], vertex_count: usize, rules: ReadRules) -> Result<(u32, u32, Vec<u32>), BundleError> {
+    let mut cur = Cursor::new(raw, SUNM);
+    let steps = cur.u32("step count")?;
+    let words_per_vertex = cur.u32("words per vertex")?;
+    let declared_vertices = cur.u32("vertex count")?;
+    let reserved = cur.u32("reserved")?;
+    if rules.reject_reserved && reserved != 0 {
+        return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
+    }
+    if words_per_vertex != steps.div_ceil(32) {
+        return Err(cur.error(format!("{words_per_vertex} words per vertex for {steps} steps, expected {}", steps.div_ceil(32))));
+    }
+    if declared_vertices as usize != vertex_count {
+        return Err(cur.error(format!("masks for {declared_vertices} vertices, the mesh has {vertex_count}")));
+    }
+    let expected = checked_len(&[(declared_vertices as u64, 4 * words_per_vertex as u64)]);
+    check_exact_len(&cur, expected, || format!("{declared_vertices} vertices × {words_per_vertex} words"))?;
+    let masks = cur.u32s(declared_vertices as u64 * words_per_vertex as u64, "mask words")?;
+    if let Some(v) = first_vertex_with_padding_bits(&masks, steps) {
+        return Err(cur.error(format!("mask of vertex {v} has bits set past step {steps} (must be zero)")));
+    }
+    cur.finish()?;
+    Ok((steps, words_per_vertex, masks))
+}
+
+// ---------------------------------------------------------------- SUND
+
+fn sun_step_record_len(sky_order: u32) -> Option<u64> {
+    let coeffs = (sky_order as u64).checked_mul(sky_order as u64)?;
+    Some(round_up8(coeffs.checked_mul(12)?.checked_add(SUN_STEP_FIXED)?))
+}
+
+/// SUND: u32 step_count, u32 sky_order; per step (padded to 8 bytes): f64 unix time,
+/// f32×3 direction, f32 elevation, f32 azimuth, f32×3 sun RGB, u32 flags (bit 0 night),
+/// f32×3 × sky_order² sky SH.
+pub(crate) fn encode_sun_data(sun: &SunSeries) -> Result<Vec<u8>, BundleError> {
+    let coeffs = (sun.sky_order as usize).checked_mul(sun.sky_order as usize);
+    let mut out = Vec::new();
+    put_u32(&mut out, count_u32(sun.steps.len(), "step count")?);
+    put_u32(&mut out, sun.sky_order);
+    for (k, s) in sun.steps.iter().enumerate() {
+        if Some(s.sky_sh.len()) != coeffs {
+            return Err(invalid(format!("sun step {k} has {} sky coefficients for sky order {}", s.sky_sh.len(), sun.sky_order)));
+        }
+        let floats = s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).chain(s.sky_sh.iter().flatten());
+        if !s.unix_time_utc.is_finite() || floats.clone().any(|x| !x.is_finite()) {
+            return Err(invalid(format!("sun step {k} has a non-finite value")));
+        }
+        put_f64(&mut out, s.unix_time_utc);
+        s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).for_each(|&x| put_f32(&mut out, x));
+        put_u32(&mut out, if s.night { STEP_NIGHT } else { 0 });
+        s.sky_sh.iter().flatten().for_each(|&x| put_f32(&mut out, x));
+        pad_to(&mut out, 8);
+    }
+    Ok(out)
+}
+
+/// Returns `(sky_order, steps)`.
+pub(crate) fn decode_sun_data(raw: &[u8], rules: ReadRules) -> Result<(u32, Vec<SunStep>), BundleError> {
+    let mut cur = Cursor::new(raw, SUND);
+    let step_count = cur.u32("step count")? as u64;
+    let sky_order = cur.u32("sky order")?;
+    let expected = sun_step_record_len(sky_order).and_then(|n| n.checked_mul(step_count));
+    check_exact_len(&cur, expected, || format!("{step_count} steps with sky order {sky_order}"))?;
+    let coeffs = sky_order as u64 * sky_order as u64;
+
+    let mut steps = Vec::with_capacity(step_count as usize);
+    for k in 0..step_count {
+        let unix_time_utc = cur.f64("time")?;
+        let fixed = cur.f32s(8, "sun direction, angles and irradiance")?;
+        let flags = cur.u32("step flags")?;
+        if rules.reject_reserved && flags & !STEP_NIGHT != 0 {
+            return Err(cur.error(format!("step {k}: flags {flags:#x} set reserved bits")));
+        }
+        let sky = cur.f32s(3 * coeffs, "sky SH")?;
+        cur.padding(8, "step record")?;
+        if !unix_time_utc.is_finite() || fixed.iter().chain(&sky).any(|x| !x.is_finite()) {
+            return Err(cur.error(format!("step {k} has a non-finite value")));
+        }
+        steps.push(SunStep {
+            unix_time_utc,
+            direction: [fixed[0], fixed[1], fixed[2]],
+            elevation_deg: fixed[3],
+            azimuth_deg: fixed[4],
+            sun_rgb: [fixed[5], fixed[6], fixed[7]],
+            night: flags & STEP_NIGHT != 0,
+            sky_sh: sky.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        });
+    }
+    cur.finish()?;
+    Ok((sky_order, steps))
+}

@@ -1,0 +1,560 @@
+//! Whole-bundle tests: round trips, determinism, golden bytes, and hostile input
+//! (truncation at every length, bit flips, bumped versions, forged counts, fuzz).
+
+use glam::{Vec2, Vec3};
+
+use super::container::write_container;
+use super::*;
+use crate::mesh::{Material, MaterialRole, Mesh};
+
+/// xorshift64*: deterministic test randomness without a dependency.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn signed(&mut self) -> f32 {
+        self.unit() * 2.0 - 1.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+}
+
+/// A random mesh with every optional attribute.
+fn random_mesh(rng: &mut Rng, vertices: usize, triangles: usize) -> Mesh {
+    let v3 = |rng: &mut Rng| Vec3::new(rng.signed(), rng.signed(), rng.signed());
+    Mesh {
+        positions: (0..vertices).map(|_| v3(rng) * 10.0).collect(),
+        normals: (0..vertices).map(|_| v3(rng).normalize_or(Vec3::Y)).collect(),
+        uvs: (0..vertices).map(|_| Vec2::new(rng.unit(), rng.unit())).collect(),
+        colors: (0..vertices).map(|_| [rng.unit(), rng.unit(), rng.unit()]).collect(),
+        indices: (0..3 * triangles).map(|_| rng.below(vertices) as u32).collect(),
+        tri_material: (0..triangles).map(|_| rng.below(2) as u16).collect(),
+        tri_group: (0..triangles).map(|_| rng.below(3) as u32).collect(),
+        materials: vec![
+            Material::opaque("stone", 0.6),
+            Material { name: "glass ü".into(), albedo: [0.1, 0.2, 0.3], role: MaterialRole::Window, transmittance: 0.8 },
+        ],
+        groups: vec!["cella".into(), "".into(), "frieze".into()],
+    }
+}
+
+fn random_transfer(rng: &mut Rng, vertices: usize, quantization: Quantization) -> Transfer {
+    let (order, channels) = (3u32, 3u32);
+    let n = vertices * (channels * order * order) as usize;
+    let layer = |rng: &mut Rng, kind| TransferLayer { kind, data: (0..n).map(|_| rng.signed() * 0.9).collect() };
+    Transfer { order, channels, quantization, layers: vec![layer(rng, LayerKind::Bounce(0)), layer(rng, LayerKind::Total)] }
+}
+
+fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> SunSeries {
+    let sky_order = 3;
+    let steps = (0..step_count)
+        .map(|k| SunStep {
+            unix_time_utc: 1_782_000_000.0 + 420.0 * k as f64,
+            direction: Vec3::new(rng.signed(), rng.unit(), rng.signed()).normalize_or(Vec3::Y).to_array(),
+            elevation_deg: rng.unit() * 90.0,
+            azimuth_deg: rng.unit() * 360.0,
+            sun_rgb: [rng.unit() * 900.0, rng.unit() * 900.0, rng.unit() * 900.0],
+            night: k % 17 == 0,
+            sky_sh: (0..sky_order * sky_order).map(|_| [rng.signed(), rng.signed(), rng.signed()]).collect(),
+        })
+        .collect();
+    let bits: Vec<bool> = (0..vertices * step_count).map(|_| rng.next() & 1 == 1).collect();
+    let (words_per_vertex, masks) = SunSeries::pack(step_count, vertices, |v, k| bits[v * step_count + k]);
+    SunSeries { sky_order: sky_order as u32, steps, words_per_vertex, masks }
+}
+
+fn random_bundle(seed: u64, vertices: usize, triangles: usize, quantization: Quantization) -> Bundle {
+    let mut rng = Rng(seed);
+    let meta = serde_json::json!({
+        "tool": "prtbake 0.1.0", "seed": seed, "params": {"order": 3, "bounces": 1, "samples": 256},
+        "conventions": {"sh_index": "l(l+1)+m", "up": "+Y"}, "stats": {"max_error": 0.25}
+    });
+    Bundle {
+        meta,
+        mesh: random_mesh(&mut rng, vertices, triangles),
+        transfer: Some(random_transfer(&mut rng, vertices, quantization)),
+        sun: Some(random_sun(&mut rng, vertices, 92)),
+    }
+}
+
+/// The smallest bundle: one triangle, META `{}`, no transfer or sun, every section raw.
+fn tiny_bundle() -> Bundle {
+    Bundle {
+        meta: serde_json::json!({}),
+        mesh: Mesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            normals: vec![Vec3::Z; 3],
+            indices: vec![0, 1, 2],
+            tri_material: vec![0],
+            tri_group: vec![0],
+            materials: vec![Material::opaque("m", 0.5)],
+            groups: vec!["g".into()],
+            ..Mesh::default()
+        },
+        transfer: None,
+        sun: None,
+    }
+}
+
+fn tiny_bytes() -> Vec<u8> {
+    encode_bundle_with(&tiny_bundle(), EncodeOptions { compression: Compression::None }).unwrap()
+}
+
+fn small_bytes() -> Vec<u8> {
+    encode_bundle(&random_bundle(7, 12, 10, Quantization::F32)).unwrap()
+}
+
+fn half_ulp(v: f32) -> f64 {
+    let a = v.abs();
+    ((f32::from_bits(a.to_bits() + 1) - a) as f64) / 2.0
+}
+
+// ---------------------------------------------------------------- round trips
+
+#[test]
+fn f32_round_trip_is_bit_exact() {
+    let bundle = random_bundle(1, 200, 300, Quantization::F32);
+    let bytes = encode_bundle(&bundle).unwrap();
+    let back = decode_bundle(&bytes).unwrap();
+    assert_eq!(back, bundle);
+    let tags: Vec<String> = list_sections(&bytes).unwrap().iter().map(|s| s.tag_name()).collect();
+    assert_eq!(tags, ["META", "MESH", "MATL", "XFER", "SUNM", "SUND"]);
+    let sun = back.sun.unwrap();
+    assert_eq!(sun.words_per_vertex, 3); // 92 steps
+}
+
+/// Asserts the documented per-value bound for `q` on every transfer value and
+/// that everything else in the bundle is exact.
+fn assert_lossy_round_trip(q: Quantization) -> (f64, usize) {
+    let bundle = random_bundle(2, 150, 200, q);
+    let back = decode_bundle(&encode_bundle(&bundle).unwrap()).unwrap();
+    assert_eq!((&back.meta, &back.mesh, &back.sun), (&bundle.meta, &bundle.mesh, &bundle.sun));
+    let (t, u) = (bundle.transfer.as_ref().unwrap(), back.transfer.as_ref().unwrap());
+    assert_eq!((u.order, u.channels, u.quantization), (t.order, t.channels, q));
+    let stride = t.values_per_vertex() as usize;
+    let mut worst = 0.0f64;
+    for (a, b) in t.layers.iter().zip(&u.layers) {
+        assert_eq!(a.kind, b.kind);
+        assert_eq!(a.data.len(), b.data.len());
+        for (orig, got) in a.data.chunks(stride).zip(b.data.chunks(stride)) {
+            let scale = i16_scale(orig) as f64;
+            for (&v, &w) in orig.iter().zip(got) {
+                let err = (v as f64 - w as f64).abs();
+                let bound = match q {
+                    Quantization::F16 => (v.abs() as f64 * 2f64.powi(-11)).max(2f64.powi(-25)),
+                    _ => scale / 2.0 + half_ulp(w),
+                };
+                assert!(err <= bound, "{q:?}: v={v} got={w} err={err} bound={bound}");
+                worst = worst.max(err);
+            }
+        }
+        let (max_abs, _) = quantization_error(&a.data, t.channels, t.order, q);
+        assert_eq!(max_abs, a.data.iter().zip(&b.data).map(|(v, w)| (*v as f64 - *w as f64).abs()).fold(0.0, f64::max));
+    }
+    (worst, encode_bundle(&bundle).unwrap().len())
+}
+
+#[test]
+fn f16_round_trip_is_within_relative_bound() {
+    let (worst, _) = assert_lossy_round_trip(Quantization::F16);
+    assert!(worst > 0.0 && worst <= 0.9 * 2f64.powi(-11));
+}
+
+#[test]
+fn i16_round_trip_is_within_half_a_step() {
+    let (worst, _) = assert_lossy_round_trip(Quantization::I16PerVertexScale);
+    assert!(worst > 0.0 && worst <= 0.9 / 32767.0 / 2.0 + 1e-7);
+}
+
+#[test]
+fn decoded_f16_bundle_reencodes_to_the_same_bytes() {
+    let bytes = encode_bundle(&random_bundle(3, 40, 50, Quantization::F16)).unwrap();
+    assert_eq!(encode_bundle(&decode_bundle(&bytes).unwrap()).unwrap(), bytes);
+}
+
+#[test]
+fn encoding_is_deterministic() {
+    let bundle = random_bundle(4, 100, 120, Quantization::I16PerVertexScale);
+    let first = encode_bundle(&bundle).unwrap();
+    assert_eq!(encode_bundle(&bundle.clone()).unwrap(), first);
+    assert_eq!(encode_bundle_with(&bundle, EncodeOptions::default()).unwrap(), first);
+}
+
+#[test]
+fn sun_bits_pack_and_read_back() {
+    let bits = |v: usize, k: usize| (v * 31 + k * 7) % 5 == 0;
+    let (words_per_vertex, masks) = SunSeries::pack(92, 10, bits);
+    assert_eq!((words_per_vertex, masks.len()), (3, 30));
+    let mut sun = random_sun(&mut Rng(9), 10, 92);
+    sun.masks = masks;
+    for v in 0..10 {
+        for k in 0..92 {
+            assert_eq!(sun.bit(v, k), bits(v, k), "v={v} k={k}");
+        }
+        assert_eq!(sun.masks[v * 3 + 2] >> 28, 0, "steps 92..96 must be zero");
+    }
+    assert!(!sun.bit(10, 0) && !sun.bit(0, 92) && !sun.bit(usize::MAX, usize::MAX));
+}
+
+#[test]
+fn write_then_read_file_round_trips_and_errors_name_the_path() {
+    let dir = std::env::temp_dir().join(format!("prtb-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("scene.prtb");
+    let bundle = random_bundle(5, 20, 20, Quantization::F32);
+    write_bundle(&path, &bundle).unwrap();
+    assert_eq!(read_bundle(&path).unwrap(), bundle);
+    let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name() != "scene.prtb").collect();
+    assert!(leftovers.is_empty(), "temporary file left behind");
+
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..100]).unwrap();
+    let err = read_bundle(&path).unwrap_err();
+    assert!(matches!(err.kind(), BundleError::Truncated { .. }));
+    assert!(err.to_string().contains("scene.prtb") && err.to_string().contains("truncated"), "{err}");
+    let missing = read_bundle(&dir.join("absent.prtb")).unwrap_err();
+    assert!(missing.to_string().contains("absent.prtb"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+// ---------------------------------------------------------------- golden bytes
+
+/// The worked example of docs/bundle-format.md, byte for byte (32-bit words as
+/// they appear in the file, little-endian): header; table (META, MESH, MATL);
+/// META `{}` + pad; MESH counts, positions, normals, indices, material + pad,
+/// group; MATL counts, material, group name "g"; file padding.
+const GOLDEN: &str = "
+    50525442 0d0a1a0a 01000000 03000000 38010000 00000000 00000000 95764dad
+    4d455441 00000000 98000000 00000000 02000000 00000000 02000000 00000000 43bfa6a3 00000000
+    4d455348 00000000 a0000000 00000000 68000000 00000000 68000000 00000000 a0c289a0 00000000
+    4d41544c 00000000 08010000 00000000 2c000000 00000000 2c000000 00000000 5f6254b3 00000000
+    7b7d0000 00000000
+    03000000 01000000 00000000
+    00000000 00000000 00000000  0000803f 00000000 00000000  00000000 0000803f 00000000
+    00000000 00000000 0000803f  00000000 00000000 0000803f  00000000 00000000 0000803f
+    00000000 01000000 02000000
+    00000000
+    00000000
+    01000000 01000000
+    00000000 0000003f 0000003f 0000003f 0000803f 01000000 6d000000
+    01000000 67000000
+    00000000";
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.chunks(4).map(|w| w.iter().map(|b| format!("{b:02x}")).collect::<String>()).collect::<Vec<_>>().join(" ")
+}
+
+#[test]
+fn golden_tiny_bundle_bytes() {
+    let bytes = tiny_bytes();
+    let expected: String = GOLDEN.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert_eq!(hex(&bytes), expected, "\nactual:\n{}", hex(&bytes));
+    assert_eq!(decode_bundle(&bytes).unwrap(), tiny_bundle());
+}
+
+// ---------------------------------------------------------------- hostile input
+
+#[test]
+fn every_truncation_is_refused() {
+    for bytes in [tiny_bytes(), small_bytes()] {
+        for len in 0..bytes.len() {
+            let result = decode_bundle(&bytes[..len]);
+            assert!(result.is_err(), "prefix of {len} bytes decoded");
+            if len < HEADER_LEN {
+                assert!(matches!(result, Err(BundleError::Truncated { .. })), "len {len}: {result:?}");
+            }
+        }
+        assert!(decode_bundle(&bytes).is_ok());
+    }
+}
+
+#[test]
+fn every_bit_flip_of_the_raw_tiny_bundle_is_refused() {
+    let bytes = tiny_bytes();
+    for bit in 0..bytes.len() * 8 {
+        let mut flipped = bytes.clone();
+        flipped[bit / 8] ^= 1 << (bit % 8);
+        assert!(decode_bundle(&flipped).is_err(), "flip of bit {bit} went unnoticed");
+    }
+}
+
+#[test]
+fn bit_flips_of_a_compressed_bundle_are_refused_or_harmless() {
+    let bytes = small_bytes();
+    let original = decode_bundle(&bytes).unwrap();
+    let mut rng = Rng(0xf11b_5eed);
+    let mut refused = 0;
+    for _ in 0..2000 {
+        let bit = rng.below(bytes.len() * 8);
+        let mut flipped = bytes.clone();
+        flipped[bit / 8] ^= 1 << (bit % 8);
+        match decode_bundle(&flipped) {
+            Err(_) => refused += 1,
+            Ok(decoded) => assert_eq!(decoded, original, "flip of bit {bit} silently changed the content"),
+        }
+    }
+    assert!(refused >= 1990, "only {refused} of 2000 flips refused");
+}
+
+fn set_u16(bytes: &mut [u8], at: usize, v: u16) {
+    bytes[at..at + 2].copy_from_slice(&v.to_le_bytes());
+}
+fn set_u32(bytes: &mut [u8], at: usize, v: u32) {
+    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+fn get_u32(bytes: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
+}
+fn get_u64(bytes: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap())
+}
+
+/// Recomputes the CRCs of raw-codec sections and of the header, so that a forged
+/// file reaches the section decoders instead of failing on a checksum.
+fn reseal(bytes: &mut [u8]) {
+    let count = get_u32(bytes, 12) as usize;
+    for i in 0..count {
+        let entry = HEADER_LEN + i * ENTRY_LEN;
+        if get_u32(bytes, entry + 4) == 0 {
+            let (at, len) = (get_u64(bytes, entry + 8) as usize, get_u64(bytes, entry + 16) as usize);
+            let crc = crc32fast::hash(&bytes[at..at + len]);
+            set_u32(bytes, entry + 32, crc);
+        }
+    }
+    let mut h = crc32fast::Hasher::new();
+    h.update(&bytes[..28]);
+    h.update(&bytes[HEADER_LEN..HEADER_LEN + count * ENTRY_LEN]);
+    let crc = h.finalize();
+    set_u32(bytes, 28, crc);
+}
+
+#[test]
+fn bumped_major_version_is_refused_by_name() {
+    let mut bytes = tiny_bytes();
+    set_u16(&mut bytes, 8, 2);
+    let err = decode_bundle(&bytes).unwrap_err();
+    assert!(matches!(err, BundleError::UnsupportedVersion { major: 2, minor: 0, .. }));
+    assert!(err.to_string().contains("version 2.0"), "{err}");
+    reseal(&mut bytes); // a well-formed v2 header is refused all the same
+    assert!(matches!(decode_bundle(&bytes), Err(BundleError::UnsupportedVersion { major: 2, .. })));
+}
+
+#[test]
+fn bad_magic_is_not_a_bundle() {
+    for input in [&b"solid cube\nfacet normal 0 0 1\n endfacet\nendsolid\n"[..], b"X", b"glTF\x02\0\0\0"] {
+        let err = decode_bundle(input).unwrap_err();
+        assert!(err.to_string().contains("not a prtbake bundle"), "{err}");
+    }
+    let mut bytes = tiny_bytes();
+    bytes[0] = b'Q';
+    assert!(matches!(decode_bundle(&bytes), Err(BundleError::NotABundle { .. })));
+    assert!(matches!(decode_bundle(&[]), Err(BundleError::Truncated { .. })));
+    assert!(matches!(decode_bundle(b"PRTB"), Err(BundleError::Truncated { .. })));
+}
+
+#[test]
+fn trailing_bytes_are_refused() {
+    for extra in [1usize, 7, 8, 100] {
+        let mut bytes = small_bytes();
+        bytes.resize(bytes.len() + extra, 0);
+        let err = decode_bundle(&bytes).unwrap_err();
+        assert!(matches!(err, BundleError::TrailingBytes { extra: e, .. } if e == extra as u64), "{err}");
+    }
+}
+
+#[test]
+fn unknown_sections_are_skipped_and_later_minors_read() {
+    let bundle = tiny_bundle();
+    let mut parts = vec![(*b"zNEW", vec![1u8, 2, 3])];
+    parts.extend([
+        (*b"META", b"{}".to_vec()),
+        (*b"MESH", sections_bytes(&bundle, *b"MESH")),
+        (*b"MATL", sections_bytes(&bundle, *b"MATL")),
+    ]);
+    let mut bytes = write_container(&parts, EncodeOptions { compression: Compression::None }).unwrap();
+    assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
+
+    // Minor 1 with a header flag and a table reserved field set: read, flags ignored.
+    set_u16(&mut bytes, 10, 1);
+    set_u32(&mut bytes, 24, 0x8000_0000);
+    set_u32(&mut bytes, HEADER_LEN + 36, 5);
+    reseal(&mut bytes);
+    assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
+    // The same bits in a minor-0 file are corruption.
+    set_u16(&mut bytes, 10, 0);
+    reseal(&mut bytes);
+    assert!(matches!(decode_bundle(&bytes), Err(BundleError::Layout(_))));
+}
+
+/// Raw bytes of one section of `bundle`, via the real encoder.
+fn sections_bytes(bundle: &Bundle, tag: [u8; 4]) -> Vec<u8> {
+    let bytes = encode_bundle_with(bundle, EncodeOptions { compression: Compression::None }).unwrap();
+    let info = list_sections(&bytes).unwrap().into_iter().find(|s| s.tag == tag).unwrap();
+    bytes[info.offset as usize..(info.offset + info.raw_len) as usize].to_vec()
+}
+
+fn decode_parts(parts: &[([u8; 4], Vec<u8>)]) -> Result<Bundle, BundleError> {
+    decode_bundle(&write_container(parts, EncodeOptions::default()).unwrap())
+}
+
+#[test]
+fn forged_counts_are_refused_before_allocation() {
+    let bundle = random_bundle(6, 12, 10, Quantization::F32);
+    let meta = (*b"META", b"{}".to_vec());
+    let mesh = (*b"MESH", sections_bytes(&bundle, *b"MESH"));
+    let matl = (*b"MATL", sections_bytes(&bundle, *b"MATL"));
+    let detail = |r: Result<Bundle, BundleError>| match r {
+        Err(BundleError::Malformed { tag, detail }) => format!("{tag}: {detail}"),
+        Err(other) => panic!("expected Malformed, got {other}"),
+        Ok(_) => panic!("forged section decoded"),
+    };
+
+    // A mesh announcing 4 billion vertices in a few hundred bytes.
+    let mut huge = mesh.1.clone();
+    set_u32(&mut huge, 0, u32::MAX);
+    let msg = detail(decode_parts(&[meta.clone(), (*b"MESH", huge), matl.clone()]));
+    assert!(msg.starts_with("MESH: a mesh of 4294967295 vertices"), "{msg}");
+
+    // Materials: u32::MAX names of at least 4 bytes each.
+    let mut many = matl.1.clone();
+    set_u32(&mut many, 4, u32::MAX);
+    let msg = detail(decode_parts(&[meta.clone(), mesh.clone(), (*b"MATL", many)]));
+    assert!(msg.starts_with("MATL:") && msg.contains("4294967295 groups"), "{msg}");
+
+    // A name length running past the section.
+    let mut long_name = matl.1.clone();
+    set_u32(&mut long_name, 8 + 20, 1 << 30);
+    assert!(detail(decode_parts(&[meta.clone(), mesh.clone(), (*b"MATL", long_name)])).contains("material name"));
+
+    // Transfer with order 65535 and sun data with 2^32-1 steps.
+    let xfer = sections_bytes(&bundle, *b"XFER");
+    let mut big_order = xfer.clone();
+    set_u32(&mut big_order, 0, 65535);
+    let msg = detail(decode_parts(&[meta.clone(), mesh.clone(), matl.clone(), (*b"XFER", big_order)]));
+    assert!(msg.starts_with("XFER:"), "{msg}");
+    let (sunm, sund) = (sections_bytes(&bundle, *b"SUNM"), sections_bytes(&bundle, *b"SUND"));
+    let mut many_steps = sund.clone();
+    set_u32(&mut many_steps, 0, u32::MAX);
+    let parts = [meta.clone(), mesh.clone(), matl.clone(), (*b"SUNM", sunm.clone()), (*b"SUND", many_steps)];
+    assert!(detail(decode_parts(&parts)).starts_with("SUND:"));
+
+    // Mask padding bits (steps 92..95) must be zero.
+    let mut dirty = sunm.clone();
+    dirty[16 + 8 + 3] |= 0x80; // vertex 0, word 2, bit 31 = step 95
+    let parts = [meta.clone(), mesh.clone(), matl.clone(), (*b"SUNM", dirty), (*b"SUND", sund.clone())];
+    assert!(detail(decode_parts(&parts)).contains("past step 92"));
+
+    // Mesh indices out of range are caught by Mesh::validate.
+    let mut bad_index = mesh.1.clone();
+    let at = 12 + 12 * 4 * 12; // after positions, normals, uvs, colours of 12 vertices
+    set_u32(&mut bad_index, at, 12);
+    assert!(detail(decode_parts(&[meta.clone(), (*b"MESH", bad_index), matl.clone()])).contains("out of range"));
+
+    // Masks for another vertex count; SUNM without SUND; a missing MESH.
+    let mut other_count = sunm.clone();
+    set_u32(&mut other_count, 8, 11);
+    let parts = [meta.clone(), mesh.clone(), matl.clone(), (*b"SUNM", other_count), (*b"SUND", sund.clone())];
+    assert!(detail(decode_parts(&parts)).contains("the mesh has 12"));
+    let parts = [meta.clone(), mesh.clone(), matl.clone(), (*b"SUNM", sunm.clone())];
+    assert!(matches!(decode_parts(&parts), Err(BundleError::MissingSection(Tag(t))) if &t == b"SUND"));
+    assert!(matches!(decode_parts(&[meta.clone(), matl.clone()]), Err(BundleError::MissingSection(Tag(t))) if &t == b"MESH"));
+}
+
+#[test]
+fn resealed_random_mutations_never_panic() {
+    // Bit flips die on CRCs; here the CRCs are recomputed so the section
+    // decoders themselves see hostile bytes.
+    let bytes = encode_bundle_with(&random_bundle(8, 12, 10, Quantization::I16PerVertexScale), EncodeOptions { compression: Compression::None }).unwrap();
+    let payload_start = HEADER_LEN + 6 * ENTRY_LEN;
+    let mut rng = Rng(0xdead_beef);
+    let mut accepted = 0;
+    for _ in 0..3000 {
+        let mut forged = bytes.clone();
+        for _ in 0..1 + rng.below(4) {
+            let at = payload_start + rng.below(bytes.len() - payload_start);
+            forged[at] = match rng.below(3) {
+                0 => forged[at] ^ (1 << rng.below(8)),
+                1 => 0xff,
+                _ => rng.next() as u8,
+            };
+        }
+        reseal(&mut forged);
+        if decode_bundle(&forged).is_ok() {
+            accepted += 1; // e.g. a changed position: still a valid bundle
+        }
+    }
+    assert!(accepted < 3000);
+}
+
+#[test]
+fn random_byte_strings_never_panic() {
+    let mut rng = Rng(42);
+    let valid = tiny_bytes();
+    for i in 0..20_000 {
+        let len = rng.below(400);
+        let mut bytes: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+        if i % 2 == 0 {
+            // Keep a valid magic and version so the table parser is exercised too.
+            let keep = len.min(12);
+            bytes[..keep].copy_from_slice(&valid[..keep]);
+        }
+        assert!(decode_bundle(&bytes).is_err());
+        let _ = list_sections(&bytes);
+    }
+}
+
+#[test]
+fn encoder_refuses_bundles_that_would_not_read_back() {
+    let good = random_bundle(10, 12, 10, Quantization::F16);
+    let refuse = |b: Bundle, needle: &str| {
+        let err = encode_bundle(&b).unwrap_err().to_string();
+        assert!(err.contains(needle), "{err} (wanted {needle})");
+    };
+    let mut b = good.clone();
+    b.transfer.as_mut().unwrap().layers[0].data.pop();
+    refuse(b, "values, expected 12 vertices");
+    let mut b = good.clone();
+    b.transfer.as_mut().unwrap().layers[1].data[5] = f32::NAN;
+    refuse(b, "not finite");
+    let mut b = good.clone();
+    b.transfer.as_mut().unwrap().layers[1].data[5] = 1e6;
+    refuse(b, "overflows f16");
+    let mut b = good.clone();
+    b.transfer.as_mut().unwrap().layers[1].kind = LayerKind::Bounce(0);
+    refuse(b, "appears twice");
+    let mut b = good.clone();
+    b.sun.as_mut().unwrap().masks[2] |= 1 << 31;
+    refuse(b, "past step 92");
+    let mut b = good.clone();
+    b.sun.as_mut().unwrap().steps[3].sky_sh.pop();
+    refuse(b, "sky coefficients");
+    let mut b = good.clone();
+    b.mesh.indices[0] = 99;
+    refuse(b, "out of range");
+}
+
+#[test]
+fn duplicate_and_misplaced_sections_are_refused() {
+    let mut dup = tiny_bytes();
+    dup[HEADER_LEN + 2 * ENTRY_LEN..][..4].copy_from_slice(b"MESH"); // MATL -> second MESH
+    reseal(&mut dup);
+    assert!(matches!(decode_bundle(&dup), Err(BundleError::DuplicateSection(Tag(t))) if &t == b"MESH"));
+
+    let mut moved = tiny_bytes();
+    set_u32(&mut moved, HEADER_LEN + ENTRY_LEN + 8, 0xa8); // MESH offset 160 -> 168
+    reseal(&mut moved);
+    let err = decode_bundle(&moved).unwrap_err().to_string();
+    assert!(err.contains("section MESH: offset 168 is not the canonical 160"), "{err}");
+
+    let mut padded = tiny_bytes();
+    padded[152 + 2] = 1; // META padding
+    assert!(matches!(decode_bundle(&padded), Err(BundleError::Layout(_))));
+}

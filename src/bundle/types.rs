@@ -1,0 +1,178 @@
+//! The typed content of a bundle: what [`super::encode_bundle`] takes and
+//! [`super::decode_bundle`] returns.
+
+use crate::mesh::Mesh;
+
+/// Everything a `.prtb` file holds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bundle {
+    /// Free-form metadata (tool version, parameters, seed, stats, conventions,
+    /// measured quantization error). Stored as compact JSON; objects keep
+    /// serde_json's key order (sorted), so encoding is deterministic.
+    pub meta: serde_json::Value,
+    /// The cleaned mesh the transfer and masks refer to, vertex for vertex.
+    pub mesh: Mesh,
+    /// SH transfer per vertex, if baked.
+    pub transfer: Option<Transfer>,
+    /// Sun masks and per-step sun/sky data, if baked.
+    pub sun: Option<SunSeries>,
+}
+
+/// Per-vertex SH transfer vectors, one layer per stored bounce (and/or the total).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Transfer {
+    /// SH order n: bands `l < n`, `n²` coefficients, index `i = l(l+1)+m`.
+    pub order: u32,
+    /// 1 (grey) or 3 (RGB interreflection); any value ≥ 1 is stored.
+    pub channels: u32,
+    /// How the layers are stored on disk. On read, data is already dequantized.
+    pub quantization: Quantization,
+    /// Distinct kinds, in the order written.
+    pub layers: Vec<TransferLayer>,
+}
+
+impl Transfer {
+    /// Values per vertex: `channels · order²` (saturating; absurd sizes fail later checks).
+    pub fn values_per_vertex(&self) -> u64 {
+        (self.channels as u64).saturating_mul((self.order as u64).saturating_mul(self.order as u64))
+    }
+}
+
+/// Which quantity a transfer layer holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum LayerKind {
+    /// Sum of all bounces. On disk: kind 0.
+    Total,
+    /// Bounce b alone (0 = direct from the environment). On disk: kind 1 + b.
+    Bounce(u32),
+}
+
+impl LayerKind {
+    /// The on-disk code: 0 total, 1 + b for bounce b; `None` for `Bounce(u32::MAX)`.
+    pub fn code(self) -> Option<u32> {
+        match self {
+            LayerKind::Total => Some(0),
+            LayerKind::Bounce(b) => b.checked_add(1),
+        }
+    }
+    /// Inverse of [`LayerKind::code`].
+    pub fn from_code(code: u32) -> LayerKind {
+        match code {
+            0 => LayerKind::Total,
+            b => LayerKind::Bounce(b - 1),
+        }
+    }
+}
+
+/// One transfer layer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferLayer {
+    pub kind: LayerKind,
+    /// Vertex-major `[vertex][channel][coeff]`: value `((v·channels)+c)·order² + i`.
+    /// Length `vertex_count · channels · order²`; finite values only.
+    pub data: Vec<f32>,
+}
+
+/// Storage precision of transfer layers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Quantization {
+    /// Bit-exact. On disk: 0.
+    F32,
+    /// IEEE binary16, round to nearest even; |error| ≤ max(2⁻¹¹·|v|, 2⁻²⁵). On disk: 1.
+    F16,
+    /// Per vertex, scale s = max|v| / 32767 (f32) and values round(v / s) in
+    /// −32767..=32767; |error| ≤ s/2 + half an f32 ulp of the result. On disk: 2.
+    I16PerVertexScale,
+}
+
+impl Quantization {
+    /// The on-disk code.
+    pub fn code(self) -> u32 {
+        match self {
+            Quantization::F32 => 0,
+            Quantization::F16 => 1,
+            Quantization::I16PerVertexScale => 2,
+        }
+    }
+    /// Inverse of [`Quantization::code`]; `None` for unknown codes.
+    pub fn from_code(code: u32) -> Option<Quantization> {
+        match code {
+            0 => Some(Quantization::F32),
+            1 => Some(Quantization::F16),
+            2 => Some(Quantization::I16PerVertexScale),
+            _ => None,
+        }
+    }
+    /// Short lowercase name for reports: `f32`, `f16`, `i16`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quantization::F32 => "f32",
+            Quantization::F16 => "f16",
+            Quantization::I16PerVertexScale => "i16",
+        }
+    }
+}
+
+/// A day's time lapse: per-step sun and sky, and a shadow bit per (vertex, step).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunSeries {
+    /// SH order of each step's sky radiance (0 = no sky).
+    pub sky_order: u32,
+    /// One entry per time step; `steps.len()` is the step count.
+    pub steps: Vec<SunStep>,
+    /// `ceil(steps.len() / 32)`.
+    pub words_per_vertex: u32,
+    /// Vertex-major bits: vertex v, step k is bit `k % 32` of word
+    /// `v · words_per_vertex + k / 32`; 1 = sunlit. Bits at steps ≥ `steps.len()` are 0.
+    pub masks: Vec<u32>,
+}
+
+/// The sun and sky at one time step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunStep {
+    /// Seconds since 1970-01-01T00:00:00Z.
+    pub unix_time_utc: f64,
+    /// Unit vector in the world frame pointing toward the sun.
+    pub direction: [f32; 3],
+    /// Sun elevation above the horizon, degrees (negative below).
+    pub elevation_deg: f32,
+    /// Sun azimuth, degrees, as the sky module defines it (clockwise from north).
+    pub azimuth_deg: f32,
+    /// Sun irradiance on a surface facing it, linear RGB.
+    pub sun_rgb: [f32; 3],
+    /// The sun is below the horizon.
+    pub night: bool,
+    /// Sky radiance SH, `sky_order²` RGB coefficients, index `l(l+1)+m`.
+    pub sky_sh: Vec<[f32; 3]>,
+}
+
+impl SunSeries {
+    /// Whether `vertex` is sunlit at `step`. Out-of-range arguments give `false`.
+    pub fn bit(&self, vertex: usize, step: usize) -> bool {
+        let word = vertex
+            .checked_mul(self.words_per_vertex as usize)
+            .and_then(|w| w.checked_add(step / 32))
+            .and_then(|w| self.masks.get(w));
+        step < self.steps.len() && word.is_some_and(|w| (w >> (step % 32)) & 1 == 1)
+    }
+
+    /// Packs `f(vertex, step)` for every vertex and step into
+    /// `(words_per_vertex, masks)` in the layout of [`SunSeries::masks`].
+    pub fn pack(step_count: usize, vertex_count: usize, f: impl Fn(usize, usize) -> bool) -> (u32, Vec<u32>) {
+        let words_per_vertex = step_count.div_ceil(32);
+        let mut masks = vec![0u32; words_per_vertex * vertex_count];
+        for (vertex, words) in masks.chunks_exact_mut(words_per_vertex.max(1)).enumerate() {
+            for step in 0..step_count {
+                if f(vertex, step) {
+                    words[step / 32] |= 1 << (step % 32);
+                }
+            }
+        }
+        (words_per_vertex as u32, masks)
+    }
+
+    /// Number of time steps.
+    pub fn step_count(&self) -> usize {
+        self.steps.len()
+    }
+}

@@ -1,0 +1,55 @@
+//! The command-line glue: each subcommand turns a checked configuration into
+//! library calls and a report. Errors carry the path they concern; the binary
+//! prints them and exits 2 (a failed check exits 1).
+
+pub mod bake_cmd;
+pub mod demo_cmd;
+pub mod inspect_cmd;
+pub mod verify_cmd;
+
+use std::path::Path;
+
+use anyhow::Context;
+
+/// What a command tells the process to exit with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Exit 0.
+    Ok,
+    /// Exit 1: the command ran but a check failed.
+    CheckFailed,
+}
+
+/// Runs `f` on a rayon pool of `threads` threads (0 = all cores).
+pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> anyhow::Result<T> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start the thread pool")?;
+    Ok(pool.install(f))
+}
+
+/// Prints `value` as pretty JSON on stdout.
+pub fn print_json(value: &serde_json::Value) -> anyhow::Result<()> {
+    println!("{}", serde_json::to_string_pretty(value)?);
+    Ok(())
+}
+
+/// The conventions every bundle's metadata records.
+pub fn conventions() -> serde_json::Value {
+    serde_json::json!({
+        "sh": "real orthonormal SH without the Condon-Shortley phase; index i = l(l+1)+m; order n = bands l < n; polar axis +Z",
+        "world": "right-handed, +Y up, metres as in the source file",
+        "transfer": "per unit albedo of the receiver: L_out = albedo * sum_i L_i t_i, L_i = integral of L(w) y_i(w) dw",
+        "layout": "vertex-major [vertex][channel][coeff]",
+        "sun_masks": "step k of vertex v: bit k%32 of word v*words_per_vertex + k/32",
+    })
+}
+
+/// Loads a mesh file with the path in every error.
+pub fn load_mesh(path: &Path, up: crate::mesh::UpAxis, quiet: bool) -> anyhow::Result<crate::mesh::Mesh> {
+    let loaded = crate::mesh::load_mesh(path, &crate::mesh::LoadOptions { up })?;
+    if !quiet {
+        for w in &loaded.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+    }
+    Ok(loaded.mesh)
+}

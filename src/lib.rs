@@ -1,0 +1,16 @@
+//! prtbake: precomputed radiance transfer, baked offline.
+//!
+//! Pipeline: [`mesh`] loads → `clean` repairs → [`bake`] traces transfer
+//! and sun masks → [`bundle`] stores → `view` relights. [`verify`] checks
+//! bakes against closed forms; [`cli`] is the command-line glue. See
+//! ARCHITECTURE.md.
+
+pub mod bake;
+pub mod bundle;
+pub mod cli;
+pub mod fixtures;
+pub mod mesh;
+pub mod sh;
+pub mod sky;
+pub mod util;
+pub mod verify;

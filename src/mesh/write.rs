@@ -1,0 +1,283 @@
+//! Writers: OBJ (+ `.mtl`) and GLB. Both write a temp file beside the target and
+//! rename it, so a reader never sees a half-written file.
+//!
+//! Both preserve what `load_mesh` reads back: positions, normals, uvs, colours,
+//! triangle order within each (group, material) run, material names, albedos,
+//! roles and transmittance, group names. Floats are written with Rust's shortest
+//! round-tripping formatting (`{}`), so OBJ positions reload bit-exactly.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use serde_json::{json, Value};
+
+use super::obj::{MTL_ROLE_KEY, MTL_TRANSMITTANCE_KEY};
+use super::{Material, MaterialRole, Mesh, MeshError};
+
+/// Writes `path` by writing `<dir>/.<name>.<pid>.tmp` first and renaming it.
+fn write_atomically(path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
+    let error = |source| MeshError::Write { path: path.to_path_buf(), source };
+    let file_name = path.file_name().ok_or_else(|| error(std::io::Error::other("path has no file name")))?;
+    let temp_path: PathBuf = path.with_file_name(format!(".{}.{}.tmp", file_name.to_string_lossy(), std::process::id()));
+    let result = (|| {
+        let mut writer = BufWriter::new(File::create(&temp_path)?);
+        fill(&mut writer)?;
+        writer.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        std::fs::rename(&temp_path, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&temp_path);
+    }
+    result.map_err(error)
+}
+
+fn check_writable(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    mesh.validate().map_err(|message| MeshError::InvalidForWrite { path: path.to_path_buf(), message })
+}
+
+/// A name safe for one OBJ/MTL line (no line breaks, not empty; tobj trims the ends).
+fn obj_name(name: &str) -> String {
+    let cleaned: String = name.trim().chars().map(|c| if c.is_control() { '_' } else { c }).collect();
+    if cleaned.is_empty() { "unnamed".to_string() } else { cleaned }
+}
+
+/// Writes `mesh` as Wavefront OBJ at `path`, with its materials in `<stem>.mtl`
+/// beside it (`mtllib` refers to it by file name).
+///
+/// Vertices carry their colour as `v x y z r g b` when the mesh has colours; every
+/// face gives position/uv/normal indices (one shared index, as `load_mesh` reads
+/// them). A new `o <group>` line starts whenever the group changes along the
+/// triangle list and `usemtl` whenever the material does, so triangle order is
+/// kept. The `.mtl` has `Kd` per material plus `prtbake_role` /
+/// `prtbake_transmittance` keys. Refuses a mesh that fails [`Mesh::validate`].
+pub fn write_obj(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    check_writable(path, mesh)?;
+    let stem = path.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
+    let mtl_name = format!("{stem}.mtl");
+    write_atomically(&path.with_file_name(&mtl_name), |w| write_mtl_text(w, &mesh.materials))?;
+    write_atomically(path, |w| write_obj_text(w, mesh, &mtl_name))
+}
+
+fn write_mtl_text(w: &mut impl Write, materials: &[Material]) -> std::io::Result<()> {
+    writeln!(w, "# written by prtbake")?;
+    for material in materials {
+        let [r, g, b] = material.albedo;
+        writeln!(w, "\nnewmtl {}\nKd {r} {g} {b}", obj_name(&material.name))?;
+        let role = match material.role {
+            MaterialRole::Opaque => "opaque",
+            MaterialRole::Window => "window",
+            MaterialRole::Panel => "panel",
+        };
+        writeln!(w, "{MTL_ROLE_KEY} {role}\n{MTL_TRANSMITTANCE_KEY} {}", material.transmittance)?;
+    }
+    Ok(())
+}
+
+fn write_obj_text(w: &mut impl Write, mesh: &Mesh, mtl_name: &str) -> std::io::Result<()> {
+    writeln!(w, "# written by prtbake: {} vertices, {} triangles\nmtllib {mtl_name}", mesh.vertex_count(), mesh.triangle_count())?;
+    for (i, p) in mesh.positions.iter().enumerate() {
+        match mesh.colors.get(i) {
+            Some([r, g, b]) => writeln!(w, "v {} {} {} {r} {g} {b}", p.x, p.y, p.z)?,
+            None => writeln!(w, "v {} {} {}", p.x, p.y, p.z)?,
+        }
+    }
+    for uv in &mesh.uvs {
+        writeln!(w, "vt {} {}", uv.x, uv.y)?;
+    }
+    for n in &mesh.normals {
+        writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
+    }
+    let has_uvs = !mesh.uvs.is_empty();
+    let mut current: Option<(u32, u16)> = None;
+    for t in 0..mesh.triangle_count() {
+        let (group, material) = (mesh.tri_group[t], mesh.tri_material[t]);
+        if current.map(|(g, _)| g) != Some(group) {
+            writeln!(w, "o {}", obj_name(&mesh.groups[group as usize]))?;
+            current = None;
+        }
+        if current.map(|(_, m)| m) != Some(material) {
+            writeln!(w, "usemtl {}", obj_name(&mesh.materials[material as usize].name))?;
+        }
+        current = Some((group, material));
+        let [a, b, c] = mesh.triangle(t).map(|i| i + 1);
+        if has_uvs {
+            writeln!(w, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
+        } else {
+            writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
+        }
+    }
+    Ok(())
+}
+
+/// glTF constants used by the GLB writer.
+const FLOAT: u32 = 5126;
+const UNSIGNED_INT: u32 = 5125;
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+
+/// Accumulates the BIN chunk and its bufferViews/accessors.
+#[derive(Default)]
+struct GlbBin {
+    bytes: Vec<u8>,
+    views: Vec<Value>,
+    accessors: Vec<Value>,
+}
+
+impl GlbBin {
+    /// Appends one tightly packed view (4-byte aligned) and an accessor over it.
+    fn push(&mut self, data: &[u8], target: u32, mut accessor: Value) -> usize {
+        while self.bytes.len() % 4 != 0 {
+            self.bytes.push(0);
+        }
+        let view = self.views.len();
+        self.views.push(json!({"buffer": 0, "byteOffset": self.bytes.len(), "byteLength": data.len(), "target": target}));
+        self.bytes.extend_from_slice(data);
+        accessor["bufferView"] = json!(view);
+        self.accessors.push(accessor);
+        self.accessors.len() - 1
+    }
+
+    fn push_vec3s(&mut self, values: impl Iterator<Item = [f32; 3]>, with_bounds: bool) -> usize {
+        let mut data = Vec::new();
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        let mut count = 0;
+        for v in values {
+            for k in 0..3 {
+                data.extend_from_slice(&v[k].to_le_bytes());
+                lo[k] = lo[k].min(v[k]);
+                hi[k] = hi[k].max(v[k]);
+            }
+            count += 1;
+        }
+        let mut accessor = json!({"componentType": FLOAT, "count": count, "type": "VEC3"});
+        if with_bounds {
+            accessor["min"] = json!(lo);
+            accessor["max"] = json!(hi);
+        }
+        self.push(&data, ARRAY_BUFFER, accessor)
+    }
+}
+
+fn material_json(material: &Material) -> Value {
+    let [r, g, b] = material.albedo;
+    let mut value = json!({
+        "name": material.name,
+        "pbrMetallicRoughness": {"baseColorFactor": [r, g, b, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+        "extras": {"prtbake_role": material.role},
+    });
+    if material.role == MaterialRole::Window {
+        value["extensions"] = json!({"KHR_materials_transmission": {"transmissionFactor": material.transmittance}});
+    }
+    value
+}
+
+/// Writes `mesh` as a binary glTF (GLB) at `path`.
+///
+/// One glTF mesh (named after the group) per non-empty group, each placed by an
+/// identity node, with one primitive per material used in it (triangles keep
+/// their relative order). A group's primitives share its vertex accessors:
+/// POSITION (with min/max), NORMAL, TEXCOORD_0 and COLOR_0 when the mesh has
+/// them, holding the group's vertices in ascending original index order. Indices
+/// are u32. Materials carry `baseColorFactor`, `KHR_materials_transmission` for
+/// windows, and `extras.prtbake_role`. Refuses a mesh that fails [`Mesh::validate`]
+/// or would exceed GLB's 4 GiB limit.
+pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    check_writable(path, mesh)?;
+    let too_large = || MeshError::InvalidForWrite { path: path.to_path_buf(), message: "the GLB would exceed 4 GiB".into() };
+    let mut bin = GlbBin::default();
+    let mut meshes = Vec::new();
+
+    // Triangles per group, then per material (BTreeMap: material order).
+    let mut by_group: Vec<BTreeMap<u16, Vec<usize>>> = vec![BTreeMap::new(); mesh.groups.len()];
+    for t in 0..mesh.triangle_count() {
+        by_group[mesh.tri_group[t] as usize].entry(mesh.tri_material[t]).or_default().push(t);
+    }
+    const UNUSED: u32 = u32::MAX;
+    let mut local_index = vec![UNUSED; mesh.vertex_count()];
+    for (group, runs) in by_group.iter().enumerate() {
+        if runs.is_empty() {
+            continue;
+        }
+        // The group's vertices in ascending original order.
+        let mut used: Vec<u32> = runs.values().flatten().flat_map(|&t| mesh.triangle(t)).collect();
+        used.sort_unstable();
+        used.dedup();
+        for (local, &v) in used.iter().enumerate() {
+            local_index[v as usize] = local as u32;
+        }
+        let position = bin.push_vec3s(used.iter().map(|&v| mesh.positions[v as usize].to_array()), true);
+        let normal = bin.push_vec3s(used.iter().map(|&v| mesh.normals[v as usize].to_array()), false);
+        let mut attributes = json!({"POSITION": position, "NORMAL": normal});
+        if !mesh.uvs.is_empty() {
+            let data: Vec<u8> = used.iter().flat_map(|&v| mesh.uvs[v as usize].to_array()).flat_map(f32::to_le_bytes).collect();
+            attributes["TEXCOORD_0"] = json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": used.len(), "type": "VEC2"})));
+        }
+        if !mesh.colors.is_empty() {
+            attributes["COLOR_0"] = json!(bin.push_vec3s(used.iter().map(|&v| mesh.colors[v as usize]), false));
+        }
+        let primitives: Vec<Value> = runs
+            .iter()
+            .map(|(&material, triangles)| {
+                let data: Vec<u8> = triangles
+                    .iter()
+                    .flat_map(|&t| mesh.triangle(t))
+                    .flat_map(|v| local_index[v as usize].to_le_bytes())
+                    .collect();
+                let indices = bin.push(&data, ELEMENT_ARRAY_BUFFER, json!({"componentType": UNSIGNED_INT, "count": 3 * triangles.len(), "type": "SCALAR"}));
+                json!({"attributes": attributes.clone(), "indices": indices, "material": material, "mode": 4})
+            })
+            .collect();
+        meshes.push(json!({"name": mesh.groups[group], "primitives": primitives}));
+        for &v in &used {
+            local_index[v as usize] = UNUSED;
+        }
+    }
+
+    let nodes: Vec<Value> = meshes.iter().enumerate().map(|(i, m)| json!({"mesh": i, "name": m["name"]})).collect();
+    let mut document = json!({
+        "asset": {"version": "2.0", "generator": concat!("prtbake ", env!("CARGO_PKG_VERSION"))},
+        "scene": 0,
+        "scenes": [{"nodes": (0..nodes.len()).collect::<Vec<_>>()}],
+        "nodes": nodes,
+        "meshes": meshes,
+        "materials": mesh.materials.iter().map(material_json).collect::<Vec<_>>(),
+        "accessors": bin.accessors,
+        "bufferViews": bin.views,
+    });
+    if !bin.bytes.is_empty() {
+        document["buffers"] = json!([{"byteLength": bin.bytes.len()}]);
+    }
+    if mesh.materials.iter().any(|m| m.role == MaterialRole::Window) {
+        document["extensionsUsed"] = json!(["KHR_materials_transmission"]);
+    }
+    let glb = assemble_glb(document.to_string().into_bytes(), bin.bytes).ok_or_else(too_large)?;
+    write_atomically(path, |w| w.write_all(&glb))
+}
+
+/// Frames JSON and BIN chunks as GLB: JSON padded with spaces and BIN with zeros
+/// to 4 bytes, as the spec requires. `None` when the total exceeds `u32`.
+pub(crate) fn assemble_glb(mut json: Vec<u8>, mut bin: Vec<u8>) -> Option<Vec<u8>> {
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let bin_chunk_len = if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let total = u32::try_from(12 + 8 + json.len() + bin_chunk_len).ok()?;
+    let mut out = Vec::with_capacity(total as usize);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total.to_le_bytes());
+    out.extend_from_slice(&u32::try_from(json.len()).ok()?.to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    if !bin.is_empty() {
+        out.extend_from_slice(&u32::try_from(bin.len()).ok()?.to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&bin);
+    }
+    Some(out)
+}

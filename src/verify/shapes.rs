@@ -1,0 +1,185 @@
+//! Analytic test geometry: icospheres, planes, integrating spheres.
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+use crate::mesh::{Material, MaterialRole, Mesh};
+
+/// A unit-radius icosphere subdivided `subdivisions` times
+/// (10·4^s + 2 vertices), outward normals equal to positions.
+pub fn icosphere(subdivisions: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut positions: Vec<Vec3> = [
+        (-1.0, t, 0.0), (1.0, t, 0.0), (-1.0, -t, 0.0), (1.0, -t, 0.0),
+        (0.0, -1.0, t), (0.0, 1.0, t), (0.0, -1.0, -t), (0.0, 1.0, -t),
+        (t, 0.0, -1.0), (t, 0.0, 1.0), (-t, 0.0, -1.0), (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
+        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut midpoint = |a: u32, b: u32, positions: &mut Vec<Vec3>| -> u32 {
+            let key = (a.min(b), a.max(b));
+            *midpoints.entry(key).or_insert_with(|| {
+                positions.push(((positions[a as usize] + positions[b as usize]) * 0.5).normalize());
+                positions.len() as u32 - 1
+            })
+        };
+        let mut next = Vec::with_capacity(faces.len() * 4);
+        for [a, b, c] in faces {
+            let ab = midpoint(a, b, &mut positions);
+            let bc = midpoint(b, c, &mut positions);
+            let ca = midpoint(c, a, &mut positions);
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    let triangle_count = faces.len();
+    Mesh {
+        normals: positions.clone(),
+        positions,
+        indices: faces.into_iter().flatten().collect(),
+        tri_material: vec![0; triangle_count],
+        tri_group: vec![0; triangle_count],
+        materials: vec![Material::opaque("sphere", 0.8)],
+        groups: vec!["sphere".into()],
+        ..Mesh::default()
+    }
+}
+
+/// Moves and scales a mesh in place.
+pub fn transform(mesh: &mut Mesh, scale: f32, offset: Vec3) {
+    mesh.positions.iter_mut().for_each(|p| *p = *p * scale + offset);
+}
+
+/// Appends `other` to `mesh`, with its own materials and groups.
+pub fn append(mesh: &mut Mesh, other: &Mesh) {
+    let base = mesh.positions.len() as u32;
+    let material_base = mesh.materials.len() as u16;
+    let group_base = mesh.groups.len() as u32;
+    mesh.positions.extend(&other.positions);
+    mesh.normals.extend(&other.normals);
+    mesh.indices.extend(other.indices.iter().map(|i| i + base));
+    mesh.tri_material.extend(other.tri_material.iter().map(|m| m + material_base));
+    mesh.tri_group.extend(other.tri_group.iter().map(|g| g + group_base));
+    mesh.materials.extend(other.materials.iter().cloned());
+    mesh.groups.extend(other.groups.iter().cloned());
+}
+
+/// A square grid of `cells`×`cells` quads in the XZ plane, side `size`,
+/// centred at the origin, facing +Y.
+pub fn plane_grid(cells: u32, size: f32) -> Mesh {
+    let n = cells + 1;
+    let mut positions = Vec::with_capacity((n * n) as usize);
+    for j in 0..n {
+        for i in 0..n {
+            let x = (i as f32 / cells as f32 - 0.5) * size;
+            let z = (j as f32 / cells as f32 - 0.5) * size;
+            positions.push(Vec3::new(x, 0.0, z));
+        }
+    }
+    let mut indices = Vec::with_capacity((cells * cells * 6) as usize);
+    for j in 0..cells {
+        for i in 0..cells {
+            let a = j * n + i;
+            let (b, c, d) = (a + 1, a + n, a + n + 1);
+            // Counter-clockwise seen from +Y.
+            indices.extend([a, c, b, b, c, d]);
+        }
+    }
+    let triangle_count = indices.len() / 3;
+    Mesh {
+        normals: vec![Vec3::Y; positions.len()],
+        positions,
+        indices,
+        tri_material: vec![0; triangle_count],
+        tri_group: vec![0; triangle_count],
+        materials: vec![Material::opaque("plane", 0.8)],
+        groups: vec!["plane".into()],
+        ..Mesh::default()
+    }
+}
+
+/// How the opening of an integrating sphere is made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Opening {
+    /// Cap triangles kept, with a window material (window mode).
+    Window,
+    /// Cap triangles removed (open mode).
+    Hole,
+}
+
+/// An integrating sphere: a unit icosphere facing inward (normals and winding
+/// toward the centre) with albedo `albedo`, whose triangles with centroid
+/// above height `cap_height` form the opening. Returns the mesh and the exact
+/// area fraction of the opening.
+pub fn integrating_sphere(subdivisions: u32, albedo: f32, cap_height: f32, opening: Opening) -> (Mesh, f64) {
+    let sphere = icosphere(subdivisions);
+    let mut mesh = Mesh {
+        positions: sphere.positions.clone(),
+        normals: sphere.normals.iter().map(|n| -*n).collect(),
+        materials: vec![
+            Material::opaque("wall", albedo),
+            Material { name: "glass".into(), albedo: [0.0; 3], role: MaterialRole::Window, transmittance: 1.0 },
+        ],
+        groups: vec!["sphere".into()],
+        ..Mesh::default()
+    };
+    let (mut wall_area, mut cap_area) = (0.0f64, 0.0f64);
+    for t in 0..sphere.triangle_count() {
+        let [a, b, c] = sphere.triangle(t);
+        let [pa, pb, pc] = sphere.triangle_positions(t);
+        let area = 0.5 * (pb - pa).cross(pc - pa).length() as f64;
+        let in_cap = (pa + pb + pc).y / 3.0 > cap_height;
+        if in_cap {
+            cap_area += area;
+            if opening == Opening::Hole {
+                continue;
+            }
+        } else {
+            wall_area += area;
+        }
+        // Reverse the winding so the front faces the centre.
+        mesh.indices.extend([a, c, b]);
+        mesh.tri_material.push(u16::from(in_cap));
+        mesh.tri_group.push(0);
+    }
+    (mesh, cap_area / (cap_area + wall_area))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn icosphere_counts_and_validity() {
+        let s = icosphere(4);
+        assert_eq!(s.vertex_count(), 2562);
+        assert_eq!(s.triangle_count(), 5120);
+        s.validate().unwrap();
+        // Winding is outward: every face normal agrees with its centroid.
+        for t in 0..s.triangle_count() {
+            let [a, b, c] = s.triangle_positions(t);
+            assert!((b - a).cross(c - a).dot(a + b + c) > 0.0);
+        }
+    }
+
+    #[test]
+    fn integrating_sphere_faces_inward() {
+        let (m, f) = integrating_sphere(3, 0.5, 0.8, Opening::Window);
+        m.validate().unwrap();
+        assert!(f > 0.05 && f < 0.15, "f = {f}");
+        for t in 0..m.triangle_count() {
+            let [a, b, c] = m.triangle_positions(t);
+            assert!((b - a).cross(c - a).dot(a + b + c) < 0.0);
+        }
+    }
+}

@@ -1,0 +1,115 @@
+//! The binary as a user runs it: real files, bad input, JSON, exit codes.
+
+use crate::util::{prtbake, shared_data, write_scene_obj, Scratch};
+
+#[test]
+fn bake_inspect_round_trip_and_thread_independence() {
+    let dir = Scratch::new("bake");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let out1 = dir.path("one.prtb");
+    let out2 = dir.path("two.prtb");
+    let common = ["--rays", "64", "--bounces", "1", "--order", "3", "--seed", "7", "--quiet"];
+    let run = |out: &std::path::Path, threads: &str| {
+        let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--threads", threads];
+        args.extend(common);
+        let o = prtbake(&args);
+        assert!(o.status.success(), "bake failed: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let line = run(&out1, "1");
+    assert!(line.contains("rays") && line.contains("Mrays/s"), "stats line: {line}");
+    run(&out2, "2");
+    assert_eq!(std::fs::read(&out1).unwrap(), std::fs::read(&out2).unwrap(), "bundles differ between 1 and 2 threads");
+
+    let o = prtbake(&["inspect", out1.to_str().unwrap(), "--json"]);
+    assert!(o.status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["triangles"], 14);
+    assert_eq!(doc["transfer"]["order"], 3);
+    // The red box makes interreflection coloured: three channels.
+    assert_eq!(doc["transfer"]["channels"], 3);
+    assert_eq!(doc["meta"]["params"]["seed"], 7);
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(&dir.0).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains(".tmp")).collect();
+    assert!(leftovers.is_empty());
+}
+
+#[test]
+fn bake_json_reports_stats() {
+    let dir = Scratch::new("json");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let out = dir.path("s.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "32", "--json", "--bounces", "2"]);
+    assert!(o.status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let s = &doc["stats"];
+    assert_eq!(s["triangles"], 14);
+    assert_eq!(s["rays_per_bounce"].as_array().unwrap().len(), 3);
+    let rays: u64 = s["rays_per_bounce"].as_array().unwrap().iter().map(|r| r.as_u64().unwrap()).sum();
+    assert_eq!(s["rays"].as_u64().unwrap(), rays);
+    assert!(s["rays_per_second"].as_f64().unwrap() > 0.0);
+    assert!(doc["peak_memory_bytes"].as_u64().unwrap() > 0);
+}
+
+/// Bad input: a clear message naming the file, exit code 2, never a panic.
+#[test]
+fn bad_input_is_refused_with_the_path() {
+    let dir = Scratch::new("bad");
+    let missing = dir.path("missing.obj");
+    let nan = dir.path("nan.obj");
+    std::fs::write(&nan, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n").unwrap();
+    let empty = dir.path("empty.obj");
+    std::fs::write(&empty, "# nothing\n").unwrap();
+    let garbage = dir.path("garbage.prtb");
+    std::fs::write(&garbage, b"PRTB\r\n\x1a\n garbage").unwrap();
+    let out = dir.path("o.prtb");
+    for (args, needle) in [
+        (vec!["bake", missing.to_str().unwrap(), "-o", out.to_str().unwrap()], "missing.obj"),
+        (vec!["bake", nan.to_str().unwrap(), "-o", out.to_str().unwrap()], "nan.obj"),
+        (vec!["bake", empty.to_str().unwrap(), "-o", out.to_str().unwrap()], "empty.obj"),
+        (vec!["inspect", garbage.to_str().unwrap()], "garbage.prtb"),
+        (vec!["bake", nan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--order", "0"], "order"),
+        (vec!["bake", nan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "100000"], "rays"),
+    ] {
+        let o = prtbake(&args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: message does not name {needle}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+    }
+    assert!(!out.exists(), "a failed bake left an output file");
+}
+
+/// Window mode with a pattern that matches nothing is an error, not a black bake.
+#[test]
+fn window_pattern_matching_nothing_is_an_error() {
+    let dir = Scratch::new("win");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("w.prtb").to_str().unwrap(), "--window", "Glass*", "--rays", "8"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no triangle is a window"));
+}
+
+/// The real car's windows are material Glass_Gray: a quick window-mode bake at low rays.
+#[test]
+fn ferrari_window_mode_bakes() {
+    let Some(car) = shared_data("car-ferrari458/ferrari_nodraco.glb") else { return };
+    let dir = Scratch::new("car");
+    let out = dir.path("car.prtb");
+    let o = prtbake(&["bake", car.to_str().unwrap(), "-o", out.to_str().unwrap(), "--window", "Glass_Gray", "--rays", "4", "--order", "2", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["stats"]["triangles"], 358_788);
+    assert_eq!(doc["stats"]["window_triangles"], 8_952);
+}
+
+#[test]
+fn draco_file_is_refused_by_name() {
+    let Some(car) = shared_data("car-ferrari458/ferrari.glb") else { return };
+    let o = prtbake(&["bake", car.to_str().unwrap(), "-o", "/nonexistent/x.prtb"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("KHR_draco_mesh_compression"));
+}

@@ -1,0 +1,6 @@
+//! Integration tests: one target (`autotests = false`), one module per area.
+
+mod analytic;
+mod bake_props;
+mod cli;
+mod util;
