@@ -1,1 +1,102 @@
-fn main(){}
+//! Throughput of the baker on a ≥ 500k-triangle scene (the demo cabin at
+//! higher detail) and, when ../shared/data is present, on the Ferrari:
+//! BVH build time, occlusion and closest-hit rays/s on 1 and 2 threads, and a
+//! whole transfer bake. Criterion's "elements/s" are rays per second.
+//!
+//! Run: `cargo bench --bench bake` (add `-- trace` etc. to filter).
+
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
+use glam::Vec3;
+use prtbake::bake::{bake_mesh, sampling, BakeParams, BuildQuality, Mode, Scene};
+use prtbake::fixtures::cabin::generate_cabin;
+use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
+use rayon::prelude::*;
+
+/// Cells per metre giving the cabin ≥ 500k triangles.
+const BIG_DETAIL: f32 = 80.0;
+const POINTS: u32 = 8192;
+const RAYS_PER_POINT: u32 = 64;
+
+/// Ray origins and directions like the baker's: centroids of a deterministic
+/// spread of triangles, cosine-distributed directions over the sphere.
+fn workload(mesh: &Mesh, scene: &Scene) -> Vec<(Vec3, Vec3)> {
+    let step = (mesh.triangle_count() as u32 / POINTS).max(1);
+    let mut rays = Vec::with_capacity((POINTS * RAYS_PER_POINT) as usize);
+    for p in 0..POINTS {
+        let t = ((p * step) as usize).min(mesh.triangle_count() - 1);
+        let [a, b, c] = mesh.triangle_positions(t);
+        let n = scene.face_normal(t as u32);
+        if n == Vec3::ZERO {
+            continue;
+        }
+        for k in 0..RAYS_PER_POINT {
+            let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, p);
+            let d = sampling::cosine_sphere(n, u1, u2);
+            rays.push((scene.offset_origin((a + b + c) / 3.0, n, d), d));
+        }
+    }
+    rays
+}
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
+}
+
+fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
+    let mut group = c.benchmark_group(format!("build/{name}"));
+    group.sample_size(10);
+    group.bench_function("cwbvh_medium", |b| b.iter(|| Scene::build(mesh, BuildQuality::Medium)));
+    group.finish();
+
+    let scene = Scene::build(mesh, BuildQuality::Medium);
+    let rays = workload(mesh, &scene);
+    let mut group = c.benchmark_group(format!("trace/{name}"));
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(rays.len() as u64));
+    for threads in [1, 2] {
+        let pool = pool(threads);
+        group.bench_function(format!("occlusion/{threads}t"), |b| {
+            b.iter(|| pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.occluded(*o, *d, f32::INFINITY)).count()).sum::<usize>()))
+        });
+        group.bench_function(format!("closest_hit/{threads}t"), |b| {
+            b.iter(|| pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some()).count()).sum::<usize>()))
+        });
+    }
+    group.finish();
+}
+
+fn bench_bake(c: &mut Criterion, name: &str, mesh: &Mesh, window: &[String]) {
+    let mode = if window.is_empty() { Mode::Open } else { Mode::Window };
+    let params = BakeParams { order: 3, rays: 8, mode, ..BakeParams::default() };
+    let (probe, _, _) = bake_mesh(mesh, &params, window).unwrap();
+    let mut group = c.benchmark_group(format!("bake/{name}"));
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(probe.stats.rays));
+    for threads in [1, 2] {
+        let pool = pool(threads);
+        group.bench_function(format!("order3_8rays_{threads}t"), |b| {
+            b.iter_batched(|| (), |_| pool.install(|| bake_mesh(mesh, &params, window).unwrap()), BatchSize::PerIteration)
+        });
+    }
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    let (cabin, _) = generate_cabin(BIG_DETAIL);
+    assert!(cabin.triangle_count() >= 500_000, "{}", cabin.triangle_count());
+    bench_scene(c, "cabin", &cabin);
+    bench_bake(c, "cabin_open", &cabin, &[]);
+    bench_bake(c, "cabin_window", &cabin, &["glass".to_string()]);
+    let ferrari = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/car-ferrari458/ferrari_nodraco.glb");
+    match load_mesh(&ferrari, &LoadOptions::default()) {
+        Ok(loaded) => {
+            bench_scene(c, "ferrari", &loaded.mesh);
+        }
+        Err(e) => eprintln!("SKIP ferrari benches: {e}"),
+    }
+}
+
+criterion_group!(bake_benches, benches);
+criterion_main!(bake_benches);

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use prtbake::bake::{BakeParams, Channels, DirectionPattern, Mode, Sampling};
+use prtbake::clean::{CleanParams, Tolerance};
 use prtbake::cli::{self, Outcome};
 use prtbake::mesh::UpAxis;
 
@@ -81,6 +82,9 @@ struct BakeArgs {
     /// Direction pattern (random is for comparison only).
     #[arg(long, value_enum, default_value_t = PatternArg::Sobol)]
     pattern: PatternArg,
+    /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
+    #[arg(long)]
+    clean: bool,
     /// Stats as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -89,10 +93,55 @@ struct BakeArgs {
     quiet: bool,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum CleanPreset {
+    /// Tessellated CAD: everything on, hard edges kept.
+    Cad,
+    /// Scans: smooth normals, no zipping of the scan's holes.
+    Scan,
+    /// Only weld, degenerate and duplicate removal.
+    Minimal,
+}
+
+#[derive(clap::Args)]
+struct CleanArgs {
+    /// Mesh to clean (.obj, .gltf, .glb).
+    input: PathBuf,
+    /// Cleaned mesh (.obj or .glb, by extension).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Write the full report as JSON here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = CleanPreset::Cad)]
+    preset: CleanPreset,
+    /// Weld distance, absolute (world units); default 1e-6 of the bounding-box diagonal.
+    #[arg(long)]
+    weld_tolerance: Option<f32>,
+    /// Vertices whose normals differ by more than this (degrees) stay apart.
+    #[arg(long)]
+    hard_edge_angle: Option<f32>,
+    /// Split edges longer than this (world units), recursively.
+    #[arg(long)]
+    max_edge: Option<f32>,
+    /// Keep one triangle per winding of a doubled sheet (two-sided surfaces).
+    #[arg(long)]
+    keep_two_sided: bool,
+    #[arg(long, value_enum, default_value_t = Up::Y)]
+    up: Up,
+    /// The report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    #[arg(long)]
+    quiet: bool,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Bake per-vertex SH transfer of a mesh into a bundle.
     Bake(BakeArgs),
+    /// Repair a mesh for PRT (duplicates, overlaps, cracks, T-junctions, slivers, winding) and report every change.
+    Clean(CleanArgs),
     /// Show what a bundle holds.
     Inspect {
         bundle: PathBuf,
@@ -153,20 +202,52 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     Ok(cli::bake_cmd::BakeConfig {
         input: a.mesh,
         output: a.output,
-        up: match a.up {
-            Up::Y => UpAxis::Y,
-            Up::Z => UpAxis::Z,
-        },
+        up: up_axis(a.up),
         params,
         window_patterns: a.windows,
         threads: a.threads,
         json: a.json,
+        clean: a.clean.then(CleanParams::cad),
+    })
+}
+
+fn up_axis(up: Up) -> UpAxis {
+    match up {
+        Up::Y => UpAxis::Y,
+        Up::Z => UpAxis::Z,
+    }
+}
+
+fn clean_config(a: CleanArgs) -> anyhow::Result<cli::clean_cmd::CleanConfig> {
+    let mut params = match a.preset {
+        CleanPreset::Cad => CleanParams::cad(),
+        CleanPreset::Scan => CleanParams::scan(None),
+        CleanPreset::Minimal => CleanParams::minimal(),
+    };
+    if let Some(t) = a.weld_tolerance {
+        params.weld_tolerance = Tolerance::Absolute(t);
+    }
+    if let Some(angle) = a.hard_edge_angle {
+        params.hard_edge_angle_deg = angle;
+    }
+    params.max_edge = a.max_edge.or(params.max_edge);
+    params.keep_two_sided = a.keep_two_sided;
+    params.validate()?;
+    Ok(cli::clean_cmd::CleanConfig {
+        input: a.input,
+        output: a.output,
+        report: a.report,
+        up: up_axis(a.up),
+        params,
+        json: a.json,
+        quiet: a.quiet,
     })
 }
 
 fn run(command: Command) -> anyhow::Result<Outcome> {
     match command {
         Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
+        Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => {
             cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)

@@ -1,12 +1,13 @@
 //! prtbake: precomputed radiance transfer, baked offline.
 //!
-//! Pipeline: [`mesh`] loads → `clean` repairs → [`bake`] traces transfer
+//! Pipeline: [`mesh`] loads → [`clean`] repairs → [`bake`] traces transfer
 //! and sun masks → [`bundle`] stores → `view` relights. [`verify`] checks
 //! bakes against closed forms; [`cli`] is the command-line glue. See
 //! ARCHITECTURE.md.
 
 pub mod bake;
 pub mod bundle;
+pub mod clean;
 pub mod cli;
 pub mod fixtures;
 pub mod mesh;

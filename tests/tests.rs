@@ -2,5 +2,6 @@
 
 mod analytic;
 mod bake_props;
+mod clean_props;
 mod cli;
 mod util;

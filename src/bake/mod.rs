@@ -157,9 +157,13 @@ pub struct BakeStats {
     pub points_rejected: u64,
     /// Vertices no sample reached (only on window or degenerate triangles): their transfer is zero.
     pub vertices_without_samples: u64,
+    /// Rays evaluated per bounce (bounces ≥ 1 reuse bounce 0's hits when they fit in memory).
     pub rays_per_bounce: Vec<u64>,
     pub seconds_per_bounce: Vec<f64>,
+    /// Rays evaluated in all bounces.
     pub rays: u64,
+    /// Rays actually traced through the BVH (probe rays included).
+    pub rays_traced: u64,
     pub seconds: f64,
     pub rays_per_second: f64,
 }

@@ -37,6 +37,25 @@ const ITEMS_PER_MERGE: usize = 8192;
 /// Rays of each point first traced with closest hit to decide whether the point lies inside geometry.
 const INSIDE_PROBE_RAYS: u32 = 32;
 
+/// Largest hit cache kept in memory (bytes); beyond it later bounces re-trace their rays.
+pub const HIT_CACHE_BUDGET_BYTES: u64 = 6 << 30;
+
+/// A cached ray result: no light comes back along this ray in bounces ≥ 1.
+const NO_HIT: u64 = u64::MAX;
+
+/// Packs a hit on `triangle` at barycentrics (u, v) into one word (16-bit barycentrics).
+#[inline]
+fn encode_hit(triangle: u32, u: f32, v: f32) -> u64 {
+    let q = |x: f32| (x.clamp(0.0, 1.0) * 65535.0).round() as u64;
+    (triangle as u64) << 32 | q(u) << 16 | q(v)
+}
+
+#[inline]
+fn decode_hit(record: u64) -> (usize, f32, f32) {
+    let q = |x: u64| (x & 0xffff) as f32 / 65535.0;
+    ((record >> 32) as usize, q(record >> 16), q(record))
+}
+
 /// One point rays leave from.
 #[derive(Clone, Copy)]
 struct Point {
@@ -93,6 +112,11 @@ struct Pass<'a> {
     bounce_albedo: &'a [[f32; 3]],
     rejected: &'a [bool],
     reject_distance: f32,
+    /// Bounce 0 records every ray's hit here (when bounces follow and it fits
+    /// the budget); bounces ≥ 1 then gather from it instead of re-tracing:
+    /// the rays are the same, only the values at their ends change.
+    hit_cache: Option<&'a [u64]>,
+    record_hits: bool,
 }
 
 /// What one task returns: per item and corner, weighted coefficient sums and weights.
@@ -100,7 +124,12 @@ struct TaskOutput {
     sums: Vec<f32>,
     weights: Vec<f32>,
     rejected: Vec<(u32, bool)>,
+    /// Rays evaluated (traced or gathered from the cache).
     rays: u64,
+    /// Rays actually traced through the BVH.
+    traced: u64,
+    /// Hit records of this task's points, in point order (bounce 0 with caching).
+    hits: Vec<u64>,
 }
 
 /// Bakes transfer for every vertex. Runs on the current rayon pool.
@@ -133,6 +162,9 @@ pub fn bake_transfer(
         surfaces.albedo.clone()
     };
     let mut rejected = vec![false; point_count as usize];
+    let cache_bytes = point_count * params.rays as u64 * 8;
+    let use_cache = params.bounces > 0 && cache_bytes <= HIT_CACHE_BUDGET_BYTES;
+    let mut hit_cache: Vec<u64> = Vec::new();
     let mut vertex_weight = vec![0.0f32; vertex_count];
     let mut layers: Vec<Vec<f32>> = Vec::new();
 
@@ -153,10 +185,14 @@ pub fn bake_transfer(
             bounce_albedo: &bounce_albedo,
             rejected: &rejected,
             reject_distance: params.inside_distance * scene.diagonal,
+            hit_cache: (use_cache && bounce > 0).then_some(hit_cache.as_slice()),
+            record_hits: use_cache && bounce == 0,
         };
         let mut accumulated = vec![0.0f32; vertex_count * pass_channels * coeffs];
         let mut new_rejections = Vec::new();
         let mut rays = 0u64;
+        let mut traced = 0u64;
+        let mut new_hits: Vec<u64> = Vec::new();
         let corners = items.corners();
         for merge_start in (0..items.len()).step_by(ITEMS_PER_MERGE) {
             let merge_end = (merge_start + ITEMS_PER_MERGE).min(items.len());
@@ -174,7 +210,9 @@ pub fn bake_transfer(
             for (task_index, out) in outputs.into_iter().enumerate() {
                 let task_start = merge_start + task_index * ITEMS_PER_TASK;
                 rays += out.rays;
+                traced += out.traced;
                 new_rejections.extend(out.rejected);
+                new_hits.extend_from_slice(&out.hits);
                 let stride = pass_channels * coeffs;
                 for (local, corner_sums) in out.sums.chunks_exact(corners * stride).enumerate() {
                     let vertices = pass.corner_vertices(task_start + local);
@@ -190,6 +228,9 @@ pub fn bake_transfer(
             }
         }
         drop(progress);
+        if bounce == 0 && use_cache {
+            hit_cache = new_hits;
+        }
         for (index, flag) in new_rejections {
             rejected[index as usize] = flag;
         }
@@ -208,6 +249,7 @@ pub fn bake_transfer(
             }
         }
         stats.rays_per_bounce.push(rays);
+        stats.rays_traced += traced;
         stats.seconds_per_bounce.push(phase_start.elapsed().as_secs_f64());
         layers.push(layer);
     }
@@ -319,6 +361,8 @@ impl Pass<'_> {
             weights: vec![0.0; (end - start) * corners],
             rejected: Vec::new(),
             rays: 0,
+            traced: 0,
+            hits: Vec::new(),
         };
         let mut point_result = vec![0.0f32; stride];
         let mut basis = vec![0.0f32; self.coeffs];
@@ -335,8 +379,9 @@ impl Pass<'_> {
                         seed: hash_seed(&[self.params.seed, TAG_DIRECTION, v as u32, u32::MAX]),
                     };
                     point_result.fill(0.0);
-                    let (rays, _) = self.trace_point(&point, bounce, false, &mut point_result, &mut basis);
-                    out.rays += rays;
+                    let traced = self.trace_point(&point, item as u64, bounce, false, &mut point_result, &mut basis, &mut out.hits);
+                    out.rays += self.params.rays as u64;
+                    out.traced += traced.0;
                     out.weights[local] = 1.0;
                     out.sums[local * stride..(local + 1) * stride].copy_from_slice(&point_result);
                 }
@@ -361,8 +406,9 @@ impl Pass<'_> {
                             seed: hash_seed(&[self.params.seed, TAG_DIRECTION, t, s]),
                         };
                         point_result.fill(0.0);
-                        let (rays, inside) = self.trace_point(&point, bounce, bounce == 0, &mut point_result, &mut basis);
-                        out.rays += rays;
+                        let (traced, inside) = self.trace_point(&point, global as u64, bounce, bounce == 0, &mut point_result, &mut basis, &mut out.hits);
+                        out.rays += self.params.rays as u64;
+                        out.traced += traced;
                         if inside {
                             out.rejected.push((global, true));
                             continue;
@@ -380,13 +426,37 @@ impl Pass<'_> {
     }
 
     /// Traces the rays of one point for `bounce`, adding the estimate to
-    /// `result` (`[channel][coeff]`). Returns the rays traced and, when
-    /// `check_inside`, whether the point lies inside geometry (then `result` is meaningless).
-    fn trace_point(&self, point: &Point, bounce: u32, check_inside: bool, result: &mut [f32], basis: &mut [f32]) -> (u64, bool) {
+    /// `result` (`[channel][coeff]`). In bounce 0 with caching, appends one
+    /// hit record per ray to `hits`. Returns the rays traced through the BVH
+    /// and, when `check_inside`, whether the point lies inside geometry (then
+    /// `result` is meaningless).
+    #[allow(clippy::too_many_arguments)]
+    fn trace_point(
+        &self,
+        point: &Point,
+        point_index: u64,
+        bounce: u32,
+        check_inside: bool,
+        result: &mut [f32],
+        basis: &mut [f32],
+        hits: &mut Vec<u64>,
+    ) -> (u64, bool) {
         let params = self.params;
         let window_mode = params.mode == Mode::Window;
         let ray_count = params.rays;
-        let mut rays = 0u64;
+        // Directions are drawn ∝ c(n,ω): each ray weighs 1/N (hemisphere) or 2/N (sphere).
+        let ray_weight = if window_mode { 2.0 } else { 1.0 } / ray_count as f32;
+        if bounce > 0 {
+            if let Some(cache) = self.hit_cache {
+                let records = &cache[(point_index * ray_count as u64) as usize..][..ray_count as usize];
+                for &record in records.iter().filter(|&&r| r != NO_HIT) {
+                    let (triangle, u, v) = decode_hit(record);
+                    self.add_interpolated(triangle, u, v, ray_weight, result);
+                }
+                return (0, false);
+            }
+        }
+        let mut traced = 0u64;
         if check_inside {
             let probe = ray_count.min(INSIDE_PROBE_RAYS);
             let inside_hits = (0..probe)
@@ -397,44 +467,62 @@ impl Pass<'_> {
                         Some(hit) if hit.back_face && hit.t < self.reject_distance)
                 })
                 .count() as f32;
-            rays += probe as u64;
+            traced += probe as u64;
             let threshold = if window_mode { 0.75 } else { 0.5 };
             if inside_hits > threshold * probe as f32 {
-                return (rays, true);
+                if self.record_hits {
+                    hits.extend(std::iter::repeat_n(NO_HIT, ray_count as usize));
+                }
+                return (traced, true);
             }
         }
-        // Directions are drawn ∝ c(n,ω): each ray weighs 1/N (hemisphere) or 2/N (sphere).
-        let ray_weight = if window_mode { 2.0 } else { 1.0 } / ray_count as f32;
         for k in 0..ray_count {
             let direction = self.direction(point, k);
             let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
-            rays += 1;
-            if bounce == 0 {
-                let visibility = if window_mode {
-                    match self.scene.closest_hit(origin, direction, f32::INFINITY) {
-                        Some(hit) => self.surfaces.window_transmittance[hit.triangle as usize].unwrap_or(0.0),
-                        None => 0.0,
+            traced += 1;
+            if bounce > 0 {
+                if let Some(hit) = self.scene.closest_hit(origin, direction, f32::INFINITY) {
+                    if self.gathers_from(&hit) {
+                        self.add_interpolated(hit.triangle as usize, hit.u, hit.v, ray_weight, result);
                     }
-                } else if self.scene.occluded(origin, direction, f32::INFINITY) {
-                    0.0
-                } else {
-                    1.0
-                };
-                if visibility > 0.0 {
-                    sh::eval_basis(params.order, direction, basis);
-                    let w = visibility * ray_weight;
-                    result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
                 }
-            } else if let Some(hit) = self.scene.closest_hit(origin, direction, f32::INFINITY) {
-                let triangle = hit.triangle as usize;
-                // Light arrives only from lit opaque surfaces: in open mode their front side.
-                if self.surfaces.window_transmittance[triangle].is_some() || (!window_mode && hit.back_face) {
-                    continue;
+                continue;
+            }
+            // Bounce 0: window mode needs the first hit; open mode only occlusion, unless hits are recorded.
+            let visibility = if window_mode || self.record_hits {
+                let hit = self.scene.closest_hit(origin, direction, f32::INFINITY);
+                if self.record_hits {
+                    hits.push(match hit {
+                        Some(h) if self.gathers_from(&h) => encode_hit(h.triangle, h.u, h.v),
+                        _ => NO_HIT,
+                    });
                 }
-                self.add_interpolated(triangle, hit.u, hit.v, ray_weight, result);
+                match hit {
+                    Some(h) if window_mode => self.surfaces.window_transmittance[h.triangle as usize].unwrap_or(0.0),
+                    Some(_) => 0.0,
+                    None if window_mode => 0.0,
+                    None => 1.0,
+                }
+            } else if self.scene.occluded(origin, direction, f32::INFINITY) {
+                0.0
+            } else {
+                1.0
+            };
+            if visibility > 0.0 {
+                sh::eval_basis(params.order, direction, basis);
+                let w = visibility * ray_weight;
+                result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
             }
         }
-        (rays, false)
+        (traced, false)
+    }
+
+    /// Whether light of later bounces comes back from `hit`: only from opaque
+    /// surfaces, and in open mode only from their lit (front) side.
+    #[inline]
+    fn gathers_from(&self, hit: &super::Hit) -> bool {
+        self.surfaces.window_transmittance[hit.triangle as usize].is_none()
+            && (self.params.mode == Mode::Window || !hit.back_face)
     }
 
     /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` for a hit at barycentrics (u, v) of `triangle`.

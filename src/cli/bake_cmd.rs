@@ -19,12 +19,23 @@ pub struct BakeConfig {
     pub window_patterns: Vec<String>,
     pub threads: usize,
     pub json: bool,
+    /// Clean the mesh first with these parameters (`--clean`).
+    pub clean: Option<crate::clean::CleanParams>,
 }
 
 /// Runs a bake end to end and prints its stats line (or JSON).
 pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
-    let mesh = super::load_mesh(&config.input, config.up, config.params.quiet)?;
-    let report = bake_to_bundle(&mesh, config, json!({ "source": config.input.file_name().map(|n| n.to_string_lossy().to_string()) }))?;
+    let mut mesh = super::load_mesh(&config.input, config.up, config.params.quiet)?;
+    let mut meta = json!({ "source": config.input.file_name().map(|n| n.to_string_lossy().to_string()) });
+    if let Some(params) = &config.clean {
+        let (cleaned, report) = super::clean_cmd::clean_loaded(&mesh, params, &config.input)?;
+        if !config.params.quiet {
+            eprintln!("clean: {}", report.summary());
+        }
+        meta["clean"] = serde_json::to_value(&report)?;
+        mesh = cleaned;
+    }
+    let report = bake_to_bundle(&mesh, config, meta)?;
     print_report(&report, config.json)
 }
 

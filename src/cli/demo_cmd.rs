@@ -1,5 +1,5 @@
 //! `prtbake demo`: the README's main job. Generates the demo cabin
-//! (src/fixtures/cabin.rs), cleans it, bakes it in window mode and writes
+//! (src/fixtures/cabin.rs) with its injected defects, cleans it inline, bakes it in window mode and writes
 //! `cabin.prtb` and `summary.json` into the output folder.
 
 use std::path::Path;
@@ -30,6 +30,10 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
     if !quiet {
         eprintln!("demo cabin: {} triangles, {} vertices, injected defects {:?}", mesh.triangle_count(), mesh.vertex_count(), defects);
     }
+    let (mesh, clean_report) = crate::clean::clean_mesh(&mesh, &crate::clean::CleanParams::cad())?;
+    if !quiet {
+        eprintln!("clean: {}", clean_report.summary());
+    }
     let config = BakeConfig {
         input: "demo-cabin (generated)".into(),
         output: output_dir.join("cabin.prtb"),
@@ -38,8 +42,9 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         window_patterns: Vec::new(),
         threads,
         json: as_json,
+        clean: None,
     };
-    let report = bake_to_bundle(&mesh, &config, json!({ "source": "demo cabin", "defects_injected": defects }))?;
+    let report = bake_to_bundle(&mesh, &config, json!({ "source": "demo cabin", "defects_injected": defects, "clean": clean_report }))?;
     let s = &report.result.stats;
     let summary = json!({
         "bundle": report.output,
@@ -47,6 +52,7 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         "vertices": s.vertices,
         "window_triangles": s.window_triangles,
         "defects_injected": defects,
+        "clean": clean_report,
         "params": config.params,
         "rays": s.rays,
         "points_rejected": s.points_rejected,

@@ -1,0 +1,240 @@
+//! Refinement: split over-long edges, and flip edges to improve slivers, so that
+//! per-vertex storage can resolve shadows (Dellepiane et al. §5.2: large
+//! triangles "recursively splitted into smaller triangles").
+//!
+//! Long edges: every point edge longer than `max_edge` is split at its midpoint,
+//! in *all* triangles that use it (so no T-junction appears), with the red-green
+//! patterns (one, two or three split sides); repeated until none is too long.
+//! Each pass halves the longest edge, so the number of passes is
+//! `ceil(log2(longest / max_edge))`.
+//!
+//! Slivers: Lawson-style flips on the edges of triangles whose smallest angle is
+//! below the threshold. An edge is flipped only when it is shared by exactly two
+//! triangles that traverse it in opposite directions with the same two vertices
+//! (no hard edge or UV seam on it), the same material and group, lie in one plane
+//! (within the plane tolerance), form a convex quad, and the flip strictly raises
+//! the smaller of their two smallest angles (the local Delaunay criterion). Flips
+//! keep the area exactly. Needles (one very short side) cannot be flipped away and
+//! stay listed in the report.
+
+use super::work::{edge_runs, min_angle, sorted_edges, Work};
+use glam::DVec3;
+use std::collections::{HashMap, VecDeque};
+
+/// Upper bound on long-edge passes (each halves the longest edge: 2^40 is plenty).
+const MAX_SPLIT_PASSES: usize = 40;
+/// A flip must raise the smallest angle by more than this (radians): no flip-flopping on ties.
+const FLIP_MARGIN: f64 = 1e-7;
+
+/// Splits every point edge longer than `max_edge`; returns the number of edges split.
+pub(crate) fn split_long_edges(work: &mut Work, max_edge: f32) -> usize {
+    let max_edge = max_edge as f64;
+    let mut split = 0;
+    for _ in 0..MAX_SPLIT_PASSES {
+        // Midpoints of the long edges, numbered in sorted edge order (deterministic).
+        let edges = sorted_edges(work);
+        let mut mid_point: HashMap<(u32, u32), u32> = HashMap::new();
+        for run in edge_runs(&edges) {
+            let (lo, hi) = (run[0].lo, run[0].hi);
+            let (a, b) = (work.points[lo as usize].as_dvec3(), work.points[hi as usize].as_dvec3());
+            if a.distance(b) > max_edge {
+                let m = work.push_point(((a + b) * 0.5).as_vec3());
+                mid_point.insert((lo, hi), m);
+            }
+        }
+        if mid_point.is_empty() {
+            break;
+        }
+        split += mid_point.len();
+        let mut mid_vertex: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in 0..work.tris.len() {
+            if !work.tri_alive[t] {
+                continue;
+            }
+            let p = work.tri_points(t);
+            let v = work.tris[t];
+            let mut mids: [Option<u32>; 3] = [None; 3];
+            for c in 0..3 {
+                let key = (p[c].min(p[(c + 1) % 3]), p[c].max(p[(c + 1) % 3]));
+                if let Some(&point) = mid_point.get(&key) {
+                    let (va, vb) = (v[c], v[(c + 1) % 3]);
+                    let vkey = (va.min(vb), va.max(vb));
+                    let mid = *mid_vertex.entry(vkey).or_insert_with(|| work.push_vertex_lerp(va, vb, 0.5, point));
+                    mids[c] = Some(mid);
+                }
+            }
+            subdivide(work, t, mids);
+        }
+    }
+    split
+}
+
+/// Replaces triangle `t` by the red-green pattern for its split sides
+/// (`mids[c]`: midpoint vertex of the side from corner `c` to `c + 1`).
+fn subdivide(work: &mut Work, t: usize, mids: [Option<u32>; 3]) {
+    let v = work.tris[t];
+    let pos = |work: &Work, x: u32| work.points[work.vertex_point[x as usize] as usize].as_dvec3();
+    let new: Vec<[u32; 3]> = match mids {
+        [None, None, None] => return,
+        [Some(m0), Some(m1), Some(m2)] => vec![[v[0], m0, m2], [m0, v[1], m1], [m2, m1, v[2]], [m0, m1, m2]],
+        _ => {
+            let count = mids.iter().filter(|m| m.is_some()).count();
+            if count == 1 {
+                let c = (0..3).find(|&c| mids[c].is_some()).unwrap_or(0);
+                let m = mids[c].unwrap_or(v[c]);
+                let (a, b, o) = (v[c], v[(c + 1) % 3], v[(c + 2) % 3]);
+                vec![[a, m, o], [m, b, o]]
+            } else {
+                // Rotate so sides a→b and b→c are split and c→a is not.
+                let unsplit = (0..3).find(|&c| mids[c].is_none()).unwrap_or(2);
+                let r = (unsplit + 1) % 3;
+                let (a, b, c) = (v[r], v[(r + 1) % 3], v[(r + 2) % 3]);
+                let (m, n) = (mids[r].unwrap_or(a), mids[(r + 1) % 3].unwrap_or(b));
+                // The quad a, m, n, c takes its shorter diagonal.
+                if pos(work, a).distance(pos(work, n)) <= pos(work, m).distance(pos(work, c)) {
+                    vec![[m, b, n], [a, m, n], [a, n, c]]
+                } else {
+                    vec![[m, b, n], [a, m, c], [m, n, c]]
+                }
+            }
+        }
+    };
+    work.tris[t] = new[0];
+    for &tri in &new[1..] {
+        work.push_tri_like(tri, t);
+    }
+}
+
+/// Number of live triangles whose smallest angle is below `min_angle_rad`.
+pub(crate) fn count_slivers(work: &Work, min_angle_rad: f64) -> usize {
+    (0..work.tris.len())
+        .filter(|&t| work.tri_alive[t] && min_angle(work.tri_positions(t).map(|p| p.as_dvec3())) < min_angle_rad)
+        .count()
+}
+
+/// Users of an undirected point edge: two triangle ids, `u32::MAX` where absent;
+/// both `u32::MAX` marks a non-manifold edge.
+type EdgeTris = (u32, u32);
+const NONE: u32 = u32::MAX;
+
+/// Flips edges of slivers while that raises their smallest angles (see module doc).
+/// Returns the number of flips.
+pub(crate) fn flip_slivers(work: &mut Work, min_angle_rad: f64, plane_tol: f32, max_edge: Option<f32>) -> usize {
+    if min_angle_rad <= 0.0 {
+        return 0;
+    }
+    let edges = sorted_edges(work);
+    let mut map: HashMap<(u32, u32), EdgeTris> = HashMap::with_capacity(edges.len());
+    for run in edge_runs(&edges) {
+        let users = match run {
+            [e] => (e.tri, NONE),
+            [e, f] => (e.tri, f.tri),
+            _ => (NONE, NONE),
+        };
+        map.insert((run[0].lo, run[0].hi), users);
+    }
+    let mut queue: VecDeque<(u32, u32)> = VecDeque::new();
+    for t in 0..work.tris.len() {
+        if work.tri_alive[t] && min_angle(work.tri_positions(t).map(|p| p.as_dvec3())) < min_angle_rad {
+            let p = work.tri_points(t);
+            for c in 0..3 {
+                queue.push_back(key(p[c], p[(c + 1) % 3]));
+            }
+        }
+    }
+    let limit = 10 * work.tris.len() + 100;
+    let mut flips = 0;
+    while let Some(edge) = queue.pop_front() {
+        if flips >= limit {
+            break;
+        }
+        let Some(&(t1, t2)) = map.get(&edge) else { continue };
+        if t1 == NONE || t2 == NONE {
+            continue;
+        }
+        let Some(flip) = plan_flip(work, &map, edge, t1 as usize, t2 as usize, plane_tol as f64, max_edge) else {
+            continue;
+        };
+        let Flip { a, b, c, d, va, vb, vc, vd } = flip;
+        work.tris[t1 as usize] = [va, vd, vc];
+        work.tris[t2 as usize] = [vd, vb, vc];
+        map.remove(&edge);
+        map.insert(key(c, d), (t1, t2));
+        replace_user(&mut map, key(b, c), t1, t2);
+        replace_user(&mut map, key(a, d), t2, t1);
+        queue.extend([key(c, a), key(a, d), key(d, b), key(b, c)]);
+        flips += 1;
+    }
+    flips
+}
+
+fn key(a: u32, b: u32) -> (u32, u32) {
+    (a.min(b), a.max(b))
+}
+
+fn replace_user(map: &mut HashMap<(u32, u32), EdgeTris>, edge: (u32, u32), old: u32, new: u32) {
+    if let Some(users) = map.get_mut(&edge) {
+        if users.0 == old {
+            users.0 = new;
+        } else if users.1 == old {
+            users.1 = new;
+        }
+    }
+}
+
+/// A planned flip of edge a–b (triangles a→b→c and b→a→d) to c–d: point ids and vertex ids.
+struct Flip {
+    a: u32,
+    b: u32,
+    c: u32,
+    d: u32,
+    va: u32,
+    vb: u32,
+    vc: u32,
+    vd: u32,
+}
+
+fn plan_flip(
+    work: &Work,
+    map: &HashMap<(u32, u32), EdgeTris>,
+    edge: (u32, u32),
+    t1: usize,
+    t2: usize,
+    plane_tol: f64,
+    max_edge: Option<f32>,
+) -> Option<Flip> {
+    if work.tri_material[t1] != work.tri_material[t2] || work.tri_group[t1] != work.tri_group[t2] {
+        return None;
+    }
+    let (p1, p2) = (work.tri_points(t1), work.tri_points(t2));
+    let i = (0..3).find(|&i| key(p1[i], p1[(i + 1) % 3]) == edge)?;
+    let (a, b, c) = (p1[i], p1[(i + 1) % 3], p1[(i + 2) % 3]);
+    // The neighbour must run b→a (consistent winding) over the same vertices.
+    let j = (0..3).find(|&j| p2[j] == b && p2[(j + 1) % 3] == a)?;
+    let d = p2[(j + 2) % 3];
+    let (w1, w2) = (work.tris[t1], work.tris[t2]);
+    let (va, vb, vc) = (w1[i], w1[(i + 1) % 3], w1[(i + 2) % 3]);
+    if w2[j] != vb || w2[(j + 1) % 3] != va || c == d || map.contains_key(&key(c, d)) {
+        return None;
+    }
+    let vd = w2[(j + 2) % 3];
+    let pos = |x: u32| work.points[x as usize].as_dvec3();
+    let (pa, pb, pc, pd) = (pos(a), pos(b), pos(c), pos(d));
+    let n = (pb - pa).cross(pc - pa).try_normalize()?;
+    if (pd - pa).dot(n).abs() > plane_tol {
+        return None;
+    }
+    if let Some(max) = max_edge {
+        if pc.distance(pd) > max as f64 {
+            return None;
+        }
+    }
+    // Convex quad: both new triangles face the old way.
+    let faces_forward = |x: DVec3, y: DVec3, z: DVec3| (y - x).cross(z - x).dot(n) > 0.0;
+    if !faces_forward(pa, pd, pc) || !faces_forward(pd, pb, pc) {
+        return None;
+    }
+    let before = min_angle([pa, pb, pc]).min(min_angle([pb, pa, pd]));
+    let after = min_angle([pa, pd, pc]).min(min_angle([pd, pb, pc]));
+    (after > before + FLIP_MARGIN).then_some(Flip { a, b, c, d, va, vb, vc, vd })
+}

@@ -1,0 +1,252 @@
+//! The clean-up report: counts of every repair, what remains, and a summary.
+
+use super::work::{edge_runs, min_angle, sorted_edges, Work};
+use super::CleanParams;
+use crate::mesh::Mesh;
+use std::fmt::Write as _;
+
+/// Two coplanar triangles that overlap without either being covered.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct OverlapReport {
+    /// Input triangle indices.
+    pub tri_a: u32,
+    pub tri_b: u32,
+    /// Centroid of the overlap.
+    pub location: [f32; 3],
+    /// Area of the overlap.
+    pub area: f32,
+}
+
+/// A connected component whose winding cannot be made consistent (Möbius-like).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct UnorientableComponent {
+    pub triangles: usize,
+    /// Input index of the component's lowest triangle.
+    pub seed_triangle: u32,
+    /// Midpoint of the first edge where the winding contradicts itself.
+    pub location: [f32; 3],
+}
+
+/// What a remaining defect is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DefectKind {
+    /// `value`: the triangle's smallest angle, degrees.
+    SmallAngle,
+    /// `value`: the edge's length.
+    LongEdge,
+    /// `value`: the number of triangles on the edge (3 or more).
+    NonManifoldEdge,
+}
+
+/// One remaining defect of the output mesh.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DefectReport {
+    pub kind: DefectKind,
+    /// Output triangle index.
+    pub triangle: u32,
+    /// Triangle centroid or edge midpoint.
+    pub location: [f32; 3],
+    pub value: f32,
+}
+
+/// Everything [`super::clean_mesh`] did, and the worst of what remains.
+///
+/// Triangle counts removed are disjoint: a triangle is counted by the first
+/// step that removes it.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct CleanReport {
+    pub input_triangles: usize,
+    pub output_triangles: usize,
+    pub input_vertices: usize,
+    pub output_vertices: usize,
+    /// Vertices merged into another (same point, agreeing attributes), initial and final weld.
+    pub welded_vertices: usize,
+    /// Collapsed or thinner than the weld tolerance (including those collapsed by zipping).
+    pub degenerate_removed: usize,
+    /// Duplicates with the kept triangle's winding.
+    pub duplicates_removed: usize,
+    /// Duplicates with the opposite winding.
+    pub flipped_duplicates_removed: usize,
+    /// Of the two counts above, those not bit-identical in the input (they matched after welding).
+    pub near_duplicates_removed: usize,
+    pub covered_coplanar_removed: usize,
+    /// Largest first, at most 64 listed.
+    pub partial_overlaps: Vec<OverlapReport>,
+    pub partial_overlap_count: usize,
+    /// Boundary edges before zipping minus after.
+    pub zipped_edges: usize,
+    /// Boundary points inserted into another triangle's edge.
+    pub tjunctions_fixed: usize,
+    /// Edges split because they were longer than `max_edge`.
+    pub edges_split: usize,
+    /// Slivers before refinement minus slivers after.
+    pub slivers_fixed: usize,
+    /// Edge flips made to improve slivers.
+    pub sliver_flips: usize,
+    pub triangles_flipped: usize,
+    /// At most 64 listed.
+    pub unorientable_components: Vec<UnorientableComponent>,
+    pub unorientable_component_count: usize,
+    /// Edges with one triangle, on welded positions, before any removal.
+    pub boundary_edges_before: usize,
+    pub boundary_edges_after: usize,
+    /// Edges with three or more triangles, after.
+    pub non_manifold_edges: usize,
+    /// Input area minus the redundant triangles removed (the union's area; see the module doc).
+    pub area_before: f64,
+    pub area_after: f64,
+    /// Worst remaining defects: a few of each kind, worst first.
+    pub worst: Vec<DefectReport>,
+    /// Pipeline rounds run (each round repeats every step; see [`super::MAX_ROUNDS`]).
+    pub rounds: usize,
+    /// True when the last round repaired nothing: cleaning the output again is a no-op.
+    pub converged: bool,
+    /// Resolved tolerances of the first round (world units).
+    pub weld_tolerance: f32,
+    pub coplanar_tolerance: f32,
+    pub zip_tolerance: f32,
+}
+
+/// Defects listed per kind.
+const WORST_PER_KIND: usize = 5;
+/// Smallest angles are listed when below this (degrees) or the sliver threshold.
+const LISTED_ANGLE_DEG: f32 = 10.0;
+/// Without `max_edge`, edges are listed when longer than this fraction of the diagonal.
+const LISTED_EDGE_FRACTION: f32 = 0.5;
+
+impl CleanReport {
+    /// The number of repairs made: zero when cleaning changed nothing.
+    pub fn repairs(&self) -> usize {
+        self.welded_vertices
+            + self.degenerate_removed
+            + self.duplicates_removed
+            + self.flipped_duplicates_removed
+            + self.covered_coplanar_removed
+            + self.zipped_edges
+            + self.tjunctions_fixed
+            + self.edges_split
+            + self.sliver_flips
+            + self.triangles_flipped
+    }
+
+    /// Adds a later round's repairs; takes its description of what remains.
+    /// `removed_area` is the redundant area that round removed.
+    pub(crate) fn absorb(&mut self, later: &CleanReport, removed_area: f64) {
+        self.welded_vertices += later.welded_vertices;
+        self.degenerate_removed += later.degenerate_removed;
+        self.duplicates_removed += later.duplicates_removed;
+        self.flipped_duplicates_removed += later.flipped_duplicates_removed;
+        self.near_duplicates_removed += later.near_duplicates_removed;
+        self.covered_coplanar_removed += later.covered_coplanar_removed;
+        self.zipped_edges += later.zipped_edges;
+        self.tjunctions_fixed += later.tjunctions_fixed;
+        self.edges_split += later.edges_split;
+        self.slivers_fixed += later.slivers_fixed;
+        self.sliver_flips += later.sliver_flips;
+        self.triangles_flipped += later.triangles_flipped;
+        self.area_before -= removed_area;
+        self.output_triangles = later.output_triangles;
+        self.output_vertices = later.output_vertices;
+        self.partial_overlaps = later.partial_overlaps.clone();
+        self.partial_overlap_count = later.partial_overlap_count;
+        self.unorientable_components = later.unorientable_components.clone();
+        self.unorientable_component_count = later.unorientable_component_count;
+        self.boundary_edges_after = later.boundary_edges_after;
+        self.non_manifold_edges = later.non_manifold_edges;
+        self.area_after = later.area_after;
+        self.worst = later.worst.clone();
+    }
+
+    /// A human-readable multi-line summary.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "triangles {} -> {}, vertices {} -> {}",
+            self.input_triangles, self.output_triangles, self.input_vertices, self.output_vertices
+        );
+        let _ = writeln!(s, "welded vertices        {}", self.welded_vertices);
+        let _ = writeln!(s, "degenerate removed     {}", self.degenerate_removed);
+        let _ = writeln!(
+            s,
+            "duplicates removed     {} (+{} flipped; {} of them near)",
+            self.duplicates_removed, self.flipped_duplicates_removed, self.near_duplicates_removed
+        );
+        let _ = writeln!(s, "covered coplanar       {}", self.covered_coplanar_removed);
+        let _ = writeln!(s, "partial overlaps       {}", self.partial_overlap_count);
+        let _ = writeln!(s, "zipped edges           {} ({} T-junctions)", self.zipped_edges, self.tjunctions_fixed);
+        let _ = writeln!(s, "edges split            {}", self.edges_split);
+        let _ = writeln!(s, "slivers fixed          {} ({} flips)", self.slivers_fixed, self.sliver_flips);
+        let _ = writeln!(
+            s,
+            "triangles flipped      {} ({} unorientable components)",
+            self.triangles_flipped, self.unorientable_component_count
+        );
+        let _ = writeln!(
+            s,
+            "boundary edges         {} -> {}, non-manifold edges {}",
+            self.boundary_edges_before, self.boundary_edges_after, self.non_manifold_edges
+        );
+        let _ = writeln!(s, "rounds                 {} ({})", self.rounds, if self.converged { "converged" } else { "NOT converged" });
+        let rel = if self.area_before > 0.0 { (self.area_after - self.area_before) / self.area_before } else { 0.0 };
+        let _ = writeln!(s, "area                   {:.6e} -> {:.6e} ({:+.2e} relative)", self.area_before, self.area_after, rel);
+        for o in self.partial_overlaps.iter().take(WORST_PER_KIND) {
+            let _ = writeln!(s, "  overlap of triangles {} and {}: area {:.3e} at {:?}", o.tri_a, o.tri_b, o.area, o.location);
+        }
+        for c in &self.unorientable_components {
+            let _ = writeln!(s, "  unorientable: {} triangles from {} near {:?}", c.triangles, c.seed_triangle, c.location);
+        }
+        for d in &self.worst {
+            let _ = writeln!(s, "  worst {:?}: triangle {} value {:.4} at {:?}", d.kind, d.triangle, d.value, d.location);
+        }
+        s
+    }
+}
+
+/// The worst remaining defects of the output: smallest angles, longest edges,
+/// non-manifold edges (triangle ids index `out`, which has `work`'s triangle order).
+pub(crate) fn worst_defects(work: &Work, out: &Mesh, params: &CleanParams) -> Vec<DefectReport> {
+    let mut worst = Vec::new();
+    let centroid = |t: usize| {
+        let [a, b, c] = out.triangle_positions(t);
+        ((a + b + c) / 3.0).to_array()
+    };
+
+    // Smallest angles.
+    let angle_limit = LISTED_ANGLE_DEG.max(params.sliver_min_angle_deg);
+    let mut angles: Vec<(f32, usize)> = (0..out.triangle_count())
+        .map(|t| (min_angle(out.triangle_positions(t).map(|p| p.as_dvec3())).to_degrees() as f32, t))
+        .filter(|&(a, _)| a < angle_limit)
+        .collect();
+    angles.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+    worst.extend(angles.iter().take(WORST_PER_KIND).map(|&(a, t)| DefectReport {
+        kind: DefectKind::SmallAngle,
+        triangle: t as u32,
+        location: centroid(t),
+        value: a,
+    }));
+
+    // Longest edges and non-manifold edges, on point topology.
+    let edges = sorted_edges(work);
+    let edge_limit = params.max_edge.unwrap_or(LISTED_EDGE_FRACTION * out.diagonal());
+    let mut long = Vec::new();
+    let mut non_manifold = Vec::new();
+    for run in edge_runs(&edges) {
+        let e = run[0];
+        let (a, b) = (work.points[e.lo as usize], work.points[e.hi as usize]);
+        let mid = (0.5 * (a + b)).to_array();
+        let len = a.distance(b);
+        if len > edge_limit {
+            long.push(DefectReport { kind: DefectKind::LongEdge, triangle: e.tri, location: mid, value: len });
+        }
+        if run.len() > 2 {
+            let value = run.len() as f32;
+            non_manifold.push(DefectReport { kind: DefectKind::NonManifoldEdge, triangle: e.tri, location: mid, value });
+        }
+    }
+    long.sort_by(|x, y| y.value.total_cmp(&x.value).then(x.triangle.cmp(&y.triangle)));
+    worst.extend(long.into_iter().take(WORST_PER_KIND));
+    worst.extend(non_manifold.into_iter().take(WORST_PER_KIND));
+    worst
+}

@@ -1,0 +1,300 @@
+//! Tests of the whole pipeline on the fixtures: exact repair counts, the properties
+//! after cleaning, idempotence and determinism.
+
+use super::fixtures::{self, color_at, uv_at, Fixture};
+use super::*;
+use glam::Vec3;
+use std::collections::HashSet;
+
+/// Relative area tolerance: f32 positions of size ~1..10 carry ~1e-7 relative error
+/// per coordinate; the designed areas are exact, so 1e-6 leaves a 10× margin.
+const AREA_REL_TOL: f64 = 1e-6;
+/// Attributes of moved vertices may lag their position by at most the zip tolerance
+/// (≤ 3.5e-4 here) times the attribute gradient (≤ 0.25 per unit).
+const ATTRIBUTE_TOL: f32 = 1e-4;
+
+fn clean(f: &Fixture) -> (Mesh, CleanReport) {
+    match clean_mesh(&f.mesh, &f.params) {
+        Ok(r) => r,
+        Err(e) => panic!("{}: {}", f.name, e),
+    }
+}
+
+/// Counts triangles that repeat another's three positions (any winding unless
+/// `per_winding`).
+fn count_duplicates(mesh: &Mesh, per_winding: bool) -> usize {
+    let mut seen = HashSet::new();
+    let mut dups = 0;
+    for t in 0..mesh.triangle_count() {
+        let p = mesh.triangle_positions(t).map(|p| p.to_array().map(f32::to_bits));
+        let start = (0..3).min_by_key(|&i| p[i]).unwrap();
+        let rotated = [p[start], p[(start + 1) % 3], p[(start + 2) % 3]];
+        let key = if per_winding {
+            (rotated, rotated[1] < rotated[2])
+        } else {
+            let mut s = p;
+            s.sort();
+            (s, false)
+        };
+        if !seen.insert(key) {
+            dups += 1;
+        }
+    }
+    dups
+}
+
+/// Boundary edges of a mesh on bit-identical positions.
+fn count_boundary(mesh: &Mesh) -> usize {
+    let work = weld::weld_points(mesh, 0.0);
+    work::count_boundary_and_non_manifold(&work).0
+}
+
+fn mesh_area(mesh: &Mesh) -> f64 {
+    (0..mesh.triangle_count())
+        .map(|t| {
+            let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum()
+}
+
+fn check_counts(f: &Fixture, r: &CleanReport) {
+    let e = &f.expected;
+    let n = f.name;
+    assert_eq!(r.degenerate_removed, e.degenerate_removed, "{n}: degenerate");
+    assert_eq!(r.duplicates_removed, e.duplicates_removed, "{n}: duplicates");
+    assert_eq!(r.flipped_duplicates_removed, e.flipped_duplicates_removed, "{n}: flipped duplicates");
+    assert_eq!(r.near_duplicates_removed, e.near_duplicates_removed, "{n}: near duplicates");
+    assert_eq!(r.covered_coplanar_removed, e.covered_coplanar_removed, "{n}: covered");
+    assert_eq!(r.tjunctions_fixed, e.tjunctions_fixed, "{n}: T-junctions");
+    assert_eq!(r.zipped_edges, e.zipped_edges, "{n}: zipped edges");
+    assert_eq!(r.edges_split, e.edges_split, "{n}: edges split");
+    assert_eq!(r.slivers_fixed, e.slivers_fixed, "{n}: slivers");
+    assert_eq!(r.triangles_flipped, e.triangles_flipped, "{n}: flipped");
+    assert_eq!(r.unorientable_component_count, e.unorientable_components, "{n}: unorientable");
+    if let Some(w) = e.welded_vertices {
+        assert_eq!(r.welded_vertices, w, "{n}: welded");
+    }
+    assert_eq!(r.output_triangles, e.output_triangles, "{n}: output triangles");
+    assert_eq!(r.boundary_edges_after, e.boundary_edges_after, "{n}: boundary after");
+    // One round repairs everything, a second finds nothing left.
+    assert!(r.converged && r.rounds <= 2, "{n}: {} rounds, converged {}", r.rounds, r.converged);
+    let overlap: f64 = r.partial_overlaps.iter().map(|o| o.area as f64).sum();
+    assert!((overlap - e.partial_overlap_area).abs() < 1e-5, "{n}: overlap area {overlap}");
+}
+
+fn check_properties(f: &Fixture, out: &Mesh, r: &CleanReport) {
+    let n = f.name;
+    out.validate().unwrap_or_else(|e| panic!("{n}: {e}"));
+    assert_eq!(count_duplicates(out, f.params.keep_two_sided), 0, "{n}: duplicates remain");
+    assert_eq!(count_boundary(out), f.expected.boundary_edges_after, "{n}: boundary (recounted)");
+    let area = mesh_area(out);
+    let rel = (area - f.expected.area).abs() / f.expected.area;
+    assert!(rel <= AREA_REL_TOL, "{n}: area {area} vs designed {} (rel {rel:e})", f.expected.area);
+    assert!(((r.area_after - area) / area).abs() <= AREA_REL_TOL, "{n}: reported area");
+    // Attributes survive: tables, roles, per-triangle (material, group) pairs, UVs, colours.
+    assert_eq!(out.materials, f.mesh.materials, "{n}: materials");
+    assert_eq!(out.groups, f.mesh.groups, "{n}: groups");
+    let pairs: HashSet<(u16, u32)> = f.mesh.tri_material.iter().copied().zip(f.mesh.tri_group.iter().copied()).collect();
+    for (m, g) in out.tri_material.iter().zip(&out.tri_group) {
+        assert!(pairs.contains(&(*m, *g)), "{n}: new material/group pair {m}/{g}");
+    }
+    assert_eq!(out.uvs.len(), out.vertex_count(), "{n}: uvs");
+    assert_eq!(out.colors.len(), out.vertex_count(), "{n}: colours");
+    for v in 0..out.vertex_count() {
+        let p = out.positions[v];
+        assert!(out.uvs[v].abs_diff_eq(uv_at(p), ATTRIBUTE_TOL), "{n}: uv of vertex {v}");
+        let c = color_at(p);
+        assert!((0..3).all(|i| (out.colors[v][i] - c[i]).abs() <= ATTRIBUTE_TOL), "{n}: colour of vertex {v}");
+        assert!((out.normals[v].length() - 1.0).abs() < 1e-5, "{n}: normal of vertex {v}");
+    }
+}
+
+#[test]
+fn every_fixture_reports_exact_counts_and_keeps_its_properties() {
+    for f in fixtures::all_fixtures() {
+        let (out, r) = clean(&f);
+        eprintln!("{}:\n{}", f.name, r.summary());
+        check_counts(&f, &r);
+        check_properties(&f, &out, &r);
+    }
+}
+
+#[test]
+fn cleaning_a_cleaned_mesh_changes_nothing() {
+    for f in fixtures::all_fixtures() {
+        let (once, _) = clean(&f);
+        let (twice, r) = clean_mesh(&once, &f.params).unwrap();
+        assert_eq!(r.repairs(), 0, "{}: second pass repaired\n{}", f.name, r.summary());
+        assert_eq!(twice, once, "{}: second pass changed the mesh", f.name);
+    }
+}
+
+#[test]
+fn cleaning_is_deterministic() {
+    for f in fixtures::all_fixtures() {
+        let a = clean(&f);
+        let b = clean(&f);
+        assert_eq!(a, b, "{}", f.name);
+    }
+}
+
+#[test]
+fn nan_vertex_is_refused_by_name() {
+    let err = clean_mesh(&fixtures::fixture_nan_vertex(), &CleanParams::default()).unwrap_err();
+    assert!(matches!(err, CleanError::NonFinite { vertex: 5, attribute: "position", .. }), "{err:?}");
+    assert!(err.to_string().contains("vertex 5"), "{err}");
+}
+
+#[test]
+fn invalid_params_are_refused() {
+    let mesh = fixtures::fixture_slivers().mesh;
+    for params in [
+        CleanParams { weld_tolerance: Tolerance::Relative(f32::NAN), ..CleanParams::default() },
+        CleanParams { zip_tolerance: Tolerance::Absolute(-1.0), ..CleanParams::default() },
+        CleanParams { hard_edge_angle_deg: 200.0, ..CleanParams::default() },
+        CleanParams { sliver_min_angle_deg: 60.0, ..CleanParams::default() },
+        CleanParams { max_edge: Some(0.0), ..CleanParams::default() },
+    ] {
+        assert!(matches!(clean_mesh(&mesh, &params), Err(CleanError::InvalidParams { .. })), "{params:?}");
+    }
+}
+
+#[test]
+fn broken_mesh_is_refused_not_panicked() {
+    let mut mesh = fixtures::fixture_slivers().mesh;
+    mesh.indices[4] = 10_000;
+    assert!(matches!(clean_mesh(&mesh, &CleanParams::default()), Err(CleanError::InvalidMesh(_))));
+    let mut mesh = fixtures::fixture_slivers().mesh;
+    mesh.normals[2].x = f32::INFINITY;
+    let err = clean_mesh(&mesh, &CleanParams::default()).unwrap_err();
+    assert!(matches!(err, CleanError::NonFinite { vertex: 2, attribute: "normal", .. }), "{err:?}");
+}
+
+#[test]
+fn empty_mesh_cleans_to_empty() {
+    let (out, r) = clean_mesh(&Mesh::default(), &CleanParams::default()).unwrap();
+    assert_eq!(out, Mesh::default());
+    assert_eq!(r.repairs(), 0);
+}
+
+#[test]
+fn keep_two_sided_keeps_one_triangle_per_winding() {
+    let mut f = fixtures::fixture_flipped_duplicate();
+    f.params.keep_two_sided = true;
+    let (out, r) = clean(&f);
+    assert_eq!(r.flipped_duplicates_removed, 0);
+    assert_eq!(r.covered_coplanar_removed, 0);
+    assert_eq!(r.partial_overlap_count, 0);
+    assert_eq!(out.triangle_count(), 35);
+    assert_eq!(count_duplicates(&out, true), 0);
+}
+
+#[test]
+fn partial_overlaps_are_located_inside_the_overlap() {
+    let f = fixtures::fixture_partial_overlap();
+    let (_, r) = clean(&f);
+    assert_eq!(r.partial_overlap_count, 2);
+    for o in &r.partial_overlaps {
+        let [x, y, z] = o.location;
+        assert!((1.0..=2.0).contains(&x) && y.abs() < 1e-6 && (-2.0..=-1.0).contains(&z), "{o:?}");
+        assert!((o.area - 0.5).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn hard_edges_survive_on_the_cracked_box() {
+    // Every output normal is one of the six face normals, and agrees with each
+    // triangle that uses it: welding never averaged across the 90° edges.
+    let (out, _) = clean(&fixtures::fixture_cracked_box());
+    let axes = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
+    assert!(out.normals.iter().all(|n| axes.iter().any(|a| a.abs_diff_eq(*n, 1e-6))));
+    for t in 0..out.triangle_count() {
+        let [a, b, c] = out.triangle_positions(t);
+        let face = (b - a).cross(c - a).normalize();
+        for v in out.triangle(t) {
+            assert!(out.normals[v as usize].dot(face) > 0.99, "triangle {t} vertex {v}");
+        }
+    }
+}
+
+#[test]
+fn orientation_makes_normals_agree_with_faces_on_boxes() {
+    let f = fixtures::fixture_orientation();
+    let (out, r) = clean(&f);
+    assert_eq!(r.unorientable_components.len(), 1);
+    let moebius = out.groups.iter().position(|g| g == "moebius").unwrap() as u32;
+    for t in (0..out.triangle_count()).filter(|&t| out.tri_group[t] != moebius) {
+        let [a, b, c] = out.triangle_positions(t);
+        let face = (b - a).cross(c - a);
+        let centre = (a + b + c) / 3.0;
+        // Outward: from each box's centre.
+        let box_centre = if centre.x > 2.0 { Vec3::new(3.5, 0.5, 0.5) } else { Vec3::splat(0.5) };
+        assert!(face.dot(centre - box_centre) > 0.0, "triangle {t} faces inward");
+        for v in out.triangle(t) {
+            assert!(out.normals[v as usize].dot(face) > 0.0, "triangle {t} vertex {v}");
+        }
+    }
+}
+
+#[test]
+fn cleaning_a_large_torus_soup_runs() {
+    // Not timed: shows the pipeline copes with 200k triangles in the test profile.
+    let f = fixtures::large_torus(200_000);
+    let (out, r) = clean(&f);
+    eprintln!("large torus:\n{}", r.summary());
+    assert_eq!(r.duplicates_removed, f.expected.duplicates_removed);
+    assert_eq!(r.flipped_duplicates_removed, f.expected.flipped_duplicates_removed);
+    assert_eq!(out.triangle_count(), f.expected.output_triangles);
+    assert_eq!(r.boundary_edges_after, 0);
+    assert_eq!(r.triangles_flipped, 0);
+    assert!((r.area_after - f.expected.area).abs() / f.expected.area < AREA_REL_TOL);
+}
+
+#[test]
+fn stanford_bunny_report() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/scans/stanford-bunny.obj");
+    if !std::path::Path::new(path).exists() {
+        eprintln!("skipping: {path} is absent");
+        return;
+    }
+    let options = tobj::LoadOptions { single_index: true, triangulate: true, ..Default::default() };
+    let (models, _) = tobj::load_obj(path, &options).expect("bunny loads");
+    let mut mesh = Mesh { materials: vec![crate::mesh::Material::opaque("default", 0.8)], ..Mesh::default() };
+    for (g, m) in models.iter().enumerate() {
+        let base = mesh.positions.len() as u32;
+        mesh.groups.push(m.name.clone());
+        let p = &m.mesh.positions;
+        mesh.positions.extend(p.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
+        mesh.indices.extend(m.mesh.indices.iter().map(|&i| base + i));
+        mesh.tri_material.resize(mesh.indices.len() / 3, 0);
+        mesh.tri_group.resize(mesh.indices.len() / 3, g as u32);
+    }
+    // Face normals accumulated per vertex (the loader's job in the real crate).
+    mesh.normals = vec![Vec3::ZERO; mesh.positions.len()];
+    for t in 0..mesh.triangle_count() {
+        let [a, b, c] = mesh.triangle_positions(t);
+        let n = (b - a).cross(c - a);
+        for v in mesh.triangle(t) {
+            mesh.normals[v as usize] += n;
+        }
+    }
+    mesh.normals.iter_mut().for_each(|n| *n = n.normalize_or(Vec3::Y));
+    let (out, r) = clean_mesh(&mesh, &CleanParams::scan(None)).unwrap();
+    println!("stanford bunny:\n{}", r.summary());
+    out.validate().unwrap();
+    let (again, r2) = clean_mesh(&out, &CleanParams::scan(None)).unwrap();
+    assert_eq!(r2.repairs(), 0, "{}", r2.summary());
+    assert_eq!(again, out);
+}
+
+#[test]
+fn report_serializes_to_json_with_every_count() {
+    let (_, r) = clean(&fixtures::fixture_cylinder_crack());
+    let json = serde_json::to_value(&r).unwrap();
+    assert_eq!(json["tjunctions_fixed"], 24);
+    assert_eq!(json["boundary_edges_after"], 48);
+    assert!(json["worst"].is_array() && json["partial_overlaps"].is_array());
+    let back: String = r.summary();
+    assert!(back.contains("24 T-junctions"), "{back}");
+}

@@ -1,0 +1,138 @@
+//! Welding: positions closer than a tolerance become one point; vertices at one
+//! point merge when their attributes agree, so hard edges and UV seams survive.
+//!
+//! After meshoptimizer's `meshopt_generateVertexRemap`: a remap table, then the
+//! buffers rewritten through it. Representatives are the smallest original index,
+//! and a representative keeps its own attributes (no averaging), so welding a
+//! welded mesh changes nothing.
+
+use super::spatial::cluster_points;
+use super::work::Work;
+use crate::mesh::Mesh;
+
+/// Two vertices at one point keep separate UVs when these differ by more (UV units).
+pub(crate) const UV_WELD_TOLERANCE: f32 = 1e-4;
+/// Two vertices at one point keep separate colours when a channel differs by more.
+pub(crate) const COLOR_WELD_TOLERANCE: f32 = 1e-4;
+
+/// Builds the working mesh from `mesh`, clustering positions within `tol`
+/// (any two closer than `tol` share a point, transitively; the point sits at the
+/// position of the smallest vertex index in its cluster).
+///
+/// Precondition: `mesh` passed [`Mesh::validate`].
+pub(crate) fn weld_points(mesh: &Mesh, tol: f32) -> Work {
+    let ids: Vec<u32> = (0..mesh.positions.len() as u32).collect();
+    let rep = cluster_points(&mesh.positions, &ids, tol);
+    // Point ids in order of their representative vertex: older geometry keeps lower ids.
+    let mut point_of_rep = vec![u32::MAX; mesh.positions.len()];
+    let mut points = Vec::new();
+    let mut vertex_point = Vec::with_capacity(mesh.positions.len());
+    for (v, &r) in rep.iter().enumerate() {
+        if r as usize == v {
+            point_of_rep[v] = points.len() as u32;
+            points.push(mesh.positions[v]);
+        }
+        vertex_point.push(point_of_rep[r as usize]);
+    }
+    let tris: Vec<[u32; 3]> = mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let n = tris.len();
+    Work {
+        points,
+        vertex_point,
+        normals: mesh.normals.clone(),
+        uvs: mesh.uvs.clone(),
+        colors: mesh.colors.clone(),
+        tris,
+        tri_material: mesh.tri_material.clone(),
+        tri_group: mesh.tri_group.clone(),
+        tri_origin: (0..n as u32).collect(),
+        tri_alive: vec![true; n],
+    }
+}
+
+/// Merges vertices that share a point and whose normals differ by at most the hard-edge
+/// angle (`cos_hard_edge` is its cosine) and whose UVs and colours agree within
+/// [`UV_WELD_TOLERANCE`] / [`COLOR_WELD_TOLERANCE`]. Returns the number of vertices
+/// merged into another.
+///
+/// Only vertices used by live triangles take part (unused ones are dropped on output).
+///
+/// Greedy and deterministic: within a point, vertices are visited by index and each
+/// joins the first earlier representative it agrees with (so agreement never chains).
+pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32) -> usize {
+    let mut used = vec![false; work.vertex_point.len()];
+    for (tri, _) in work.tris.iter().zip(&work.tri_alive).filter(|(_, &alive)| alive) {
+        tri.iter().for_each(|&v| used[v as usize] = true);
+    }
+    let mut order: Vec<u32> = (0..work.vertex_point.len() as u32).filter(|&v| used[v as usize]).collect();
+    order.sort_unstable_by_key(|&v| (work.vertex_point[v as usize], v));
+    let mut remap: Vec<u32> = (0..work.vertex_point.len() as u32).collect();
+    let mut merged = 0;
+    let mut reps: Vec<u32> = Vec::new();
+    for group in order.chunk_by(|&a, &b| work.vertex_point[a as usize] == work.vertex_point[b as usize]) {
+        reps.clear();
+        for &v in group {
+            match reps.iter().find(|&&r| attributes_agree(work, r, v, cos_hard_edge)) {
+                Some(&r) => {
+                    remap[v as usize] = r;
+                    merged += 1;
+                }
+                None => reps.push(v),
+            }
+        }
+    }
+    if merged > 0 {
+        work.remap_vertices(&remap);
+    }
+    merged
+}
+
+fn attributes_agree(work: &Work, a: u32, b: u32, cos_hard_edge: f32) -> bool {
+    let (a, b) = (a as usize, b as usize);
+    let (na, nb) = (work.normals[a], work.normals[b]);
+    let (la, lb) = (na.length(), nb.length());
+    let normals_agree = if la == 0.0 || lb == 0.0 {
+        la == lb
+    } else {
+        na.dot(nb) >= cos_hard_edge * la * lb
+    };
+    let uvs_agree = work.uvs.is_empty() || work.uvs[a].abs_diff_eq(work.uvs[b], UV_WELD_TOLERANCE);
+    let colors_agree = work.colors.is_empty()
+        || (0..3).all(|i| (work.colors[a][i] - work.colors[b][i]).abs() <= COLOR_WELD_TOLERANCE);
+    normals_agree && uvs_agree && colors_agree
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Material;
+    use glam::Vec3;
+
+    fn two_vertices(n1: Vec3, n2: Vec3) -> Mesh {
+        Mesh {
+            positions: vec![Vec3::ZERO, Vec3::new(1e-9, 0.0, 0.0), Vec3::X, Vec3::Z],
+            normals: vec![n1, n2, Vec3::Y, Vec3::Y],
+            indices: vec![0, 2, 3, 1, 3, 2],
+            tri_material: vec![0, 0],
+            tri_group: vec![0, 0],
+            materials: vec![Material::opaque("m", 0.5)],
+            groups: vec!["g".into()],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn hard_edges_stay_apart_and_soft_ones_merge() {
+        let cos60 = 60f32.to_radians().cos();
+        // 90 degrees apart: same point, two vertices.
+        let mut w = weld_points(&two_vertices(Vec3::Y, Vec3::X), 1e-6);
+        assert_eq!(w.vertex_point[0], w.vertex_point[1]);
+        assert_eq!(merge_vertices(&mut w, cos60), 0);
+        // 30 degrees apart: merged into the smaller index, which keeps its normal.
+        let n2 = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
+        let mut w = weld_points(&two_vertices(Vec3::Y, n2), 1e-6);
+        assert_eq!(merge_vertices(&mut w, cos60), 1);
+        assert_eq!(w.tris[1][0], 0);
+        assert_eq!(w.normals[0], Vec3::Y);
+    }
+}

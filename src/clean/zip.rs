@@ -1,0 +1,196 @@
+//! Zipping cracks and T-junctions between patches (Sloan et al. §4.1.1: "cracks
+//! between patches resulting from the NURBS tessellation").
+//!
+//! Only boundary edges (used by one triangle) and their end points take part, so
+//! a closed surface is never touched. Two steps:
+//! 1. *Weld boundary points* closer than the zip tolerance (representative: the
+//!    smallest point id, i.e. the older patch keeps its position).
+//! 2. *Split at T-junctions*: a boundary point within the tolerance of the interior
+//!    of another triangle's boundary edge (and farther than the tolerance from both
+//!    of its ends) splits that triangle there. The split vertex takes the point
+//!    itself, with attributes interpolated along the edge. Where the point goes:
+//!    onto the edge when the edge is older (its end points have smaller ids),
+//!    otherwise it stays and the edge bends to it; so the older patch never moves
+//!    and the area it describes is kept. Repeated until nothing splits, since a
+//!    triangle splits one edge per pass.
+
+use super::spatial::{cluster_points, Aabb, AabbTree};
+use super::work::{count_boundary_and_non_manifold, edge_runs, sorted_edges, EdgeUse, Work};
+
+/// Upper bound on T-junction passes (each pass splits one edge per triangle).
+const MAX_PASSES: usize = 16;
+
+/// What [`zip_boundaries`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct ZipOutcome {
+    /// Boundary edges before minus boundary edges after.
+    pub zipped_edges: usize,
+    /// Boundary points inserted into another triangle's edge.
+    pub tjunctions: usize,
+    /// Boundary points merged into another by step 1.
+    pub welded_points: usize,
+    /// Triangles collapsed by step 1 (two corners merged) and removed.
+    pub collapsed: usize,
+}
+
+/// Zips boundary edges closer than `tol` (see the module doc).
+pub(crate) fn zip_boundaries(work: &mut Work, tol: f32) -> ZipOutcome {
+    let (before, _) = count_boundary_and_non_manifold(work);
+    let mut out = ZipOutcome::default();
+
+    // Steps 1 and 2 until neither changes anything: a split can bring points together.
+    for _ in 0..MAX_PASSES {
+        let (welded, collapsed) = weld_boundary_points(work, tol);
+        out.welded_points += welded;
+        out.collapsed += collapsed;
+        let mut split_any = 0;
+        for _ in 0..MAX_PASSES {
+            let split = split_tjunctions(work, tol);
+            if split == 0 {
+                break;
+            }
+            split_any += split;
+        }
+        out.tjunctions += split_any;
+        if welded == 0 && split_any == 0 {
+            break;
+        }
+    }
+    let (after, _) = count_boundary_and_non_manifold(work);
+    out.zipped_edges = before.saturating_sub(after);
+    out
+}
+
+/// Step 1: welds boundary points closer than `tol` and removes the triangles that
+/// collapse. Returns (points merged, triangles removed).
+fn weld_boundary_points(work: &mut Work, tol: f32) -> (usize, usize) {
+    let edges = sorted_edges(work);
+    let mut boundary_points: Vec<u32> = boundary_edges(&edges).flat_map(|e| [e.lo, e.hi]).collect();
+    boundary_points.sort_unstable();
+    boundary_points.dedup();
+    let reps = cluster_points(&work.points, &boundary_points, tol);
+    let mut remap: Vec<u32> = (0..work.points.len() as u32).collect();
+    let mut welded = 0;
+    for (&p, &r) in boundary_points.iter().zip(&reps) {
+        if p != r {
+            remap[p as usize] = r;
+            welded += 1;
+        }
+    }
+    let mut collapsed = 0;
+    if welded > 0 {
+        work.remap_points(&remap);
+        for t in 0..work.tris.len() {
+            let [a, b, c] = work.tri_points(t);
+            if work.tri_alive[t] && (a == b || b == c || c == a) {
+                work.tri_alive[t] = false;
+                collapsed += 1;
+            }
+        }
+    }
+    (welded, collapsed)
+}
+
+fn boundary_edges(edges: &[EdgeUse]) -> impl Iterator<Item = EdgeUse> + '_ {
+    edge_runs(edges).filter(|run| run.len() == 1).map(|run| run[0])
+}
+
+/// A boundary point to insert into a boundary edge.
+#[derive(Clone, Copy, Debug)]
+struct Split {
+    tri: u32,
+    corner: u8,
+    /// Parameter along the edge from corner `corner` to the next.
+    s: f64,
+    point: u32,
+    projection: glam::DVec3,
+}
+
+/// One pass of step 2; returns the number of points inserted.
+fn split_tjunctions(work: &mut Work, tol: f32) -> usize {
+    let edges = sorted_edges(work);
+    let boundary: Vec<EdgeUse> = boundary_edges(&edges).collect();
+    if boundary.is_empty() {
+        return 0;
+    }
+    let boxes: Vec<Aabb> = boundary
+        .iter()
+        .map(|e| Aabb::of_points(&[work.points[e.lo as usize], work.points[e.hi as usize]], tol))
+        .collect();
+    let tree = AabbTree::build(boxes);
+    let mut points: Vec<u32> = boundary.iter().flat_map(|e| [e.lo, e.hi]).collect();
+    points.sort_unstable();
+    points.dedup();
+
+    // Find, for each boundary point, the nearest boundary edge it lies on.
+    let tol = tol as f64;
+    let mut splits: Vec<Split> = Vec::new();
+    let mut found = Vec::new();
+    for &v in &points {
+        let pv = work.points[v as usize];
+        found.clear();
+        tree.query(&Aabb { min: pv, max: pv }, &mut found);
+        found.sort_unstable();
+        let pv = pv.as_dvec3();
+        let mut best: Option<(f64, Split)> = None;
+        for &i in &found {
+            let e = boundary[i as usize];
+            let tri_points = work.tri_points(e.tri as usize);
+            if tri_points.contains(&v) {
+                continue;
+            }
+            let corner = e.corner as usize;
+            let a = work.points[tri_points[corner] as usize].as_dvec3();
+            let b = work.points[tri_points[(corner + 1) % 3] as usize].as_dvec3();
+            let ab = b - a;
+            let len = ab.length();
+            if len == 0.0 {
+                continue;
+            }
+            let s = (pv - a).dot(ab) / (len * len);
+            let projection = a + ab * s;
+            let dist = pv.distance(projection);
+            let interior = s * len > tol && (1.0 - s) * len > tol;
+            if dist <= tol && interior && !matches!(best, Some((d, _)) if d <= dist) {
+                best = Some((dist, Split { tri: e.tri, corner: e.corner, s, point: v, projection }));
+            }
+        }
+        if let Some((_, split)) = best {
+            splits.push(split);
+        }
+    }
+
+    // Apply: per triangle, the splits of its lowest split corner; others wait a pass.
+    splits.sort_by(|x, y| (x.tri, x.corner).cmp(&(y.tri, y.corner)).then(x.s.total_cmp(&y.s)));
+    let mut inserted = 0;
+    for tri_splits in splits.chunk_by(|x, y| x.tri == y.tri) {
+        let corner = tri_splits[0].corner;
+        let edge_splits: Vec<Split> = tri_splits.iter().copied().filter(|x| x.corner == corner).collect();
+        inserted += split_triangle_edge(work, &edge_splits);
+    }
+    inserted
+}
+
+/// Fans triangle `splits[0].tri` from its opposite corner through the split points
+/// (sorted by parameter along one edge). Returns the number of points inserted.
+fn split_triangle_edge(work: &mut Work, splits: &[Split]) -> usize {
+    let t = splits[0].tri as usize;
+    let corner = splits[0].corner as usize;
+    let tri = work.tris[t];
+    let (va, vb, vc) = (tri[corner], tri[(corner + 1) % 3], tri[(corner + 2) % 3]);
+    let (pa, pb) = (work.vertex_point[va as usize], work.vertex_point[vb as usize]);
+    let mut chain = vec![va];
+    for split in splits {
+        // The older side keeps its position (see the module doc).
+        if split.point > pa.min(pb) {
+            work.points[split.point as usize] = split.projection.as_vec3();
+        }
+        chain.push(work.push_vertex_lerp(va, vb, split.s as f32, split.point));
+    }
+    chain.push(vb);
+    work.tris[t] = [chain[0], chain[1], vc];
+    for w in chain[1..].windows(2) {
+        work.push_tri_like([w[0], w[1], vc], t);
+    }
+    splits.len()
+}
