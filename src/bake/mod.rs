@@ -2,6 +2,7 @@
 //! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
 //! arrays and statistics.
 
+pub mod hugepages;
 pub mod progress;
 pub mod sampling;
 pub mod scene;

@@ -89,10 +89,13 @@ impl Scene {
         let (bvh, leaf_to_mesh, leaf_triangles) = if triangles.is_empty() {
             (CwBvh::default(), Vec::new(), Vec::new())
         } else {
-            let bvh = build_cwbvh_from_tris(&triangles, params, &mut Duration::default());
+            let mut bvh = build_cwbvh_from_tris(&triangles, params, &mut Duration::default());
             let leaf_to_mesh = bvh.primitive_indices.clone();
-            let leaf_triangles = leaf_to_mesh.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
-            (bvh, leaf_to_mesh, leaf_triangles)
+            let leaf_triangles: Vec<RtTriangle> =
+                leaf_to_mesh.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
+            // The two arrays every ray walks: back them with huge pages.
+            bvh.nodes = super::hugepages::copy_to_huge_pages(&bvh.nodes);
+            (bvh, leaf_to_mesh, super::hugepages::copy_to_huge_pages(&leaf_triangles))
         };
         let (lo, hi) = mesh.bounds();
         let diagonal = (hi - lo).length().max(f32::MIN_POSITIVE);

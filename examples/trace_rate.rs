@@ -1,0 +1,106 @@
+//! Measures ray throughput of the tracing layer on the workload the baker
+//! issues (rays from triangle sample points, cosine-distributed over the
+//! sphere), and optionally exports the exact rays for `benches/embree_compare.py`.
+//!
+//! cargo run --release --example trace_rate -- [MESH|cabin] [--rays-per-point N] [--points N]
+//!     [--threads T] [--runs R] [--export DIR]
+//!
+//! Prints min / median / max Mrays/s over R runs for occlusion and closest hit.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::Vec3;
+use prtbake::bake::{sampling, BuildQuality, Scene};
+use prtbake::fixtures::cabin::generate_cabin;
+use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
+use rayon::prelude::*;
+
+fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
+    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let source = args.first().filter(|a| !a.starts_with("--")).cloned().unwrap_or_else(|| "cabin".into());
+    let rays_per_point: u32 = arg(&args, "--rays-per-point", 64);
+    let points: u32 = arg(&args, "--points", 16384);
+    let threads: usize = arg(&args, "--threads", 1);
+    let runs: usize = arg(&args, "--runs", 3);
+    let export: Option<PathBuf> = args.iter().position(|a| a == "--export").and_then(|i| args.get(i + 1)).map(PathBuf::from);
+
+    let mesh: Mesh = if source == "cabin" {
+        generate_cabin(80.0).0
+    } else {
+        load_mesh(source.as_ref(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh
+    };
+    let start = Instant::now();
+    let scene = Scene::build(&mesh, BuildQuality::Medium);
+    let build = start.elapsed().as_secs_f64();
+
+    // Sample points: centroids of an even spread of triangles, in mesh order.
+    let step = (mesh.triangle_count() as u32 / points).max(1);
+    let mut rays: Vec<(Vec3, Vec3)> = Vec::new();
+    for p in 0..points {
+        let t = ((p * step) as usize).min(mesh.triangle_count() - 1);
+        let n = scene.face_normal(t as u32);
+        if n == Vec3::ZERO {
+            continue;
+        }
+        let [a, b, c] = mesh.triangle_positions(t);
+        for k in 0..rays_per_point {
+            let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, p);
+            let d = sampling::cosine_sphere(n, u1, u2);
+            rays.push((scene.offset_origin((a + b + c) / 3.0, n, d), d));
+        }
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    let measure = |name: &str, f: &(dyn Fn(&(Vec3, Vec3)) -> bool + Sync)| {
+        let mut rates: Vec<f64> = (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                let hits: usize = pool.install(|| rays.par_chunks(4096).map(|c| c.iter().filter(|r| f(r)).count()).sum());
+                std::hint::black_box(hits);
+                rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6
+            })
+            .collect();
+        rates.sort_by(f64::total_cmp);
+        println!(
+            "{name:<12} {threads} thread(s): min {:.3}  median {:.3}  max {:.3} Mrays/s",
+            rates[0],
+            rates[rates.len() / 2],
+            rates[rates.len() - 1]
+        );
+    };
+    println!(
+        "{source}: {} triangles, BVH build {:.3}s, {} rays ({} points x {})",
+        mesh.triangle_count(),
+        build,
+        rays.len(),
+        rays.len() as u32 / rays_per_point,
+        rays_per_point
+    );
+    measure("occlusion", &|(o, d)| scene.occluded(*o, *d, f32::INFINITY));
+    measure("closest_hit", &|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some());
+
+    if let Some(dir) = export {
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut tris = std::io::BufWriter::new(std::fs::File::create(dir.join("triangles.f32")).unwrap());
+        for t in 0..mesh.triangle_count() {
+            for p in mesh.triangle_positions(t) {
+                tris.write_all(bytemuck_vec3(p).as_slice()).unwrap();
+            }
+        }
+        let mut r = std::io::BufWriter::new(std::fs::File::create(dir.join("rays.f32")).unwrap());
+        for (o, d) in &rays {
+            r.write_all(bytemuck_vec3(*o).as_slice()).unwrap();
+            r.write_all(bytemuck_vec3(*d).as_slice()).unwrap();
+        }
+        println!("exported {} triangles and {} rays to {}", mesh.triangle_count(), rays.len(), dir.display());
+    }
+}
+
+fn bytemuck_vec3(v: Vec3) -> Vec<u8> {
+    [v.x, v.y, v.z].iter().flat_map(|x| x.to_le_bytes()).collect()
+}
