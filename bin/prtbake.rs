@@ -61,7 +61,8 @@ struct BakeArgs {
     #[arg(long, default_value_t = 0)]
     bounces: u32,
     /// Light enters only through windows: materials or groups matching this glob (repeatable);
-    /// glTF materials with KHR_materials_transmission count too.
+    /// glTF materials with KHR_materials_transmission count too. `PATTERN=TAU` sets the glass
+    /// transmittance (default: the material's, 1 unless the file says otherwise).
     #[arg(long = "window", value_name = "PATTERN")]
     windows: Vec<String>,
     /// Window mode even without --window (materials with the window role only).

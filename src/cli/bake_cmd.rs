@@ -25,7 +25,10 @@ pub struct BakeConfig {
 
 /// Runs a bake end to end and prints its stats line (or JSON).
 pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
+    let load_start = std::time::Instant::now();
     let mut mesh = super::load_mesh(&config.input, config.up, config.params.quiet)?;
+    let load_seconds = load_start.elapsed().as_secs_f64();
+    let clean_start = std::time::Instant::now();
     let mut meta = json!({ "source": config.input.file_name().map(|n| n.to_string_lossy().to_string()) });
     if let Some(params) = &config.clean {
         let (cleaned, report) = super::clean_cmd::clean_loaded(&mesh, params, &config.input)?;
@@ -35,7 +38,10 @@ pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
         meta["clean"] = serde_json::to_value(&report)?;
         mesh = cleaned;
     }
-    let report = bake_to_bundle(&mesh, config, meta)?;
+    let clean_seconds = clean_start.elapsed().as_secs_f64();
+    let mut report = bake_to_bundle(&mesh, config, meta)?;
+    report.load_seconds = load_seconds;
+    report.clean_seconds = config.clean.is_some().then_some(clean_seconds);
     print_report(&report, config.json)
 }
 
@@ -46,6 +52,9 @@ pub struct BakeReport {
     pub build_seconds: f64,
     pub bundle_bytes: u64,
     pub window_names: Vec<String>,
+    pub load_seconds: f64,
+    pub clean_seconds: Option<f64>,
+    pub write_seconds: f64,
 }
 
 /// Bakes `mesh` and writes the bundle named in `config`; `extra_meta` is merged into the metadata.
@@ -59,10 +68,23 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
             config.window_patterns
         );
     }
+    let write_start = std::time::Instant::now();
+    let mut extra_meta = extra_meta;
+    extra_meta["window_patterns"] = json!(config.window_patterns);
+    extra_meta["windows"] = json!(surfaces.window_names);
     let bundle = make_bundle(mesh, &result, &config.params, extra_meta);
     bundle::write_bundle(&config.output, &bundle).with_context(|| format!("cannot write {}", config.output.display()))?;
     let bundle_bytes = std::fs::metadata(&config.output).map(|m| m.len()).unwrap_or(0);
-    Ok(BakeReport { output: config.output.clone(), result, build_seconds, bundle_bytes, window_names: surfaces.window_names })
+    Ok(BakeReport {
+        output: config.output.clone(),
+        result,
+        build_seconds,
+        bundle_bytes,
+        window_names: surfaces.window_names,
+        load_seconds: 0.0,
+        clean_seconds: None,
+        write_seconds: write_start.elapsed().as_secs_f64(),
+    })
 }
 
 /// Assembles a bundle from a bake. Only deterministic values go into it
@@ -111,6 +133,13 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             "order": report.result.order,
             "channels": report.result.channels,
             "stats": s,
+            "seconds_per_phase": {
+                "load": report.load_seconds,
+                "clean": report.clean_seconds,
+                "bvh_build": report.build_seconds,
+                "bounces": s.seconds_per_bounce,
+                "write": report.write_seconds,
+            },
             "bvh_build_seconds": report.build_seconds,
             "bundle_bytes": report.bundle_bytes,
             "windows": report.window_names,
