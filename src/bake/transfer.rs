@@ -456,27 +456,16 @@ impl Pass<'_> {
                 return (0, false);
             }
         }
+        // The first rays of bounce 0 also decide whether the point lies inside
+        // geometry (most of them hit back faces close by): they are traced with
+        // closest hit once, and serve both purposes.
+        let probe = if check_inside { ray_count.min(INSIDE_PROBE_RAYS) } else { 0 };
+        let mut inside_hits = 0u32;
         let mut traced = 0u64;
-        if check_inside {
-            let probe = ray_count.min(INSIDE_PROBE_RAYS);
-            let inside_hits = (0..probe)
-                .filter(|&k| {
-                    let direction = self.direction(point, k);
-                    let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
-                    matches!(self.scene.closest_hit(origin, direction, f32::INFINITY),
-                        Some(hit) if hit.back_face && hit.t < self.reject_distance)
-                })
-                .count() as f32;
-            traced += probe as u64;
-            let threshold = if window_mode { 0.75 } else { 0.5 };
-            if inside_hits > threshold * probe as f32 {
-                if self.record_hits {
-                    hits.extend(std::iter::repeat_n(NO_HIT, ray_count as usize));
-                }
+        for k in 0..ray_count {
+            if check_inside && k == probe && self.reject_inside(inside_hits, probe, hits) {
                 return (traced, true);
             }
-        }
-        for k in 0..ray_count {
             let direction = self.direction(point, k);
             let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
             traced += 1;
@@ -488,9 +477,12 @@ impl Pass<'_> {
                 }
                 continue;
             }
-            // Bounce 0: window mode needs the first hit; open mode only occlusion, unless hits are recorded.
-            let visibility = if window_mode || self.record_hits {
+            // Bounce 0: window mode needs the first hit; open mode only occlusion, unless hits are recorded or probed.
+            let visibility = if window_mode || self.record_hits || k < probe {
                 let hit = self.scene.closest_hit(origin, direction, f32::INFINITY);
+                if k < probe && matches!(hit, Some(h) if h.back_face && h.t < self.reject_distance) {
+                    inside_hits += 1;
+                }
                 if self.record_hits {
                     hits.push(match hit {
                         Some(h) if self.gathers_from(&h) => encode_hit(h.triangle, h.u, h.v),
@@ -514,7 +506,27 @@ impl Pass<'_> {
                 result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
             }
         }
+        if check_inside && probe == ray_count && self.reject_inside(inside_hits, probe, hits) {
+            return (traced, true);
+        }
         (traced, false)
+    }
+
+    /// Decides, from the `probe` first rays, whether a point lies inside
+    /// geometry: more than half of them (three quarters over the whole
+    /// sphere, where the back hemisphere of a solid's surface hits its inside
+    /// anyway) met a back face closer than `reject_distance`. A rejected
+    /// point's recorded hits are replaced by misses.
+    fn reject_inside(&self, inside_hits: u32, probe: u32, hits: &mut Vec<u64>) -> bool {
+        let threshold = if self.params.mode == Mode::Window { 0.75 } else { 0.5 };
+        if inside_hits as f32 <= threshold * probe as f32 {
+            return false;
+        }
+        if self.record_hits {
+            hits.truncate(hits.len() - probe as usize);
+            hits.extend(std::iter::repeat_n(NO_HIT, self.params.rays as usize));
+        }
+        true
     }
 
     /// Whether light of later bounces comes back from `hit`: only from opaque
