@@ -3,4 +3,7 @@
 mod analytic;
 mod bake_props;
 mod cli;
+mod export;
 mod util;
+#[cfg(feature = "viewer")]
+mod view;

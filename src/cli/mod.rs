@@ -4,8 +4,10 @@
 
 pub mod bake_cmd;
 pub mod demo_cmd;
+pub mod export_cmd;
 pub mod inspect_cmd;
 pub mod verify_cmd;
+pub mod view_cmd;
 
 use std::path::Path;
 
