@@ -286,3 +286,39 @@ fn frame_settings_follow_the_step_sky() {
     assert_eq!(settings.lighting, vec![[4.0, 5.0, 6.0], [0.0; 3], [0.0; 3], [0.0; 3]]);
     assert_eq!(settings.sun_step, Some(1));
 }
+
+#[test]
+fn view_command_writes_a_screenshot_and_refuses_bad_input() {
+    use crate::util::{prtbake, Scratch};
+    let scratch = Scratch::new("view-cli");
+    let (with_sun, _, _) = plane_and_sphere_time_lapse();
+    let mut without_sun = with_sun.clone();
+    without_sun.sun = None;
+    let (sun_path, plain_path) = (scratch.path("sun.prtb"), scratch.path("plain.prtb"));
+    ::prtbake::bundle::write_bundle(&sun_path, &with_sun).unwrap();
+    ::prtbake::bundle::write_bundle(&plain_path, &without_sun).unwrap();
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+
+    // Bad input is refused before any GPU work: exit 2 and a message naming the problem.
+    let no_lapse = prtbake(&["view", &s(&plain_path), "--time", "09:00", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(no_lapse.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&no_lapse.stderr).contains("no time lapse"));
+    let bad_step = prtbake(&["view", &s(&sun_path), "--step", "7", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(bad_step.status.code(), Some(2));
+    let bad_size = prtbake(&["view", &s(&sun_path), "--size", "0x10", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(bad_size.status.code(), Some(2));
+    let bad_layers = prtbake(&["view", &s(&sun_path), "--layers", "direct", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert!(String::from_utf8_lossy(&bad_layers.stderr).contains("--store-bounces"));
+
+    if gpu_or_skip("view_command_writes_a_screenshot").is_none() {
+        return;
+    }
+    let png_path = scratch.path("shot.png");
+    let run = prtbake(&["view", &s(&sun_path), "--step", "1", "--screenshot", &s(&png_path), "--size", "96x64", "--json"]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(report["step"], 1);
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png_path).unwrap()));
+    let info = decoder.read_info().unwrap().info().clone();
+    assert_eq!((info.width, info.height), (96, 64));
+}

@@ -96,7 +96,7 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         "drago" => ToneOperator::Drago,
         other => anyhow::bail!("--tonemap {other:?}: expected drago or linear"),
     };
-    if !(config.gamma.is_finite() && config.gamma > 0.0) || !config.exposure.is_finite() {
+    if !(config.gamma.is_finite() && config.gamma > 0.0 && config.exposure.is_finite()) {
         anyhow::bail!("--gamma must be positive and --exposure finite");
     }
     let state = ViewState {

@@ -469,6 +469,7 @@ impl Renderer {
     /// `dt` is the time since the previous frame (seconds) for the temporal
     /// adaptation; `reset_adaptation` jumps straight to the current frame's
     /// luminance (first frame, screenshots).
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         &self,
         gpu: &Gpu,

@@ -27,8 +27,8 @@ pub fn vertex_light(scene: &PreparedScene, lighting: &[[f32; 3]], sun: Option<(&
             if series.bit(v, step) {
                 let cosine = normal[0] * s.direction[0] + normal[1] * s.direction[1] + normal[2] * s.direction[2];
                 let cosine = if scene.two_sided_sun { cosine.abs() } else { cosine.max(0.0) };
-                for c in 0..3 {
-                    light[c] += cosine * s.sun_rgb[c] / std::f32::consts::PI;
+                for (l, rgb) in light.iter_mut().zip(s.sun_rgb) {
+                    *l += cosine * rgb / std::f32::consts::PI;
                 }
             }
         }

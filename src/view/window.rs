@@ -1,11 +1,11 @@
 //! The interactive viewer: a winit window, a wgpu surface, keys and mouse.
 //!
-//! Keys (also printed by `H`, documented in docs/viewer.md):
-//! mouse left drag orbit, right drag look around, wheel dolly; W A S D fly,
-//! Q E down/up; Space play/pause the time lapse; ← → (or , .) step;
-//! + − exposure ±½ stop; [ ] turn the environment ∓15°, R auto-turn;
-//! T all light, B (or 0) direct, I indirect, 0–9 bounce N; U sun term; M tone
-//! operator; C print the camera as `--camera`; H help; Esc quit.
+//! Keys (also printed by `H`, documented in docs/viewer.md): mouse left drag
+//! orbit, right drag look around, wheel dolly; `W A S D` fly, `Q E` down/up;
+//! `Space` play/pause the time lapse; `← →` (or `, .`) step; `+ −` exposure ±½
+//! stop; `[ ]` turn the environment ∓15°, `R` auto-turn; `T` all light, `B`
+//! (or `0`) direct, `I` indirect, `0–9` bounce N; `U` sun term; `M` tone
+//! operator; `C` print the camera as `--camera`; `H` help; `Esc` quit.
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -176,12 +176,10 @@ impl App {
     fn on_key(&mut self, event_loop: &ActiveEventLoop, key: &Key) {
         match key.as_ref() {
             Key::Named(NamedKey::Escape) => event_loop.exit(),
-            Key::Named(NamedKey::Space) => {
-                if self.bundle.sun.is_some() {
-                    self.playing = !self.playing;
-                    if self.state.step.is_none() {
-                        self.state.step = Some(0);
-                    }
+            Key::Named(NamedKey::Space) if self.bundle.sun.is_some() => {
+                self.playing = !self.playing;
+                if self.state.step.is_none() {
+                    self.state.step = Some(0);
                 }
             }
             Key::Named(NamedKey::ArrowRight) | Key::Character(".") => {
