@@ -137,6 +137,67 @@ struct CleanArgs {
     quiet: bool,
 }
 
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// Bundle to view (.prtb).
+    bundle: PathBuf,
+    /// Light with this equirect environment map (.exr or .hdr), projected once onto SH.
+    #[arg(long, conflicts_with = "sky")]
+    env: Option<PathBuf>,
+    /// Light with the time lapse's sky SH from the bundle (default when it has one).
+    #[arg(long)]
+    sky: bool,
+    /// Show the time-lapse step nearest this local time (HH:MM).
+    #[arg(long, conflicts_with = "step")]
+    time: Option<String>,
+    /// Show time-lapse step K (0-based).
+    #[arg(long)]
+    step: Option<usize>,
+    /// UTC offset for --time, +HH:MM (default +02:00, the default time line's).
+    #[arg(long, allow_hyphen_values = true)]
+    tz: Option<String>,
+    /// Exposure in stops (radiance × 2^STOPS).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    exposure: f32,
+    /// Environment rotation about +Y, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    yaw: f32,
+    /// Environment rotation about +X, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pitch: f32,
+    /// Environment rotation about +Z, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    roll: f32,
+    /// Tone mapping: drago (adaptive logarithmic, seed 000) or linear (exposure + gamma, seed 001).
+    #[arg(long, default_value = "drago", value_parser = ["drago", "linear"])]
+    tonemap: String,
+    #[arg(long, default_value_t = 2.2)]
+    gamma: f32,
+    /// Transfer layers: total, direct, indirect, or bounces like 0,2 (needs --store-bounces at bake time).
+    #[arg(long, default_value = "total")]
+    layers: String,
+    /// Do not draw materials or groups matching this glob (repeatable); window materials are never drawn.
+    #[arg(long, value_name = "PATTERN")]
+    hide: Vec<String>,
+    /// Render one frame offscreen into this PNG and exit (no window system needed).
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    /// Screenshot size, WxH.
+    #[arg(long, default_value = "1280x720")]
+    size: String,
+    /// Camera eye and target: EX,EY,EZ,TX,TY,TZ (default: the whole scene).
+    #[arg(long, allow_hyphen_values = true)]
+    camera: Option<String>,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 50.0)]
+    fov: f32,
+    /// With --screenshot: render N timed frames and report frame time and GPU memory.
+    #[arg(long, default_value_t = 0)]
+    frames: u32,
+    #[arg(long)]
+    json: bool,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Bake per-vertex SH transfer of a mesh into a bundle.
@@ -172,6 +233,43 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Relight a bundle interactively (wgpu), or headlessly into a PNG with --screenshot.
+    View(ViewArgs),
+    /// Write the bundle's mesh as GLB with transfer and sun masks as _PRT_ vertex attributes.
+    Export {
+        bundle: PathBuf,
+        /// GLB to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Transfer layer: total or a stored bounce index.
+        #[arg(long, default_value = "total")]
+        layer: String,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn view_config(a: ViewArgs) -> cli::view_cmd::ViewConfig {
+    cli::view_cmd::ViewConfig {
+        bundle: a.bundle,
+        env: a.env,
+        sky: a.sky,
+        time: a.time,
+        step: a.step,
+        tz: a.tz,
+        exposure: a.exposure,
+        rotation_deg: [a.yaw, a.pitch, a.roll],
+        tonemap: a.tonemap,
+        gamma: a.gamma,
+        layers: a.layers,
+        hide: a.hide,
+        screenshot: a.screenshot,
+        size: a.size,
+        camera: a.camera,
+        fov_deg: a.fov,
+        frames: a.frames,
+        json: a.json,
+    }
 }
 
 fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
@@ -254,6 +352,10 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
             cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)
         }
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
+        Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),
+        Command::Export { bundle, output, layer, json } => {
+            cli::export_cmd::run(&bundle, &output, cli::export_cmd::parse_layer(&layer)?, json).map(|_| Outcome::Ok)
+        }
     }
 }
 

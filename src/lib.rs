@@ -15,3 +15,5 @@ pub mod sh;
 pub mod sky;
 pub mod util;
 pub mod verify;
+#[cfg(feature = "viewer")]
+pub mod view;

@@ -4,4 +4,7 @@ mod analytic;
 mod bake_props;
 mod clean_props;
 mod cli;
+mod export;
 mod util;
+#[cfg(feature = "viewer")]
+mod view;

@@ -8,6 +8,7 @@
 //! - `container`: header, section table, codecs, checksums (knows no content).
 //! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND.
 //! - `quantize`: f32 / f16 / i16-with-per-vertex-scale transfer storage.
+//! - `export_gltf`: the mesh as GLB with transfer and sun masks as `_PRT_…` vertex attributes.
 //!
 //! Decoding never panics on hostile bytes: counts are checked against section
 //! lengths before allocation and every failure is a [`BundleError`] naming the
@@ -16,6 +17,7 @@
 mod container;
 mod cursor;
 mod error;
+mod export_gltf;
 mod quantize;
 mod sections;
 mod types;
@@ -29,6 +31,7 @@ use std::path::Path;
 
 pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
 pub use error::{BundleError, Tag};
+pub use export_gltf::{export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX};
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16};
 pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
 

@@ -36,6 +36,41 @@ impl Transfer {
     pub fn values_per_vertex(&self) -> u64 {
         (self.channels as u64).saturating_mul((self.order as u64).saturating_mul(self.order as u64))
     }
+
+    /// The layer of `kind`, if stored.
+    pub fn layer(&self, kind: LayerKind) -> Option<&TransferLayer> {
+        self.layers.iter().find(|l| l.kind == kind)
+    }
+
+    /// Bounce indices stored as separate layers, ascending.
+    pub fn stored_bounces(&self) -> Vec<u32> {
+        let mut bounces: Vec<u32> =
+            self.layers.iter().filter_map(|l| if let LayerKind::Bounce(b) = l.kind { Some(b) } else { None }).collect();
+        bounces.sort_unstable();
+        bounces
+    }
+
+    /// Transfer of all light: the `Total` layer, or else the sum of the stored
+    /// bounce layers (in ascending bounce order). Empty when there are no layers.
+    pub fn total(&self) -> Vec<f32> {
+        match self.layer(LayerKind::Total) {
+            Some(total) => total.data.clone(),
+            None => self.sum_bounces(|_| true),
+        }
+    }
+
+    /// Sum of the stored bounce layers for which `pick(bounce)` holds, in ascending
+    /// bounce order (deterministic); zeros of the right length when none is picked.
+    pub fn sum_bounces(&self, pick: impl Fn(u32) -> bool) -> Vec<f32> {
+        let len = self.layers.first().map_or(0, |l| l.data.len());
+        let mut sum = vec![0.0f32; len];
+        for b in self.stored_bounces().into_iter().filter(|&b| pick(b)) {
+            if let Some(layer) = self.layer(LayerKind::Bounce(b)) {
+                sum.iter_mut().zip(&layer.data).for_each(|(s, x)| *s += x);
+            }
+        }
+        sum
+    }
 }
 
 /// Which quantity a transfer layer holds.

@@ -25,7 +25,7 @@ pub use error::MeshError;
 pub use load::{load_mesh, LoadOptions, LoadedMesh, UpAxis};
 pub use normals::{compute_vertex_normals, repair_normals, FALLBACK_NORMAL};
 pub use types::*;
-pub use write::{write_glb, write_obj};
+pub use write::{write_glb, write_glb_with, write_obj, AttributeValues, CustomAttribute};
 
 /// Albedo (grey) of materials that state none (OBJ without `Kd`, glTF without
 /// `baseColorFactor`) and of the `"default"` material given to parts without one.

@@ -114,6 +114,7 @@ fn write_obj_text(w: &mut impl Write, mesh: &Mesh, mtl_name: &str) -> std::io::R
 /// glTF constants used by the GLB writer.
 const FLOAT: u32 = 5126;
 const UNSIGNED_INT: u32 = 5125;
+const UNSIGNED_BYTE: u32 = 5121;
 const ARRAY_BUFFER: u32 = 34962;
 const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 
@@ -184,7 +185,87 @@ fn material_json(material: &Material) -> Value {
 /// windows, and `extras.prtbake_role`. Refuses a mesh that fails [`Mesh::validate`]
 /// or would exceed GLB's 4 GiB limit.
 pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    write_glb_with(path, mesh, &[], None)
+}
+
+/// Per-vertex values written as an application-specific glTF vertex attribute.
+///
+/// The semantic must start with `_` (glTF 2.0 §3.7.2.1); it is stored with the
+/// standard attributes of every primitive, over the same vertices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CustomAttribute {
+    /// Attribute name as written, e.g. `_PRT_TRANSFER_0`.
+    pub semantic: String,
+    pub values: AttributeValues,
+}
+
+/// The data of a [`CustomAttribute`], one element per mesh vertex, in vertex order.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AttributeValues {
+    /// `components` (1..=4) floats per vertex (accessor SCALAR/VEC2/VEC3/VEC4 of FLOAT);
+    /// `data.len() == vertex_count · components`.
+    F32 { components: u8, data: Vec<f32> },
+    /// Four unsigned bytes per vertex (accessor VEC4 of UNSIGNED_BYTE, not normalized):
+    /// four bytes keep each element 4-byte aligned, as glTF requires of vertex attributes.
+    U8x4(Vec<[u8; 4]>),
+}
+
+impl CustomAttribute {
+    fn check(&self, vertex_count: usize) -> Result<(), String> {
+        if !self.semantic.starts_with('_') || self.semantic.len() < 2 {
+            return Err(format!("custom attribute {:?} must start with '_'", self.semantic));
+        }
+        let (len, per_vertex) = match &self.values {
+            AttributeValues::F32 { components, data } if (1..=4).contains(components) => (data.len(), *components as usize),
+            AttributeValues::F32 { components, .. } => return Err(format!("{}: {components} components (1..=4 allowed)", self.semantic)),
+            AttributeValues::U8x4(data) => (data.len(), 1),
+        };
+        if len != vertex_count * per_vertex {
+            return Err(format!("{}: {len} values for {vertex_count} vertices", self.semantic));
+        }
+        if let AttributeValues::F32 { data, .. } = &self.values {
+            if data.iter().any(|x| !x.is_finite()) {
+                return Err(format!("{}: non-finite value", self.semantic));
+            }
+        }
+        Ok(())
+    }
+
+    /// Appends the values of `vertices` (in that order) to `bin`; returns the accessor index.
+    fn push(&self, bin: &mut GlbBin, vertices: &[u32]) -> usize {
+        match &self.values {
+            AttributeValues::F32 { components, data } => {
+                let c = *components as usize;
+                let bytes: Vec<u8> =
+                    vertices.iter().flat_map(|&v| &data[v as usize * c..(v as usize + 1) * c]).flat_map(|x| x.to_le_bytes()).collect();
+                let kind = ["SCALAR", "VEC2", "VEC3", "VEC4"][c - 1];
+                bin.push(&bytes, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": vertices.len(), "type": kind}))
+            }
+            AttributeValues::U8x4(data) => {
+                let bytes: Vec<u8> = vertices.iter().flat_map(|&v| data[v as usize]).collect();
+                bin.push(&bytes, ARRAY_BUFFER, json!({"componentType": UNSIGNED_BYTE, "count": vertices.len(), "type": "VEC4"}))
+            }
+        }
+    }
+}
+
+/// [`write_glb`] plus application-specific vertex attributes and document-level
+/// `extras` (e.g. what the attributes mean).
+///
+/// Each attribute is split by group exactly like POSITION, so element `k` of a
+/// primitive's attribute belongs to the same vertex as element `k` of its
+/// POSITION. Refuses (with [`MeshError::InvalidForWrite`]) semantics that do
+/// not start with `_` or repeat, lengths that do not match the vertex count,
+/// and non-finite floats.
+pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute], extras: Option<Value>) -> Result<(), MeshError> {
     check_writable(path, mesh)?;
+    let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
+    for (i, attribute) in attributes_in.iter().enumerate() {
+        attribute.check(mesh.vertex_count()).map_err(invalid)?;
+        if attributes_in[..i].iter().any(|a| a.semantic == attribute.semantic) {
+            return Err(invalid(format!("custom attribute {} appears twice", attribute.semantic)));
+        }
+    }
     let too_large = || MeshError::InvalidForWrite { path: path.to_path_buf(), message: "the GLB would exceed 4 GiB".into() };
     let mut bin = GlbBin::default();
     let mut meshes = Vec::new();
@@ -217,6 +298,9 @@ pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
         if !mesh.colors.is_empty() {
             attributes["COLOR_0"] = json!(bin.push_vec3s(used.iter().map(|&v| mesh.colors[v as usize]), false));
         }
+        for custom in attributes_in {
+            attributes[custom.semantic.as_str()] = json!(custom.push(&mut bin, &used));
+        }
         let primitives: Vec<Value> = runs
             .iter()
             .map(|(&material, triangles)| {
@@ -248,6 +332,9 @@ pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
     });
     if !bin.bytes.is_empty() {
         document["buffers"] = json!([{"byteLength": bin.bytes.len()}]);
+    }
+    if let Some(extras) = extras {
+        document["extras"] = extras;
     }
     if mesh.materials.iter().any(|m| m.role == MaterialRole::Window) {
         document["extensionsUsed"] = json!(["KHR_materials_transmission"]);

@@ -1,0 +1,126 @@
+//! Export a bake for engines other than ours: the bundle's mesh as GLB with
+//! its transfer coefficients and sun masks as application-specific vertex
+//! attributes (`_PRT_…`). The layout is documented in docs/viewer.md
+//! ("Export for other engines").
+//!
+//! - `_PRT_TRANSFER_k`, k = 0 … ⌈S/4⌉−1: VEC4 of FLOAT, values 4k … 4k+3 of the
+//!   vertex's S = channels · order² transfer values in bundle order
+//!   `[channel][coeff]` (coefficient index `l(l+1)+m`); the last one is zero-padded.
+//! - `_PRT_SUN_k`, k = 0 … words_per_vertex−1: VEC4 of UNSIGNED_BYTE, the four
+//!   little-endian bytes of sun-mask word k: step `32k + 8j + b` is bit b of byte j.
+//! - Document `extras.prtbake`: order, channels, layer, attribute counts, and per
+//!   step the sun direction, irradiance, time, night flag and sky SH.
+
+use std::path::Path;
+
+use serde_json::{json, Value};
+
+use super::{Bundle, LayerKind};
+use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, MeshError};
+
+/// Name of the format version written into `extras.prtbake.format`.
+pub const GLTF_EXPORT_FORMAT: &str = "prtbake-gltf-1";
+/// Prefix of the transfer attributes (`_PRT_TRANSFER_0`, …).
+pub const TRANSFER_ATTRIBUTE_PREFIX: &str = "_PRT_TRANSFER_";
+/// Prefix of the sun-mask attributes (`_PRT_SUN_0`, …).
+pub const SUN_ATTRIBUTE_PREFIX: &str = "_PRT_SUN_";
+
+/// What [`export_glb`] wrote.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct GltfExportReport {
+    pub vertices: usize,
+    pub triangles: usize,
+    /// Number of `_PRT_TRANSFER_k` attributes (0 without transfer).
+    pub transfer_attributes: usize,
+    /// Number of `_PRT_SUN_k` attributes (0 without sun masks).
+    pub sun_attributes: usize,
+    /// Which layer the transfer attributes hold: `total` or `bounce N`.
+    pub layer: String,
+}
+
+/// The transfer attributes of `values` (S per vertex), 4 floats each, zero-padded.
+pub fn transfer_attributes(values: &[f32], per_vertex: usize, vertex_count: usize) -> Vec<CustomAttribute> {
+    let count = per_vertex.div_ceil(4);
+    (0..count)
+        .map(|k| {
+            let mut data = Vec::with_capacity(4 * vertex_count);
+            for v in 0..vertex_count {
+                for j in 4 * k..4 * k + 4 {
+                    data.push(if j < per_vertex { values[v * per_vertex + j] } else { 0.0 });
+                }
+            }
+            CustomAttribute { semantic: format!("{TRANSFER_ATTRIBUTE_PREFIX}{k}"), values: AttributeValues::F32 { components: 4, data } }
+        })
+        .collect()
+}
+
+/// Writes `bundle` as GLB at `path` with `_PRT_…` attributes.
+///
+/// `layer`: which transfer layer to write; `None` writes the total (the `Total`
+/// layer, or the sum of the stored bounces). Errors when the layer is absent or
+/// the mesh cannot be written (see [`write_glb_with`]).
+pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Result<GltfExportReport, MeshError> {
+    let mesh = &bundle.mesh;
+    let vertex_count = mesh.vertex_count();
+    let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
+    let mut attributes = Vec::new();
+    let mut layer_name = "none".to_string();
+    let mut transfer_meta = Value::Null;
+    if let Some(t) = &bundle.transfer {
+        let per_vertex = t.values_per_vertex() as usize;
+        let values = match layer {
+            None | Some(LayerKind::Total) => t.total(),
+            Some(kind) => t.layer(kind).map(|l| l.data.clone()).ok_or_else(|| invalid(format!("the bundle has no {kind:?} layer")))?,
+        };
+        layer_name = match layer {
+            Some(LayerKind::Bounce(b)) => format!("bounce {b}"),
+            _ => "total".into(),
+        };
+        attributes.extend(transfer_attributes(&values, per_vertex, vertex_count));
+        transfer_meta = json!({
+            "order": t.order, "channels": t.channels, "values_per_vertex": per_vertex, "layer": layer_name,
+            "attributes": per_vertex.div_ceil(4), "prefix": TRANSFER_ATTRIBUTE_PREFIX,
+        });
+    } else if layer.is_some() {
+        return Err(invalid("the bundle has no transfer".into()));
+    }
+    let transfer_count = attributes.len();
+
+    let mut sun_meta = Value::Null;
+    if let Some(sun) = &bundle.sun {
+        let words = sun.words_per_vertex as usize;
+        for k in 0..words {
+            let data = (0..vertex_count).map(|v| sun.masks[v * words + k].to_le_bytes()).collect();
+            attributes.push(CustomAttribute { semantic: format!("{SUN_ATTRIBUTE_PREFIX}{k}"), values: AttributeValues::U8x4(data) });
+        }
+        let steps: Vec<Value> = sun
+            .steps
+            .iter()
+            .map(|s| {
+                json!({
+                    "unix_time_utc": s.unix_time_utc, "direction": s.direction, "elevation_deg": s.elevation_deg,
+                    "azimuth_deg": s.azimuth_deg, "sun_rgb": s.sun_rgb, "night": s.night, "sky_sh": s.sky_sh,
+                })
+            })
+            .collect();
+        sun_meta = json!({
+            "steps": steps, "sky_order": sun.sky_order, "words_per_vertex": words, "attributes": words, "prefix": SUN_ATTRIBUTE_PREFIX,
+        });
+    }
+    let sun_count = attributes.len() - transfer_count;
+    let extras = json!({ "prtbake": {
+        "format": GLTF_EXPORT_FORMAT,
+        "transfer": transfer_meta,
+        "sun": sun_meta,
+        "shading": "radiance = albedo * (sum_i L_i t_i + bit * max(n.s, 0) * sun_rgb / pi); L_i = integral of L(w) y_i(w) dw",
+        "conventions": bundle.meta.get("conventions").cloned().unwrap_or(Value::Null),
+    }});
+    write_glb_with(path, mesh, &attributes, Some(extras))?;
+    Ok(GltfExportReport {
+        vertices: vertex_count,
+        triangles: mesh.triangle_count(),
+        transfer_attributes: transfer_count,
+        sun_attributes: sun_count,
+        layer: layer_name,
+    })
+}

@@ -1,0 +1,153 @@
+//! `prtbake view BUNDLE`: relight a bundle in a window, or headlessly into a PNG
+//! (`--screenshot`), optionally timing frames (`--frames N`). Reads only the
+//! bundle and the env map, never the source mesh. Needs the `viewer` feature.
+
+use std::path::PathBuf;
+
+/// A checked-as-typed `view` configuration (semantic checks happen in [`run`]).
+#[derive(Clone, Debug)]
+pub struct ViewConfig {
+    pub bundle: PathBuf,
+    /// Equirect env map (.exr / .hdr) for the SH lighting.
+    pub env: Option<PathBuf>,
+    /// Use the time lapse's sky SH from the bundle.
+    pub sky: bool,
+    /// Local `HH:MM` of the step to show.
+    pub time: Option<String>,
+    /// Step index to show.
+    pub step: Option<usize>,
+    /// UTC offset `+HH:MM` for `--time` (default: the sky module's, Athens at the equinox).
+    pub tz: Option<String>,
+    pub exposure: f32,
+    /// Environment yaw, pitch, roll in degrees.
+    pub rotation_deg: [f32; 3],
+    /// `drago` or `linear`.
+    pub tonemap: String,
+    pub gamma: f32,
+    /// `total`, `direct`, `indirect` or bounce list `0,1`.
+    pub layers: String,
+    /// Globs of materials or groups not to draw (window-role materials are never drawn).
+    pub hide: Vec<String>,
+    pub screenshot: Option<PathBuf>,
+    /// `WxH`.
+    pub size: String,
+    /// `EX,EY,EZ,TX,TY,TZ`.
+    pub camera: Option<String>,
+    pub fov_deg: f32,
+    /// Frames to time in headless mode (0 = one frame, no timing).
+    pub frames: u32,
+    pub json: bool,
+}
+
+/// Parses `WxH` (each 1..=16384).
+pub fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
+    let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+    match parsed {
+        Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
+        _ => anyhow::bail!("--size {text:?}: expected WIDTHxHEIGHT, each 1..=16384, e.g. 1280x720"),
+    }
+}
+
+#[cfg(not(feature = "viewer"))]
+pub fn run(_config: &ViewConfig) -> anyhow::Result<()> {
+    anyhow::bail!("this prtbake was built without the `viewer` feature (rebuild with default features)")
+}
+
+#[cfg(feature = "viewer")]
+pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use serde_json::json;
+
+    use crate::view::{self, Camera, LayerSelection, LightingSource, ToneMap, ToneOperator, ViewState};
+
+    let path = &config.bundle;
+    let bundle = crate::bundle::read_bundle(path).with_context(|| format!("cannot view {}", path.display()))?;
+    let transfer = bundle.transfer.as_ref().with_context(|| format!("{}: the bundle has no transfer to shade", path.display()))?;
+    let order = transfer.order as usize;
+    let layers = LayerSelection::parse(&config.layers, &transfer.stored_bounces()).map_err(anyhow::Error::msg)?;
+    let scene = view::scene::prepare_scene(&bundle, &layers, &config.hide).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let size = parse_size(&config.size)?;
+
+    // The time-lapse step, if any.
+    let tz_minutes = match &config.tz {
+        Some(text) => crate::sky::time::parse_tz(text)?,
+        None => crate::sky::time::default_tz_minutes(),
+    };
+    let wants_time_lapse = config.sky || config.time.is_some() || config.step.is_some();
+    let step = match (&bundle.sun, config.step, &config.time) {
+        (None, _, _) if wants_time_lapse => {
+            anyhow::bail!("{}: the bundle has no time lapse (sun masks), so --sky, --time and --step do not apply", path.display())
+        }
+        (None, _, _) => None,
+        (Some(sun), Some(k), _) if k >= sun.step_count() => anyhow::bail!("--step {k}: the bundle has {} steps (0..{})", sun.step_count(), sun.step_count()),
+        (Some(_), Some(k), _) => Some(k),
+        (Some(sun), None, Some(time)) => {
+            view::lighting::step_nearest_time(sun, crate::sky::time::parse_hhmm(time)?, tz_minutes)
+        }
+        (Some(sun), None, None) => (sun.step_count() > 0).then_some(sun.step_count() / 2),
+    };
+    let source = match &config.env {
+        Some(env) => LightingSource::Sh(view::lighting::env_map_sh(env, order).with_context(|| format!("cannot use {} as lighting", env.display()))?),
+        None if bundle.sun.is_some() => LightingSource::StepSky,
+        None => LightingSource::Sh(view::lighting::default_sky_sh(order)),
+    };
+    let operator = match config.tonemap.as_str() {
+        "linear" => ToneOperator::Linear,
+        "drago" => ToneOperator::Drago,
+        other => anyhow::bail!("--tonemap {other:?}: expected drago or linear"),
+    };
+    if !(config.gamma.is_finite() && config.gamma > 0.0 && config.exposure.is_finite()) {
+        anyhow::bail!("--gamma must be positive and --exposure finite");
+    }
+    let state = ViewState {
+        source,
+        rotation_deg: config.rotation_deg,
+        step,
+        sun_on: step.is_some(),
+        tonemap: ToneMap { operator, exposure_stops: config.exposure, gamma: config.gamma, ..ToneMap::default() },
+        layers,
+    };
+    let mut camera = match &config.camera {
+        Some(text) => {
+            let (eye, target) = Camera::parse_eye_target(text).map_err(anyhow::Error::msg)?;
+            Camera::look_at(eye, target, scene.bounds)
+        }
+        None => Camera::fit(scene.bounds),
+    };
+    if !(config.fov_deg > 1.0 && config.fov_deg < 179.0) {
+        anyhow::bail!("--fov {}: expected 1..179 degrees", config.fov_deg);
+    }
+    camera.fov_y_deg = config.fov_deg;
+
+    let Some(screenshot) = &config.screenshot else {
+        return view::window::run_window(bundle, scene, state, camera, tz_minutes).map_err(Into::into);
+    };
+    let gpu = view::Gpu::headless()?;
+    let settings = state.frame_settings(bundle.sun.as_ref(), order);
+    let (width, height) = size;
+    let (image, timing) = if config.frames > 0 {
+        let (image, timing) = view::time_frames(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height, config.frames)?;
+        (image, Some(timing))
+    } else {
+        (view::render_image(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height)?, None)
+    };
+    image.write_png(screenshot)?;
+    let step_time = match (&bundle.sun, step) {
+        (Some(sun), Some(k)) => Some(view::lighting::step_local_time(sun, k, tz_minutes)),
+        _ => None,
+    };
+    if config.json {
+        return super::print_json(&json!({
+            "screenshot": screenshot, "width": width, "height": height, "adapter": gpu.adapter_name(),
+            "step": step, "step_local_time": step_time, "camera": camera.to_arg(), "timing": timing,
+        }));
+    }
+    println!("wrote {} ({width}x{height}, {})", screenshot.display(), gpu.adapter_name());
+    if let Some(t) = timing {
+        println!(
+            "frame time: mean {:.2} ms, min {:.2} ms over {} frames; {} triangles, {} GPU vertices; GPU buffers {} bytes (transfer {}), targets {} bytes",
+            t.mean_ms, t.min_ms, t.frames, t.triangles, t.gpu_vertices, t.memory.buffers, t.memory.transfer, t.memory.targets
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,544 @@
+//! The GPU side: device, the scene's buffers, three pipelines and one frame's
+//! passes.
+//!
+//! A frame is: (1) scene pass, per-vertex PRT shading (shading.wgsl) into an
+//! `Rgba16Float` HDR target with a `Depth32Float` depth buffer, drawn
+//! two-sided (industrial meshes have inconsistent winding); (2) for Drago's
+//! operator, a one-workgroup compute pass over a 128×128 grid of the HDR
+//! target that updates the adapted luminance in a small storage buffer
+//! (luminance.wgsl); (3) a full-screen pass that tone-maps into the output
+//! (tonemap.wgsl). Per frame the CPU writes only the frame uniform (camera,
+//! lighting SH, sun) and two tiny parameter blocks.
+
+use wgpu::util::DeviceExt;
+
+use super::camera::Camera;
+use super::scene::{PreparedScene, GPU_VERTEX_BYTES};
+use super::tonemap::{ToneOperator, ADAPT_TAU_BRIGHTEN_S, ADAPT_TAU_DARKEN_S};
+use super::{FrameSettings, ViewError};
+use crate::bundle::SunSeries;
+
+/// Format of the HDR target.
+pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Format of the depth buffer.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Lighting coefficients the frame uniform holds (order 16).
+const MAX_COEFFS: usize = 256;
+/// Frame uniform: mat4 + 3 vec4 + 256 vec4.
+const FRAME_BYTES: usize = 64 + 3 * 16 + MAX_COEFFS * 16;
+/// Background of uncovered pixels (display values).
+const BACKGROUND: [f32; 3] = [0.06, 0.065, 0.075];
+
+/// An adapter, its device and queue.
+pub struct Gpu {
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+}
+
+impl Gpu {
+    /// Any adapter, no window system: a hardware one if present, else a
+    /// software one (Mesa's lavapipe). [`ViewError::NoAdapter`] when there is none.
+    pub fn headless() -> Result<Gpu, ViewError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+        let adapter = [false, true]
+            .into_iter()
+            .find_map(|force_fallback_adapter| {
+                let options = wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::HighPerformance,
+                    force_fallback_adapter,
+                    compatible_surface: None,
+                    ..Default::default()
+                };
+                pollster::block_on(instance.request_adapter(&options)).ok()
+            })
+            .ok_or(ViewError::NoAdapter)?;
+        Gpu::with_adapter(instance, adapter)
+    }
+
+    /// Opens the device of `adapter` with every limit the adapter supports
+    /// (large meshes need big storage buffers).
+    pub fn with_adapter(instance: wgpu::Instance, adapter: wgpu::Adapter) -> Result<Gpu, ViewError> {
+        let descriptor = wgpu::DeviceDescriptor { label: Some("prtbake"), required_limits: adapter.limits(), ..Default::default() };
+        let (device, queue) = pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| ViewError::Device(e.to_string()))?;
+        Ok(Gpu { instance, adapter, device, queue })
+    }
+
+    /// "name (backend, device type)" of the adapter.
+    pub fn adapter_name(&self) -> String {
+        let info = self.adapter.get_info();
+        format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
+    }
+}
+
+/// GPU memory the renderer allocated, in bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct GpuMemory {
+    /// Vertex, index, transfer, mask and uniform buffers.
+    pub buffers: u64,
+    /// Of which the transfer storage buffer.
+    pub transfer: u64,
+    /// HDR colour target and depth buffer (not the output image).
+    pub targets: u64,
+}
+
+/// Size-dependent targets and the bind groups that read them.
+struct Targets {
+    width: u32,
+    height: u32,
+    hdr_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    luminance_bind: wgpu::BindGroup,
+    tonemap_bind: wgpu::BindGroup,
+}
+
+/// Draws a prepared scene: pipelines, buffers and targets.
+pub struct Renderer {
+    scene_pipeline: wgpu::RenderPipeline,
+    luminance_pipeline: wgpu::ComputePipeline,
+    tonemap_pipeline: wgpu::RenderPipeline,
+    luminance_layout: wgpu::BindGroupLayout,
+    tonemap_layout: wgpu::BindGroupLayout,
+    scene_bind: wgpu::BindGroup,
+    frame_buffer: wgpu::Buffer,
+    vertex_buffer: wgpu::Buffer,
+    index_buffer: wgpu::Buffer,
+    transfer_buffer: wgpu::Buffer,
+    mask_buffer: wgpu::Buffer,
+    adapt_state: wgpu::Buffer,
+    adapt_params: wgpu::Buffer,
+    tone_buffer: wgpu::Buffer,
+    targets: Targets,
+    index_count: u32,
+    order: u32,
+    channels: u32,
+    words_per_vertex: u32,
+    two_sided_sun: bool,
+    srgb_output: bool,
+}
+
+fn buffer_entry(binding: u32, visibility: wgpu::ShaderStages, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    }
+}
+
+fn hdr_texture_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// Little-endian bytes of 32-bit words (f32 as bits).
+fn words_to_bytes(words: &[u32]) -> Vec<u8> {
+    words.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+impl Renderer {
+    /// Uploads `scene` and builds the pipelines for an output of `output_format`
+    /// at `width × height` (each ≥ 1).
+    ///
+    /// Errors when a buffer exceeds the device's limits (the message says
+    /// which), when the device runs out of memory, or on a validation error.
+    pub fn new(gpu: &Gpu, scene: &PreparedScene, output_format: wgpu::TextureFormat, width: u32, height: u32) -> Result<Renderer, ViewError> {
+        // Capture errors instead of letting wgpu's default handler panic.
+        let out_of_memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let renderer = Self::build(gpu, scene, output_format, width, height);
+        let errors = [pollster::block_on(validation.pop()), pollster::block_on(out_of_memory.pop())];
+        match errors.into_iter().flatten().next() {
+            Some(error) => Err(ViewError::Gpu(error.to_string())),
+            None => renderer,
+        }
+    }
+
+    fn build(gpu: &Gpu, scene: &PreparedScene, output_format: wgpu::TextureFormat, width: u32, height: u32) -> Result<Renderer, ViewError> {
+        let device = &gpu.device;
+        let limits = device.limits();
+        let transfer_bytes = scene.transfer.len() as u64 * 4;
+        if transfer_bytes > limits.max_storage_buffer_binding_size || transfer_bytes > limits.max_buffer_size {
+            return Err(ViewError::Gpu(format!(
+                "the transfer needs a {transfer_bytes}-byte storage buffer; this device allows {} (choose a lower order or fewer channels)",
+                limits.max_storage_buffer_binding_size
+            )));
+        }
+        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
+            // Zero-sized bindings are invalid: keep at least 16 bytes.
+            let mut bytes = contents.to_vec();
+            bytes.resize(bytes.len().max(16), 0);
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &bytes, usage })
+        };
+        let mut vertex_bytes = Vec::with_capacity(scene.vertices.len() * GPU_VERTEX_BYTES);
+        scene.vertices.iter().for_each(|v| v.write_to(&mut vertex_bytes));
+        let vertex_buffer = init("vertices", &vertex_bytes, wgpu::BufferUsages::VERTEX);
+        let index_buffer = init("indices", &words_to_bytes(&scene.indices), wgpu::BufferUsages::INDEX);
+        let transfer_words: Vec<u32> = scene.transfer.iter().map(|x| x.to_bits()).collect();
+        let transfer_buffer =
+            init("transfer", &words_to_bytes(&transfer_words), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        let mask_buffer = init("sun masks", &words_to_bytes(&scene.masks), wgpu::BufferUsages::STORAGE);
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame"),
+            size: FRAME_BYTES as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let small = |label: &str, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: 48, usage: usage | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false })
+        };
+        let adapt_state = small("adaptation", wgpu::BufferUsages::STORAGE);
+        let adapt_params = small("adaptation parameters", wgpu::BufferUsages::UNIFORM);
+        let tone_buffer = small("tone", wgpu::BufferUsages::UNIFORM);
+
+        // Scene pipeline.
+        let vs_fs = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
+        let scene_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("scene"),
+            entries: &[
+                buffer_entry(0, vs_fs, wgpu::BufferBindingType::Uniform),
+                buffer_entry(1, wgpu::ShaderStages::VERTEX, wgpu::BufferBindingType::Storage { read_only: true }),
+                buffer_entry(2, wgpu::ShaderStages::VERTEX, wgpu::BufferBindingType::Storage { read_only: true }),
+            ],
+        });
+        let scene_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("scene"),
+            layout: &scene_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: transfer_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: mask_buffer.as_entire_binding() },
+            ],
+        });
+        let shading = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shading.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shading.wgsl").into()),
+        });
+        let scene_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("scene"),
+            bind_group_layouts: &[Some(&scene_layout)],
+            immediate_size: 0,
+        });
+        let vertex_attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Uint32];
+        let scene_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("scene"),
+            layout: Some(&scene_pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &shading,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: GPU_VERTEX_BYTES as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &vertex_attributes,
+                })],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &shading,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(HDR_FORMAT.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+
+        // Luminance (compute) pipeline.
+        let luminance_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("luminance"),
+            entries: &[
+                hdr_texture_entry(0, wgpu::ShaderStages::COMPUTE),
+                buffer_entry(1, wgpu::ShaderStages::COMPUTE, wgpu::BufferBindingType::Storage { read_only: false }),
+                buffer_entry(2, wgpu::ShaderStages::COMPUTE, wgpu::BufferBindingType::Uniform),
+            ],
+        });
+        let luminance_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("luminance.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("luminance.wgsl").into()),
+        });
+        let luminance_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("luminance"),
+            layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("luminance"),
+                bind_group_layouts: &[Some(&luminance_layout)],
+                immediate_size: 0,
+            })),
+            module: &luminance_module,
+            entry_point: Some("cs_luminance"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+
+        // Tone-mapping pipeline.
+        let tonemap_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("tonemap"),
+            entries: &[
+                hdr_texture_entry(0, wgpu::ShaderStages::FRAGMENT),
+                buffer_entry(1, wgpu::ShaderStages::FRAGMENT, wgpu::BufferBindingType::Storage { read_only: true }),
+                buffer_entry(2, wgpu::ShaderStages::FRAGMENT, wgpu::BufferBindingType::Uniform),
+            ],
+        });
+        let tonemap_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("tonemap.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("tonemap.wgsl").into()),
+        });
+        let tonemap_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("tonemap"),
+            layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("tonemap"),
+                bind_group_layouts: &[Some(&tonemap_layout)],
+                immediate_size: 0,
+            })),
+            vertex: wgpu::VertexState {
+                module: &tonemap_module,
+                entry_point: Some("vs_fullscreen"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &tonemap_module,
+                entry_point: Some("fs_tonemap"),
+                compilation_options: Default::default(),
+                targets: &[Some(output_format.into())],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+
+        let targets = Self::create_targets(device, &luminance_layout, &tonemap_layout, &adapt_state, &adapt_params, &tone_buffer, width, height);
+        Ok(Renderer {
+            scene_pipeline,
+            luminance_pipeline,
+            tonemap_pipeline,
+            luminance_layout,
+            tonemap_layout,
+            scene_bind,
+            frame_buffer,
+            vertex_buffer,
+            index_buffer,
+            transfer_buffer,
+            mask_buffer,
+            adapt_state,
+            adapt_params,
+            tone_buffer,
+            targets,
+            index_count: scene.indices.len() as u32,
+            order: scene.order,
+            channels: scene.channels,
+            words_per_vertex: scene.words_per_vertex,
+            two_sided_sun: scene.two_sided_sun,
+            srgb_output: output_format.is_srgb(),
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn create_targets(
+        device: &wgpu::Device,
+        luminance_layout: &wgpu::BindGroupLayout,
+        tonemap_layout: &wgpu::BindGroupLayout,
+        adapt_state: &wgpu::Buffer,
+        adapt_params: &wgpu::Buffer,
+        tone_buffer: &wgpu::Buffer,
+        width: u32,
+        height: u32,
+    ) -> Targets {
+        let (width, height) = (width.max(1), height.max(1));
+        let texture = |label: &str, format: wgpu::TextureFormat, usage: wgpu::TextureUsages| {
+            device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default())
+        };
+        let hdr_view = texture("hdr", HDR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING);
+        let depth_view = texture("depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        let bind = |label: &str, layout: &wgpu::BindGroupLayout, second: &wgpu::Buffer, third: &wgpu::Buffer| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&hdr_view) },
+                    wgpu::BindGroupEntry { binding: 1, resource: second.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: third.as_entire_binding() },
+                ],
+            })
+        };
+        let luminance_bind = bind("luminance", luminance_layout, adapt_state, adapt_params);
+        let tonemap_bind = bind("tonemap", tonemap_layout, adapt_state, tone_buffer);
+        Targets { width, height, hdr_view, depth_view, luminance_bind, tonemap_bind }
+    }
+
+    /// Recreates the HDR and depth targets for a new output size.
+    pub fn resize(&mut self, gpu: &Gpu, width: u32, height: u32) {
+        if (width.max(1), height.max(1)) != (self.targets.width, self.targets.height) {
+            self.targets = Self::create_targets(
+                &gpu.device,
+                &self.luminance_layout,
+                &self.tonemap_layout,
+                &self.adapt_state,
+                &self.adapt_params,
+                &self.tone_buffer,
+                width,
+                height,
+            );
+        }
+    }
+
+    /// Replaces the shaded transfer (after a layer toggle); `values` must have
+    /// the length of the uploaded one.
+    pub fn set_transfer(&self, gpu: &Gpu, values: &[f32]) -> Result<(), ViewError> {
+        let bytes = words_to_bytes(&values.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+        if bytes.len() as u64 > self.transfer_buffer.size() {
+            return Err(ViewError::Invalid(format!("{} transfer bytes for a {}-byte buffer", bytes.len(), self.transfer_buffer.size())));
+        }
+        gpu.queue.write_buffer(&self.transfer_buffer, 0, &bytes);
+        Ok(())
+    }
+
+    /// Memory held by the renderer's buffers and targets.
+    pub fn memory(&self) -> GpuMemory {
+        let buffers = [
+            &self.vertex_buffer,
+            &self.index_buffer,
+            &self.transfer_buffer,
+            &self.mask_buffer,
+            &self.frame_buffer,
+            &self.adapt_state,
+            &self.adapt_params,
+            &self.tone_buffer,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum();
+        let pixels = self.targets.width as u64 * self.targets.height as u64;
+        GpuMemory { buffers, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
+    }
+
+    /// The frame uniform's bytes for `camera`, `settings` and the sun series.
+    fn frame_bytes(&self, camera: &Camera, settings: &FrameSettings, sun: Option<&SunSeries>) -> Vec<u8> {
+        let aspect = self.targets.width as f32 / self.targets.height as f32;
+        let mut words: Vec<u32> = camera.view_proj(aspect).to_cols_array().iter().map(|x| x.to_bits()).collect();
+        let step = settings.sun_step.and_then(|k| sun.and_then(|s| s.steps.get(k)).map(|s| (k, s)));
+        let (direction, rgb, on, k) = match step {
+            Some((k, s)) if self.words_per_vertex > 0 => (s.direction, s.sun_rgb, 1.0, k as u32),
+            _ => ([0.0; 3], [0.0; 3], 0.0, 0),
+        };
+        let two_sided = if self.two_sided_sun { 1.0f32 } else { 0.0 };
+        words.extend([direction[0], direction[1], direction[2], two_sided].map(f32::to_bits));
+        words.extend([rgb[0], rgb[1], rgb[2], on].map(f32::to_bits));
+        words.extend([self.order * self.order, self.channels, self.words_per_vertex, k]);
+        let n2 = (self.order * self.order) as usize;
+        for i in 0..MAX_COEFFS {
+            let c = if i < n2 { settings.lighting.get(i).copied().unwrap_or([0.0; 3]) } else { [0.0; 3] };
+            words.extend([c[0], c[1], c[2], 0.0].map(f32::to_bits));
+        }
+        words_to_bytes(&words)
+    }
+
+    /// Renders one frame into `target` (a view of a texture of the renderer's
+    /// size and output format) and submits it.
+    ///
+    /// `dt` is the time since the previous frame (seconds) for the temporal
+    /// adaptation; `reset_adaptation` jumps straight to the current frame's
+    /// luminance (first frame, screenshots).
+    #[allow(clippy::too_many_arguments)]
+    pub fn render(
+        &self,
+        gpu: &Gpu,
+        target: &wgpu::TextureView,
+        camera: &Camera,
+        settings: &FrameSettings,
+        sun: Option<&SunSeries>,
+        dt: f32,
+        reset_adaptation: bool,
+    ) -> wgpu::SubmissionIndex {
+        let queue = &gpu.queue;
+        queue.write_buffer(&self.frame_buffer, 0, &self.frame_bytes(camera, settings, sun));
+        let t = &settings.tonemap;
+        let drago = t.operator == ToneOperator::Drago;
+        let mut tone = vec![t.exposure_stops.exp2().to_bits(), t.gamma.to_bits(), drago as u32, self.srgb_output as u32];
+        tone.extend([BACKGROUND[0], BACKGROUND[1], BACKGROUND[2], 1.0, t.bias, t.display_max, 0.0, 0.0].map(f32::to_bits));
+        queue.write_buffer(&self.tone_buffer, 0, &words_to_bytes(&tone));
+        let adapt = [dt.max(0.0).to_bits(), ADAPT_TAU_BRIGHTEN_S.to_bits(), ADAPT_TAU_DARKEN_S.to_bits(), reset_adaptation as u32];
+        queue.write_buffer(&self.adapt_params, 0, &words_to_bytes(&adapt));
+
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("scene"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.targets.hdr_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.targets.depth_view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.scene_pipeline);
+            pass.set_bind_group(0, &self.scene_bind, &[]);
+            pass.set_vertex_buffer(0, self.vertex_buffer.slice(..));
+            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..self.index_count, 0, 0..1);
+        }
+        if drago {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("luminance"), timestamp_writes: None });
+            pass.set_pipeline(&self.luminance_pipeline);
+            pass.set_bind_group(0, &self.targets.luminance_bind, &[]);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("tonemap"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: target,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.tonemap_pipeline);
+            pass.set_bind_group(0, &self.targets.tonemap_bind, &[]);
+            pass.draw(0..3, 0..1);
+        }
+        queue.submit([encoder.finish()])
+    }
+}

@@ -1,0 +1,193 @@
+//! Bundle → the flat arrays the GPU draws: vertices split by material (so the
+//! fragment stage knows each triangle's albedo while the SH dot product stays
+//! per bundle vertex), u32 indices, the selected transfer layers summed, masks.
+
+use std::collections::HashMap;
+
+use crate::bundle::{Bundle, SunSeries, Transfer};
+use crate::mesh::MaterialRole;
+
+/// One GPU vertex: 40 bytes, `source` indexes the bundle's per-vertex data.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuVertex {
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    /// Albedo of the material of the triangles using this copy, clamped to 0..1 as the bake does.
+    pub albedo: [f32; 3],
+    /// Bundle vertex whose transfer and sun bits this copy uses.
+    pub source: u32,
+}
+
+/// Size of [`GpuVertex`] in the vertex buffer.
+pub const GPU_VERTEX_BYTES: usize = 40;
+
+impl GpuVertex {
+    /// Little-endian bytes in the vertex-buffer layout.
+    pub fn write_to(&self, out: &mut Vec<u8>) {
+        for x in self.position.iter().chain(&self.normal).chain(&self.albedo) {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        out.extend_from_slice(&self.source.to_le_bytes());
+    }
+}
+
+/// Which transfer layers are summed into the shaded transfer.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LayerSelection {
+    /// All light: the `Total` layer (or the sum of the stored bounces).
+    Total,
+    /// The stored bounces whose index is listed (0 = direct); others are off.
+    Bounces(Vec<u32>),
+}
+
+impl LayerSelection {
+    /// Parses `total`, `direct` (bounce 0), `indirect` (bounces ≥ 1) or a
+    /// comma list of bounce indices such as `0,2`; `stored` are the bundle's bounce layers.
+    pub fn parse(text: &str, stored: &[u32]) -> Result<LayerSelection, String> {
+        let missing = || format!("layers {text:?}: the bundle stores no separate bounces (bake with --store-bounces)");
+        match text {
+            "total" | "all" => Ok(LayerSelection::Total),
+            _ if stored.is_empty() => Err(missing()),
+            "direct" => Ok(LayerSelection::Bounces(vec![0])),
+            "indirect" => Ok(LayerSelection::Bounces(stored.iter().copied().filter(|&b| b > 0).collect())),
+            _ => {
+                let list = text
+                    .split(',')
+                    .map(|s| s.trim().parse::<u32>().map_err(|_| format!("layers {text:?}: expected total, direct, indirect or a list like 0,1")))
+                    .collect::<Result<Vec<u32>, String>>()?;
+                match list.iter().find(|b| !stored.contains(b)) {
+                    Some(b) => Err(format!("layers {text:?}: bounce {b} is not stored (stored: {stored:?})")),
+                    None => Ok(LayerSelection::Bounces(list)),
+                }
+            }
+        }
+    }
+
+    /// The summed transfer (vertex-major `[vertex][channel][coeff]`).
+    pub fn combine(&self, transfer: &Transfer) -> Vec<f32> {
+        match self {
+            LayerSelection::Total => transfer.total(),
+            LayerSelection::Bounces(list) => transfer.sum_bounces(|b| list.contains(&b)),
+        }
+    }
+
+    /// Short description for the status line.
+    pub fn describe(&self) -> String {
+        match self {
+            LayerSelection::Total => "total".into(),
+            LayerSelection::Bounces(list) if list.is_empty() => "none".into(),
+            LayerSelection::Bounces(list) => format!("bounces {list:?}"),
+        }
+    }
+}
+
+/// The bundle in the form the renderer uploads.
+#[derive(Clone, Debug)]
+pub struct PreparedScene {
+    pub vertices: Vec<GpuVertex>,
+    /// Triangles over `vertices`, u32, counter-clockwise (drawn two-sided).
+    pub indices: Vec<u32>,
+    /// SH order n of the transfer.
+    pub order: u32,
+    /// 1 or 3.
+    pub channels: u32,
+    /// Selected transfer, `[bundle vertex][channel][coeff]`.
+    pub transfer: Vec<f32>,
+    /// The bundle's sun masks (empty without a sun series) and words per vertex.
+    pub masks: Vec<u32>,
+    pub words_per_vertex: u32,
+    /// Sun cosine `|n·s|` (window-mode bundles) instead of `max(n·s, 0)`.
+    pub two_sided_sun: bool,
+    /// Bounds of the drawn geometry.
+    pub bounds: (glam::Vec3, glam::Vec3),
+}
+
+/// Whether the bundle was baked in window mode (its META `params.mode`).
+pub fn is_window_mode(bundle: &Bundle) -> bool {
+    bundle.meta.pointer("/params/mode").and_then(|m| m.as_str()) == Some("window")
+}
+
+/// Prepares `bundle` for drawing.
+///
+/// Triangles whose material has the window role, or whose material or group
+/// name matches a glob of `hide`, are not drawn (glass would hide the cabin it
+/// lights). Errors when the bundle has no transfer, a pattern is malformed, or
+/// the selected layers are absent.
+pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) -> Result<PreparedScene, String> {
+    let transfer = bundle.transfer.as_ref().ok_or("the bundle has no transfer to shade (bake it first)")?;
+    if transfer.channels != 1 && transfer.channels != 3 {
+        return Err(format!("{} transfer channels: the viewer shades 1 (grey) or 3 (RGB)", transfer.channels));
+    }
+    if transfer.order as usize > crate::sh::MAX_ORDER {
+        return Err(format!("transfer order {} is above {}", transfer.order, crate::sh::MAX_ORDER));
+    }
+    if let LayerSelection::Bounces(list) = layers {
+        let stored = transfer.stored_bounces();
+        if let Some(b) = list.iter().find(|b| !stored.contains(b)) {
+            return Err(format!("bounce {b} is not stored in the bundle (stored: {stored:?})"));
+        }
+    }
+    let patterns = hide
+        .iter()
+        .map(|p| glob::Pattern::new(p).map_err(|e| format!("invalid --hide pattern {p:?}: {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mesh = &bundle.mesh;
+    let hidden_material: Vec<bool> =
+        mesh.materials.iter().map(|m| m.role == MaterialRole::Window || patterns.iter().any(|p| p.matches(&m.name))).collect();
+    let hidden_group: Vec<bool> = mesh.groups.iter().map(|g| patterns.iter().any(|p| p.matches(g))).collect();
+
+    // One GPU vertex per (bundle vertex, material) pair in first-use order.
+    let mut first_copy: Vec<(u32, u16)> = vec![(u32::MAX, 0); mesh.vertex_count()];
+    let mut other_copies: HashMap<(u32, u16), u32> = HashMap::new();
+    let mut vertices = Vec::new();
+    let mut indices = Vec::with_capacity(mesh.indices.len());
+    let (mut lo, mut hi) = (glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY));
+    for t in 0..mesh.triangle_count() {
+        let material = mesh.tri_material[t];
+        if hidden_material[material as usize] || hidden_group[mesh.tri_group[t] as usize] {
+            continue;
+        }
+        for v in mesh.triangle(t) {
+            let mut new_copy = || {
+                let position = mesh.positions[v as usize];
+                lo = lo.min(position);
+                hi = hi.max(position);
+                vertices.push(GpuVertex {
+                    position: position.to_array(),
+                    normal: mesh.normals[v as usize].to_array(),
+                    albedo: mesh.materials[material as usize].albedo.map(|a| a.clamp(0.0, 1.0)),
+                    source: v,
+                });
+                vertices.len() as u32 - 1
+            };
+            let index = match first_copy[v as usize] {
+                (u32::MAX, _) => {
+                    let i = new_copy();
+                    first_copy[v as usize] = (i, material);
+                    i
+                }
+                (i, m) if m == material => i,
+                _ => *other_copies.entry((v, material)).or_insert_with(new_copy),
+            };
+            indices.push(index);
+        }
+    }
+    if indices.is_empty() {
+        (lo, hi) = mesh.bounds();
+    }
+    let (masks, words_per_vertex) = match &bundle.sun {
+        Some(SunSeries { masks, words_per_vertex, .. }) => (masks.clone(), *words_per_vertex),
+        None => (Vec::new(), 0),
+    };
+    Ok(PreparedScene {
+        vertices,
+        indices,
+        order: transfer.order,
+        channels: transfer.channels,
+        transfer: layers.combine(transfer),
+        masks,
+        words_per_vertex,
+        two_sided_sun: is_window_mode(bundle),
+        bounds: (lo, hi),
+    })
+}

@@ -1,0 +1,79 @@
+// Per-vertex PRT shading (seeds 000 §4.2, 001 §4).
+//
+// Vertex: E = Σ_i L_i t_i(v)  +  bit(v, step) · cos · sun_rgb / π   (cos = max(n·s,0), or |n·s| two-sided)
+// Fragment: radiance = albedo · E, written to an HDR target; alpha 1 marks covered pixels.
+
+const PI: f32 = 3.14159265358979;
+const MAX_COEFFS: u32 = 256u;
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    // xyz: unit direction toward the sun; w: 1 = two-sided cosine.
+    sun_dir: vec4<f32>,
+    // rgb: sun irradiance; w: 1 = sun term on.
+    sun_rgb: vec4<f32>,
+    // x: coefficients per channel (order²), y: channels (1 or 3),
+    // z: mask words per vertex, w: time-lapse step.
+    counts: vec4<u32>,
+    // Lighting SH, rgb per coefficient, index l(l+1)+m.
+    sh: array<vec4<f32>, MAX_COEFFS>,
+};
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+// [vertex][channel][coeff], f32.
+@group(0) @binding(1) var<storage, read> transfer: array<f32>;
+// Sun bits: step k of vertex v is bit k%32 of word v·W + k/32.
+@group(0) @binding(2) var<storage, read> masks: array<u32>;
+
+struct VertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) albedo: vec3<f32>,
+    @location(3) source: u32,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) light: vec3<f32>,
+    @location(1) albedo: vec3<f32>,
+};
+
+@vertex
+fn vs_main(v: VertexIn) -> VertexOut {
+    let n2 = frame.counts.x;
+    let channels = frame.counts.y;
+    let base = v.source * channels * n2;
+    var light = vec3<f32>(0.0);
+    if (channels == 3u) {
+        for (var i = 0u; i < n2; i++) {
+            let t = vec3<f32>(transfer[base + i], transfer[base + n2 + i], transfer[base + 2u * n2 + i]);
+            light += t * frame.sh[i].xyz;
+        }
+    } else {
+        for (var i = 0u; i < n2; i++) {
+            light += transfer[base + i] * frame.sh[i].xyz;
+        }
+    }
+    if (frame.sun_rgb.w > 0.5) {
+        let step = frame.counts.w;
+        let word = masks[v.source * frame.counts.z + step / 32u];
+        let bit = (word >> (step % 32u)) & 1u;
+        var cosine = dot(v.normal, frame.sun_dir.xyz);
+        if (frame.sun_dir.w > 0.5) {
+            cosine = abs(cosine);
+        } else {
+            cosine = max(cosine, 0.0);
+        }
+        light += f32(bit) * cosine * frame.sun_rgb.xyz / PI;
+    }
+    var out: VertexOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.light = light;
+    out.albedo = v.albedo;
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    return vec4<f32>(in.albedo * in.light, 1.0);
+}

@@ -1,0 +1,155 @@
+//! `prtbake export`: the GLB read back with the gltf crate matches the bundle.
+
+use glam::Vec3;
+use prtbake::bundle::{self, Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+use prtbake::mesh::Mesh;
+use prtbake::verify::shapes;
+
+use crate::util::{prtbake, Scratch};
+
+/// Two groups (plane, sphere), RGB transfer of order 3 (27 values: 7 VEC4s, the
+/// last one padded), two layers, and 40 time-lapse steps (2 mask words).
+fn sample_bundle() -> Bundle {
+    let mut mesh = shapes::plane_grid(6, 2.0);
+    let mut sphere = shapes::icosphere(1);
+    shapes::transform(&mut sphere, 0.4, Vec3::new(0.0, 0.6, 0.0));
+    shapes::append(&mut mesh, &sphere);
+    let (order, channels) = (3u32, 3u32);
+    let per_vertex = (order * order * channels) as usize;
+    let values = |seed: f32| -> Vec<f32> {
+        (0..mesh.vertex_count() * per_vertex).map(|i| (i as f32 * 0.37 + seed).sin() * 0.5).collect()
+    };
+    let steps: Vec<SunStep> = (0..40)
+        .map(|k| SunStep {
+            unix_time_utc: 1.7e9 + 420.0 * k as f64,
+            direction: Vec3::new(1.0, 1.0 + k as f32 * 0.1, 0.2).normalize().to_array(),
+            elevation_deg: 30.0 + k as f32,
+            azimuth_deg: 90.0 + k as f32,
+            sun_rgb: [1000.0 + k as f32, 900.0, 800.0],
+            night: false,
+            sky_sh: vec![[k as f32, 1.0, 2.0]; 4],
+        })
+        .collect();
+    let (words_per_vertex, masks) = SunSeries::pack(steps.len(), mesh.vertex_count(), |v, k| (v * 7 + k * 3) % 5 < 2);
+    Bundle {
+        meta: serde_json::json!({"conventions": {"sh": "test"}}),
+        transfer: Some(Transfer {
+            order,
+            channels,
+            quantization: Quantization::F32,
+            layers: vec![
+                TransferLayer { kind: LayerKind::Total, data: values(0.0) },
+                TransferLayer { kind: LayerKind::Bounce(0), data: values(1.0) },
+            ],
+        }),
+        sun: Some(SunSeries { sky_order: 2, steps, words_per_vertex, masks }),
+        mesh,
+    }
+}
+
+/// The bundle vertices each written primitive holds, in order: per non-empty
+/// group, its vertices ascending (the GLB writer's documented layout).
+fn group_vertices(mesh: &Mesh) -> Vec<Vec<u32>> {
+    (0..mesh.groups.len() as u32)
+        .map(|g| {
+            let mut used: Vec<u32> = (0..mesh.triangle_count()).filter(|&t| mesh.tri_group[t] == g).flat_map(|t| mesh.triangle(t)).collect();
+            used.sort_unstable();
+            used.dedup();
+            used
+        })
+        .filter(|u| !u.is_empty())
+        .collect()
+}
+
+fn read_attribute<T: gltf::accessor::Item + Copy>(primitive: &gltf::Primitive, name: &str, blob: &[u8]) -> Vec<T> {
+    let accessor = primitive
+        .attributes()
+        .find(|(semantic, _)| *semantic == gltf::Semantic::Extras(name.trim_start_matches('_').to_string()))
+        .unwrap_or_else(|| panic!("attribute {name} missing"))
+        .1;
+    gltf::accessor::Iter::<T>::new(accessor, |_| Some(blob)).expect("readable accessor").collect()
+}
+
+fn check_glb(path: &std::path::Path, b: &Bundle, expected_transfer: &[f32]) {
+    let bytes = std::fs::read(path).unwrap();
+    let gltf = gltf::Gltf::from_slice(&bytes).expect("a valid GLB");
+    let blob = gltf.blob.as_deref().expect("a BIN chunk");
+    let t = b.transfer.as_ref().unwrap();
+    let sun = b.sun.as_ref().unwrap();
+    let per_vertex = t.values_per_vertex() as usize;
+    let groups = group_vertices(&b.mesh);
+    assert_eq!(gltf.meshes().count(), groups.len());
+    let mut vertices_seen = 0;
+    for (mesh, vertices) in gltf.meshes().zip(&groups) {
+        for primitive in mesh.primitives() {
+            let reader = primitive.reader(|_| Some(blob));
+            let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+            assert_eq!(positions.len(), vertices.len());
+            for (p, &v) in positions.iter().zip(vertices) {
+                assert_eq!(*p, b.mesh.positions[v as usize].to_array());
+            }
+            for k in 0..per_vertex.div_ceil(4) {
+                let values: Vec<[f32; 4]> = read_attribute(&primitive, &format!("_PRT_TRANSFER_{k}"), blob);
+                for (value, &v) in values.iter().zip(vertices) {
+                    for j in 0..4 {
+                        let index = 4 * k + j;
+                        let want = if index < per_vertex { expected_transfer[v as usize * per_vertex + index] } else { 0.0 };
+                        assert_eq!(value[j].to_bits(), want.to_bits(), "vertex {v}, value {index}");
+                    }
+                }
+            }
+            for w in 0..sun.words_per_vertex as usize {
+                let words: Vec<[u8; 4]> = read_attribute(&primitive, &format!("_PRT_SUN_{w}"), blob);
+                for (bytes, &v) in words.iter().zip(vertices) {
+                    // Step 32w + 8j + b is bit b of byte j.
+                    for step in 32 * w..(32 * w + 32).min(sun.step_count()) {
+                        let (j, bit) = ((step % 32) / 8, step % 8);
+                        assert_eq!((bytes[j] >> bit) & 1 == 1, sun.bit(v as usize, step), "vertex {v}, step {step}");
+                    }
+                }
+            }
+        }
+        vertices_seen += vertices.len();
+    }
+    assert_eq!(vertices_seen, b.mesh.vertex_count());
+    let extras: serde_json::Value = serde_json::from_str(gltf.document.as_json().extras.as_ref().expect("document extras").get()).unwrap();
+    let prt = &extras["prtbake"];
+    assert_eq!(prt["format"], bundle::GLTF_EXPORT_FORMAT);
+    assert_eq!(prt["transfer"]["order"], 3);
+    assert_eq!(prt["transfer"]["channels"], 3);
+    assert_eq!(prt["transfer"]["attributes"], 7);
+    assert_eq!(prt["sun"]["steps"].as_array().unwrap().len(), 40);
+    assert_eq!(prt["sun"]["steps"][5]["sun_rgb"][0], 1005.0);
+}
+
+#[test]
+fn glb_export_reads_back_with_the_gltf_crate() {
+    let scratch = Scratch::new("export");
+    let b = sample_bundle();
+    let total = scratch.path("total.glb");
+    let report = bundle::export_glb(&total, &b, None).unwrap();
+    assert_eq!((report.transfer_attributes, report.sun_attributes), (7, 2));
+    check_glb(&total, &b, &b.transfer.as_ref().unwrap().layers[0].data);
+    let direct = scratch.path("direct.glb");
+    bundle::export_glb(&direct, &b, Some(LayerKind::Bounce(0))).unwrap();
+    check_glb(&direct, &b, &b.transfer.as_ref().unwrap().layers[1].data);
+    assert!(bundle::export_glb(&scratch.path("x.glb"), &b, Some(LayerKind::Bounce(3))).is_err());
+}
+
+#[test]
+fn export_command_writes_a_glb() {
+    let scratch = Scratch::new("export-cli");
+    let b = sample_bundle();
+    let input = scratch.path("scene.prtb");
+    bundle::write_bundle(&input, &b).unwrap();
+    let output = scratch.path("scene.glb");
+    let run = prtbake(&["export", input.to_str().unwrap(), "-o", output.to_str().unwrap(), "--json"]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(report["report"]["transfer_attributes"], 7);
+    check_glb(&output, &b, &b.transfer.as_ref().unwrap().layers[0].data);
+    // A bad layer is an error naming the problem, exit code 2.
+    let bad = prtbake(&["export", input.to_str().unwrap(), "-o", output.to_str().unwrap(), "--layer", "9"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("Bounce(9)"));
+}

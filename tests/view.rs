@@ -1,0 +1,324 @@
+//! The viewer against the CPU evaluation of its shading formula: headless
+//! frames on whatever adapter exists (CI: Mesa's lavapipe); skipped with a
+//! notice when there is none.
+
+use glam::Vec3;
+use prtbake::bundle::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+use prtbake::mesh::Mesh;
+use prtbake::sh;
+use prtbake::verify::shapes;
+use prtbake::view::scene::prepare_scene;
+use prtbake::view::tonemap::{self, ToneMap, ToneOperator};
+use prtbake::view::{reference, render_image, Camera, FrameSettings, Gpu, Image, LayerSelection, ViewError};
+
+/// Largest allowed difference per channel, in 8-bit codes. Derivation: the
+/// HDR target is binary16 (relative error ≤ 2⁻¹¹, i.e. ≤ 0.06 codes after
+/// gamma 1/2.2 at exposure ≤ 1); f32 interpolation differences are far below
+/// that; each side rounds to the nearest code (≤ ½ code each). So ≤ 1 code,
+/// plus one code of margin for the rasteriser's fixed-point pixel positions.
+const MAX_CODE_DIFF: i32 = 2;
+
+fn gpu_or_skip(test: &str) -> Option<Gpu> {
+    match Gpu::headless() {
+        Ok(gpu) => {
+            eprintln!("{test}: adapter {}", gpu.adapter_name());
+            Some(gpu)
+        }
+        Err(ViewError::NoAdapter) => {
+            eprintln!("SKIP: {test}: no GPU adapter at all (install mesa-vulkan-drivers for lavapipe)");
+            None
+        }
+        Err(e) => panic!("{test}: {e}"),
+    }
+}
+
+/// Open-mode transfer of an unoccluded convex object: t_lm = (Â_l/π)·y_lm(n).
+fn unoccluded_transfer(mesh: &Mesh, order: usize) -> Vec<f32> {
+    let n2 = order * order;
+    let mut y = vec![0.0f32; n2];
+    let mut out = Vec::with_capacity(mesh.vertex_count() * n2);
+    for n in &mesh.normals {
+        sh::eval_basis(order, n.normalize(), &mut y);
+        out.extend((0..n2).map(|i| (sh::clamped_cosine_kernel(sh::band_of_index(i)) / std::f64::consts::PI) as f32 * y[i]));
+    }
+    out
+}
+
+fn bundle_of(mesh: Mesh, order: usize, transfer: Vec<f32>, sun: Option<SunSeries>) -> Bundle {
+    Bundle {
+        meta: serde_json::json!({}),
+        mesh,
+        transfer: Some(Transfer {
+            order: order as u32,
+            channels: 1,
+            quantization: Quantization::F32,
+            layers: vec![TransferLayer { kind: LayerKind::Total, data: transfer }],
+        }),
+        sun,
+    }
+}
+
+fn linear_tonemap(exposure_stops: f32) -> ToneMap {
+    ToneMap { operator: ToneOperator::Linear, exposure_stops, gamma: 2.2, ..ToneMap::default() }
+}
+
+/// Möller–Trumbore: distance and barycentrics (of corners 1 and 2) of the nearest hit.
+fn nearest_hit(mesh: &Mesh, origin: Vec3, dir: Vec3) -> Option<(usize, f32, f32)> {
+    let mut best: Option<(f32, usize, f32, f32)> = None;
+    for t in 0..mesh.triangle_count() {
+        let [a, b, c] = mesh.triangle_positions(t);
+        let (e1, e2) = (b - a, c - a);
+        let p = dir.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        let s = origin - a;
+        let u = s.dot(p) / det;
+        let q = s.cross(e1);
+        let v = dir.dot(q) / det;
+        let distance = e2.dot(q) / det;
+        if u < 0.0 || v < 0.0 || u + v > 1.0 || distance <= 0.0 {
+            continue;
+        }
+        if best.is_none_or(|(d, ..)| distance < d) {
+            best = Some((distance, t, u, v));
+        }
+    }
+    best.map(|(_, t, u, v)| (t, u, v))
+}
+
+fn background(image: &Image, x: u32, y: u32) -> bool {
+    // The tone-mapping pass writes the constant background (0.06, 0.065, 0.075) → (15, 17, 19).
+    image.pixel(x, y)[..3] == [15, 17, 19]
+}
+
+#[test]
+fn sphere_matches_cpu_shading_pixel_for_pixel() {
+    let Some(gpu) = gpu_or_skip("sphere_matches_cpu_shading_pixel_for_pixel") else { return };
+    let order = 3;
+    let mut mesh = shapes::icosphere(3);
+    mesh.materials[0].albedo = [0.8, 0.6, 0.4];
+    let transfer = unoccluded_transfer(&mesh, order);
+    let bundle = bundle_of(mesh.clone(), order, transfer, None);
+    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    // A known lighting: bright from +Y and +Z, tinted, with some band-2 detail.
+    let lighting: Vec<[f32; 3]> = vec![
+        [1.2, 1.1, 1.0],
+        [0.5, 0.45, 0.4],
+        [0.6, 0.6, 0.7],
+        [0.2, -0.1, 0.0],
+        [0.05, 0.0, 0.02],
+        [0.1, 0.1, 0.1],
+        [-0.15, -0.1, -0.05],
+        [0.0, 0.05, 0.1],
+        [0.1, 0.0, -0.05],
+    ];
+    let settings = FrameSettings { lighting: lighting.clone(), sun_step: None, tonemap: linear_tonemap(0.5) };
+    let (width, height) = (128, 128);
+    let camera = Camera::look_at(Vec3::new(0.8, 1.1, 2.8), Vec3::ZERO, scene.bounds);
+    let image = render_image(&gpu, &scene, None, &camera, &settings, width, height).unwrap();
+
+    // CPU: per vertex E, then for every pixel centre the perspective-correct
+    // interpolation (a ray hit's barycentrics), albedo, tone map, quantize.
+    let vertex_light: Vec<[f32; 3]> =
+        (0..mesh.vertex_count()).map(|v| reference::vertex_light(&scene, &lighting, None, v, mesh.normals[v].to_array())).collect();
+    let albedo = mesh.materials[0].albedo;
+    let mut expected: Vec<Option<[u8; 3]>> = Vec::with_capacity((width * height) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let (origin, dir) = camera.pixel_ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            expected.push(nearest_hit(&mesh, origin, dir).map(|(t, u, v)| {
+                let [a, b, c] = mesh.triangle(t).map(|i| vertex_light[i as usize]);
+                let light: [f32; 3] = std::array::from_fn(|k| a[k] * (1.0 - u - v) + b[k] * u + c[k] * v);
+                let rgb = tonemap::linear(reference::radiance(albedo, light), 0.5, 2.2);
+                rgb.map(tonemap::to_u8)
+            }));
+        }
+    }
+    let at = |x: i64, y: i64| -> Option<Option<[u8; 3]>> {
+        (x >= 0 && y >= 0 && x < width as i64 && y < height as i64).then(|| expected[(y * width as i64 + x) as usize])
+    };
+    let (mut compared, mut background_checked, mut max_diff, mut sum_diff) = (0, 0, 0, 0i64);
+    for y in 0..height as i64 {
+        for x in 0..width as i64 {
+            let neighbours: Vec<Option<Option<[u8; 3]>>> = (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))).map(|(dx, dy)| at(x + dx, y + dy)).collect();
+            // Skip the silhouette: coverage of pixels cut by it is a rasterisation rule, not shading.
+            if neighbours.iter().all(|n| matches!(n, Some(Some(_)))) {
+                let want = expected[(y * width as i64 + x) as usize].unwrap();
+                let got = image.pixel(x as u32, y as u32);
+                let diff = (0..3).map(|k| (got[k] as i32 - want[k] as i32).abs()).max().unwrap();
+                assert!(diff <= MAX_CODE_DIFF, "pixel ({x}, {y}): GPU {got:?}, CPU {want:?}");
+                max_diff = max_diff.max(diff);
+                sum_diff += diff as i64;
+                compared += 1;
+            } else if neighbours.iter().all(|n| matches!(n, Some(None))) {
+                assert!(background(&image, x as u32, y as u32), "pixel ({x}, {y}) should be background, is {:?}", image.pixel(x as u32, y as u32));
+                background_checked += 1;
+            }
+        }
+    }
+    eprintln!("sphere: {compared} pixels compared, max difference {max_diff} codes, mean {:.3}; {background_checked} background pixels", sum_diff as f64 / compared as f64);
+    assert!(compared > 4000, "only {compared} interior pixels");
+    assert!(background_checked > 4000);
+    assert!((sum_diff as f64) / (compared as f64) < 0.5, "mean difference too large");
+}
+
+/// Plane (41×41 vertices, side 4) with a sphere (radius 0.5, centre height 1)
+/// above it, and two time-lapse steps with the sun on opposite sides.
+fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
+    let order = 2;
+    let mut mesh = shapes::plane_grid(40, 4.0);
+    let plane_vertices = mesh.vertex_count();
+    let (radius, centre) = (0.5f32, Vec3::new(0.0, 1.0, 0.0));
+    let mut sphere = shapes::icosphere(3);
+    shapes::transform(&mut sphere, radius, centre);
+    shapes::append(&mut mesh, &sphere);
+    let suns = [Vec3::new(1.0, 1.0, 0.0).normalize(), Vec3::new(-1.0, 1.0, 0.3).normalize()];
+    // Exact bits: a plane vertex is sunlit when the ray toward the sun misses the
+    // analytic sphere; a sphere vertex when it faces the sun (convex, plane below).
+    let hits_sphere = |p: Vec3, d: Vec3| {
+        let oc = p - centre;
+        let b = oc.dot(d);
+        let c = oc.length_squared() - radius * radius;
+        b * b - c > 0.0 && -b > 0.0
+    };
+    let (words_per_vertex, masks) = SunSeries::pack(2, mesh.vertex_count(), |v, k| {
+        if v < plane_vertices { !hits_sphere(mesh.positions[v], suns[k]) } else { mesh.normals[v].dot(suns[k]) > 0.0 }
+    });
+    let steps = suns
+        .iter()
+        .enumerate()
+        .map(|(k, s)| SunStep {
+            unix_time_utc: 1_773_993_600.0 + 3600.0 * k as f64,
+            direction: s.to_array(),
+            elevation_deg: s.y.asin().to_degrees(),
+            azimuth_deg: 0.0,
+            sun_rgb: [1.5, 1.5, 1.5],
+            night: false,
+            sky_sh: Vec::new(),
+        })
+        .collect();
+    let sun = SunSeries { sky_order: 0, steps, words_per_vertex, masks };
+    let transfer = unoccluded_transfer(&mesh, order);
+    (bundle_of(mesh, order, transfer, Some(sun)), suns.to_vec(), plane_vertices)
+}
+
+#[test]
+fn time_lapse_shadow_moves_where_the_bits_say() {
+    let Some(gpu) = gpu_or_skip("time_lapse_shadow_moves_where_the_bits_say") else { return };
+    let (bundle, _suns, plane_vertices) = plane_and_sphere_time_lapse();
+    let sun = bundle.sun.as_ref().unwrap();
+    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    // Constant ambient radiance a: L_00 = a·√(4π) gives E = a on any unoccluded normal.
+    let ambient = 0.1f32;
+    let lighting = vec![[ambient * (4.0 * std::f32::consts::PI).sqrt(); 3]];
+    let (width, height) = (160, 160);
+    let camera = Camera::look_at(Vec3::new(0.0, 6.0, 0.5), Vec3::ZERO, scene.bounds);
+    let albedo = bundle.mesh.materials[0].albedo;
+    let n = 41usize;
+    let mut moved = [0usize; 2];
+    let mut checked = 0;
+    let images: Vec<Image> = (0..2)
+        .map(|k| {
+            let settings = FrameSettings { lighting: lighting.clone(), sun_step: Some(k), tonemap: linear_tonemap(0.0) };
+            render_image(&gpu, &scene, Some(sun), &camera, &settings, width, height).unwrap()
+        })
+        .collect();
+    for j in 1..n - 1 {
+        for i in 1..n - 1 {
+            let v = j * n + i;
+            let p = bundle.mesh.positions[v];
+            // Hidden behind the sphere (with margin)?
+            let to_p = (p - camera.eye).normalize();
+            let oc = camera.eye - Vec3::new(0.0, 1.0, 0.0);
+            let b = oc.dot(to_p);
+            if b * b - (oc.length_squared() - 0.6 * 0.6) > 0.0 {
+                continue;
+            }
+            let Some((x, y)) = camera.project(p, width, height) else { continue };
+            let (px, py) = (x.floor() as u32, y.floor() as u32);
+            let neighbours = [v - n - 1, v - n, v - n + 1, v - 1, v + 1, v + n - 1, v + n, v + n + 1];
+            for k in 0..2 {
+                // Only where the vertex and its whole fan share the bit: the pixel is then exactly the vertex's value.
+                if neighbours.iter().any(|&w| sun.bit(w, k) != sun.bit(v, k)) {
+                    continue;
+                }
+                let light = reference::vertex_light(&scene, &lighting, Some((sun, k)), v, [0.0, 1.0, 0.0]);
+                let want = tonemap::linear(reference::radiance(albedo, light), 0.0, 2.2).map(tonemap::to_u8);
+                let got = images[k].pixel(px, py);
+                let diff = (0..3).map(|c| (got[c] as i32 - want[c] as i32).abs()).max().unwrap();
+                assert!(diff <= MAX_CODE_DIFF, "step {k}, vertex {v} at ({px}, {py}): GPU {got:?}, CPU {want:?} (bit {})", sun.bit(v, k));
+                checked += 1;
+                let other = 1 - k;
+                if !sun.bit(v, k) && sun.bit(v, other) && neighbours.iter().all(|&w| sun.bit(w, other)) {
+                    // In shadow at step k and sunlit at the other: the pixel got darker by the sun term.
+                    let lit = images[other].pixel(px, py);
+                    assert!(lit[1] as i32 - got[1] as i32 > 60, "vertex {v}: shadow at step {k} {got:?} vs lit {lit:?}");
+                    moved[k] += 1;
+                }
+            }
+        }
+    }
+    assert!(plane_vertices == n * n);
+    eprintln!("time lapse: {checked} vertex pixels checked; in shadow only at step 0: {}, only at step 1: {}", moved[0], moved[1]);
+    assert!(moved[0] >= 20 && moved[1] >= 20, "the shadow did not move: {moved:?}");
+    assert!(checked > 1500);
+}
+
+#[test]
+fn frame_settings_follow_the_step_sky() {
+    // The time-lapse state feeds the step's sky SH and the sun step (no GPU needed).
+    let (mut bundle, _, _) = plane_and_sphere_time_lapse();
+    let sun = bundle.sun.as_mut().unwrap();
+    sun.sky_order = 1;
+    sun.steps[0].sky_sh = vec![[1.0, 2.0, 3.0]];
+    sun.steps[1].sky_sh = vec![[4.0, 5.0, 6.0]];
+    let state = prtbake::view::ViewState {
+        source: prtbake::view::LightingSource::StepSky,
+        rotation_deg: [30.0, 0.0, 0.0],
+        step: Some(1),
+        sun_on: true,
+        tonemap: ToneMap::default(),
+        layers: LayerSelection::Total,
+    };
+    let settings = state.frame_settings(bundle.sun.as_ref(), 2);
+    assert_eq!(settings.lighting, vec![[4.0, 5.0, 6.0], [0.0; 3], [0.0; 3], [0.0; 3]]);
+    assert_eq!(settings.sun_step, Some(1));
+}
+
+#[test]
+fn view_command_writes_a_screenshot_and_refuses_bad_input() {
+    use crate::util::{prtbake, Scratch};
+    let scratch = Scratch::new("view-cli");
+    let (with_sun, _, _) = plane_and_sphere_time_lapse();
+    let mut without_sun = with_sun.clone();
+    without_sun.sun = None;
+    let (sun_path, plain_path) = (scratch.path("sun.prtb"), scratch.path("plain.prtb"));
+    ::prtbake::bundle::write_bundle(&sun_path, &with_sun).unwrap();
+    ::prtbake::bundle::write_bundle(&plain_path, &without_sun).unwrap();
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+
+    // Bad input is refused before any GPU work: exit 2 and a message naming the problem.
+    let no_lapse = prtbake(&["view", &s(&plain_path), "--time", "09:00", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(no_lapse.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&no_lapse.stderr).contains("no time lapse"));
+    let bad_step = prtbake(&["view", &s(&sun_path), "--step", "7", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(bad_step.status.code(), Some(2));
+    let bad_size = prtbake(&["view", &s(&sun_path), "--size", "0x10", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(bad_size.status.code(), Some(2));
+    let bad_layers = prtbake(&["view", &s(&sun_path), "--layers", "direct", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert!(String::from_utf8_lossy(&bad_layers.stderr).contains("--store-bounces"));
+
+    if gpu_or_skip("view_command_writes_a_screenshot").is_none() {
+        return;
+    }
+    let png_path = scratch.path("shot.png");
+    let run = prtbake(&["view", &s(&sun_path), "--step", "1", "--screenshot", &s(&png_path), "--size", "96x64", "--json"]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(report["step"], 1);
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png_path).unwrap()));
+    let info = decoder.read_info().unwrap().info().clone();
+    assert_eq!((info.width, info.height), (96, 64));
+}
