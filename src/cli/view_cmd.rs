@@ -65,7 +65,12 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     let transfer = bundle.transfer.as_ref().with_context(|| format!("{}: the bundle has no transfer to shade", path.display()))?;
     let order = transfer.order as usize;
     let layers = LayerSelection::parse(&config.layers, &transfer.stored_bounces()).map_err(anyhow::Error::msg)?;
-    let scene = view::scene::prepare_scene(&bundle, &layers, &config.hide).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    // Glass chosen by `bake --window PATTERN[=TAU]` is hidden like window-role materials.
+    let mut hide = config.hide.clone();
+    if let Some(patterns) = bundle.meta.get("window_patterns").and_then(|p| p.as_array()) {
+        hide.extend(patterns.iter().filter_map(|p| p.as_str()).map(|p| p.rsplit_once('=').map_or(p, |(g, _)| g).to_string()));
+    }
+    let scene = view::scene::prepare_scene(&bundle, &layers, &hide).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let size = parse_size(&config.size)?;
 
     // The time-lapse step, if any.
