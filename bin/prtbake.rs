@@ -83,6 +83,10 @@ struct BakeArgs {
     /// Direction pattern (random is for comparison only).
     #[arg(long, value_enum, default_value_t = PatternArg::Sobol)]
     pattern: PatternArg,
+    /// Window mode: sample bounce 0's rays toward points on the glass (next-event
+    /// estimation; better for small distant windows, worse for large close ones).
+    #[arg(long)]
+    window_sampling: bool,
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
@@ -295,6 +299,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
             PatternArg::Random => DirectionPattern::Random,
         },
         quiet: a.quiet || a.json,
+        window_sampling: a.window_sampling,
         ..BakeParams::default()
     };
     params.check()?;

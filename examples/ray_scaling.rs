@@ -2,7 +2,7 @@
 //! bounces, against a high-ray reference bake of the same scene.
 //!
 //! cargo run --release --example ray_scaling -- [MESH|cabin] [--window PATTERN] [--detail D]
-//!     [--bounces B] [--reference RAYS] [--max RAYS]
+//!     [--bounces B] [--reference RAYS] [--max RAYS] [--no-window-sampling]
 //!
 //! The error is the RMS over vertices of the total DC coefficient minus the
 //! reference's (seed 2), relative to the reference's mean DC; printed as a
@@ -24,17 +24,18 @@ fn main() {
     let bounces: u32 = arg(&args, "--bounces", 2);
     let reference_rays: u32 = arg(&args, "--reference", 4096);
     let max_rays: u32 = arg(&args, "--max", 4096);
+    let window_sampling = !args.iter().any(|a| a == "--no-window-sampling");
     let mesh = if source == "cabin" {
         generate_cabin(detail).0
     } else {
         load_mesh(source.as_ref(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh
     };
     let windows = vec![window];
-    let bake = |rays: u32, seed: u32| {
-        let params = BakeParams { order: 3, rays, seed, bounces, mode: Mode::Window, ..BakeParams::default() };
+    let bake = |rays: u32, seed: u32, window_sampling: bool| {
+        let params = BakeParams { order: 3, rays, seed, bounces, mode: Mode::Window, window_sampling, ..BakeParams::default() };
         bake_mesh(&mesh, &params, &windows).unwrap().0
     };
-    let reference = bake(reference_rays, 2);
+    let reference = bake(reference_rays, 2, true);
     let channels = reference.channels;
     let dc = |r: &prtbake::bake::TransferResult, v: usize| r.coefficients(v, 0)[0] as f64;
     let lit: Vec<usize> = (0..mesh.vertex_count()).filter(|&v| dc(&reference, v) > 0.0).collect();
@@ -44,7 +45,7 @@ fn main() {
     println!("|---|---|---|---|");
     let mut rays = 64;
     while rays <= max_rays {
-        let r = bake(rays, 1);
+        let r = bake(rays, 1, window_sampling);
         let err = (lit.iter().map(|&v| (dc(&r, v) - dc(&reference, v)).powi(2)).sum::<f64>() / lit.len().max(1) as f64).sqrt() / mean;
         println!("| {rays} | {:.2} | {:.2} | {:.4} |", r.stats.seconds, r.stats.rays_per_second / 1e6, err);
         rays *= 4;

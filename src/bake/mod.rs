@@ -71,6 +71,13 @@ pub struct BakeParams {
     /// Keep each bounce's transfer, not only the total.
     pub store_bounces: bool,
     pub pattern: DirectionPattern,
+    /// Window mode: aim bounce 0's rays at points sampled on the glass (next-event
+    /// estimation) rather than relying on cosine-distributed rays finding it.
+    /// Off by default: on the demo cabin, whose windows are large and close,
+    /// it measured worse (relative RMS DC error 0.152 vs 0.091 at 64 rays); it
+    /// wins for small, distant windows. Multiple importance sampling of both
+    /// would be the cure (not done).
+    pub window_sampling: bool,
     /// A sample is inside geometry when most of its probe rays hit back faces
     /// closer than this fraction of the scene diagonal.
     pub inside_distance: f32,
@@ -91,6 +98,7 @@ impl Default for BakeParams {
             channels: Channels::Auto,
             store_bounces: false,
             pattern: DirectionPattern::Sobol,
+            window_sampling: false,
             inside_distance: 0.05,
             quiet: true,
         }

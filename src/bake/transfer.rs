@@ -117,6 +117,43 @@ struct Pass<'a> {
     /// the rays are the same, only the values at their ends change.
     hit_cache: Option<&'a [u64]>,
     record_hits: bool,
+    /// Window triangles to sample directly for bounce 0 (window mode).
+    windows: Option<&'a WindowLights>,
+}
+
+/// The window triangles of a scene as light sources: bounce 0 in window mode
+/// samples points on them by area (next-event estimation) instead of waiting
+/// for cosine-distributed rays to find the glass, which is a small target.
+pub(crate) struct WindowLights {
+    triangles: Vec<u32>,
+    /// Cumulative area fractions, last = 1.
+    cdf: Vec<f64>,
+    total_area: f64,
+}
+
+impl WindowLights {
+    fn new(mesh: &Mesh, surfaces: &Surfaces) -> Option<WindowLights> {
+        let triangles: Vec<u32> = (0..mesh.triangle_count() as u32)
+            .filter(|&t| surfaces.window_transmittance[t as usize].is_some_and(|tau| tau > 0.0) && triangle_area(mesh, t) > 0.0)
+            .collect();
+        let mut cdf = Vec::with_capacity(triangles.len());
+        let mut sum = 0.0f64;
+        for &t in &triangles {
+            sum += triangle_area(mesh, t) as f64;
+            cdf.push(sum);
+        }
+        if sum <= 0.0 {
+            return None;
+        }
+        cdf.iter_mut().for_each(|c| *c /= sum);
+        Some(WindowLights { triangles, cdf, total_area: sum })
+    }
+
+    /// The window triangle whose cumulative area interval holds `u` ∈ [0,1).
+    fn pick(&self, u: f32) -> u32 {
+        let i = self.cdf.partition_point(|&c| c <= u as f64).min(self.triangles.len() - 1);
+        self.triangles[i]
+    }
 }
 
 /// What one task returns: per item and corner, weighted coefficient sums and weights.
@@ -165,6 +202,7 @@ pub fn bake_transfer(
     let cache_bytes = point_count * params.rays as u64 * 8;
     let use_cache = params.bounces > 0 && cache_bytes <= HIT_CACHE_BUDGET_BYTES;
     let mut hit_cache: Vec<u64> = Vec::new();
+    let window_lights = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(mesh, surfaces) } else { None };
     let mut vertex_weight = vec![0.0f32; vertex_count];
     let mut layers: Vec<Vec<f32>> = Vec::new();
 
@@ -187,6 +225,7 @@ pub fn bake_transfer(
             reject_distance: params.inside_distance * scene.diagonal,
             hit_cache: (use_cache && bounce > 0).then_some(hit_cache.as_slice()),
             record_hits: use_cache && bounce == 0,
+            windows: window_lights.as_ref(),
         };
         let mut accumulated = vec![0.0f32; vertex_count * pass_channels * coeffs];
         let mut new_rejections = Vec::new();
@@ -460,9 +499,13 @@ impl Pass<'_> {
         // geometry (most of them hit back faces close by): they are traced with
         // closest hit once, and serve both purposes.
         let probe = if check_inside { ray_count.min(INSIDE_PROBE_RAYS) } else { 0 };
+        // With window sampling, bounce 0's light comes from rays aimed at the
+        // glass; cosine rays are traced only to probe and to record hits.
+        let sample_windows = bounce == 0 && self.windows.is_some();
+        let cosine_rays = if sample_windows && !self.record_hits { probe } else { ray_count };
         let mut inside_hits = 0u32;
         let mut traced = 0u64;
-        for k in 0..ray_count {
+        for k in 0..cosine_rays {
             if check_inside && k == probe && self.reject_inside(inside_hits, probe, hits) {
                 return (traced, true);
             }
@@ -500,16 +543,55 @@ impl Pass<'_> {
             } else {
                 1.0
             };
-            if visibility > 0.0 {
+            if visibility > 0.0 && !sample_windows {
                 sh::eval_basis(params.order, direction, basis);
                 let w = visibility * ray_weight;
                 result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
             }
         }
-        if check_inside && probe == ray_count && self.reject_inside(inside_hits, probe, hits) {
+        if check_inside && probe == cosine_rays && self.reject_inside(inside_hits, probe, hits) {
             return (traced, true);
         }
+        if let (true, Some(windows)) = (sample_windows, self.windows) {
+            traced += self.add_window_light(point, windows, result, basis);
+        }
         (traced, false)
+    }
+
+    /// Bounce 0 in window mode by sampling the glass: N points on the window
+    /// triangles (by area); a point counts when the first hit toward it is
+    /// its own triangle. Estimator of (1/π) ∫ y τ |n·ω| dω over directions
+    /// through windows: y(ω) τ |n·ω| · A |cos θ_w| / (π r² N). Returns rays traced.
+    fn add_window_light(&self, point: &Point, windows: &WindowLights, result: &mut [f32], basis: &mut [f32]) -> u64 {
+        let rays = self.params.rays;
+        let scale = (windows.total_area / std::f64::consts::PI / rays as f64) as f32;
+        for k in 0..rays {
+            let (u_pick, _) = sample_2d(self.params.pattern, k, 2, point.seed);
+            let (u1, u2) = sample_2d(self.params.pattern, k, 1, point.seed);
+            let triangle = windows.pick(u_pick);
+            let [a, b, c] = self.mesh.triangle_positions(triangle as usize);
+            let bary = square_to_triangle(u1, u2);
+            let target = a * bary[0] + b * bary[1] + c * bary[2];
+            let offset = target - point.position;
+            let distance_squared = offset.length_squared();
+            if distance_squared <= (16.0 * self.scene.origin_offset).powi(2) {
+                continue;
+            }
+            let distance = distance_squared.sqrt();
+            let direction = offset / distance;
+            let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
+            let reach = distance * 1.001 + 4.0 * self.scene.tie_distance;
+            let Some(hit) = self.scene.closest_hit(origin, direction, reach) else { continue };
+            if hit.triangle != triangle {
+                continue;
+            }
+            let tau = self.surfaces.window_transmittance[triangle as usize].unwrap_or(0.0);
+            let cos_window = self.scene.face_normal(triangle).dot(direction).abs();
+            let w = tau * point.normal.dot(direction).abs() * cos_window * scale / distance_squared;
+            sh::eval_basis(self.params.order, direction, basis);
+            result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
+        }
+        rays as u64
     }
 
     /// Decides, from the `probe` first rays, whether a point lies inside
