@@ -3,4 +3,5 @@
 mod analytic;
 mod bake_props;
 mod cli;
+mod sun;
 mod util;
