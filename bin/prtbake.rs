@@ -162,6 +162,9 @@ struct SunArgs {
     /// Tracing loop nesting (for measurement; the masks are the same).
     #[arg(long, value_enum, default_value_t = LoopOrderArg::StepOuter)]
     loop_order: LoopOrderArg,
+    /// Trace without the shadow cache (for measurement; the masks are the same).
+    #[arg(long)]
+    no_shadow_cache: bool,
     /// Stats as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -176,6 +179,17 @@ enum Command {
     Bake(BakeArgs),
     /// Bake a day's sun-shadow bits per vertex, with per-step sun and sky, into a bundle.
     Sun(SunArgs),
+    /// Write a generated scene (the colonnade monument) as .glb or .obj.
+    Generate {
+        /// Scene name: colonnade.
+        #[arg(value_parser = ["colonnade"])]
+        scene: String,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// small (tests), monument (≈620k triangles), million (> 1M vertices).
+        #[arg(long, default_value = "monument", value_parser = ["small", "monument", "million"])]
+        detail: String,
+    },
     /// Show what a bundle holds.
     Inspect {
         bundle: PathBuf,
@@ -317,6 +331,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
             LoopOrderArg::StepOuter => prtbake::bake::LoopOrder::StepOuter,
             LoopOrderArg::PointOuter => prtbake::bake::LoopOrder::PointOuter,
         },
+        shadow_cache: !a.no_shadow_cache,
         quiet: a.quiet || a.json,
     };
     params.check()?;
@@ -339,6 +354,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
     match command {
         Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
         Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
+        Command::Generate { scene: _, output, detail } => cli::generate_cmd::run_colonnade(&output, &detail).map(|_| Outcome::Ok),
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => {
             cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)

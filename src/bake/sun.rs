@@ -69,8 +69,13 @@ pub struct SunParams {
     pub max_per_triangle: u32,
     /// Seed of the sample placement (the transfer bake's `seed` gives the same points).
     pub seed: u32,
-    /// Loop nesting while tracing (the masks are the same either way).
+    /// Loop nesting while tracing (the masks are the same either way; not stored).
+    #[serde(skip)]
     pub loop_order: LoopOrder,
+    /// Test the triangle that blocked the previous ray first ([`Scene::occluded_cached`];
+    /// open mode; the masks are the same either way; not stored).
+    #[serde(skip)]
+    pub shadow_cache: bool,
     /// No progress line on stderr (never stored).
     #[serde(skip)]
     pub quiet: bool,
@@ -84,6 +89,7 @@ impl Default for SunParams {
             max_per_triangle: 256,
             seed: 1,
             loop_order: LoopOrder::StepOuter,
+            shadow_cache: true,
             quiet: true,
         }
     }
@@ -328,12 +334,14 @@ impl Tracer<'_> {
         }
         let words = self.words;
         let mut rays = 0u64;
+        // One shadow-cache entry per task: the leaf that blocked the previous ray.
+        let mut hint = u32::MAX;
         match self.params.loop_order {
             LoopOrder::StepOuter => {
                 for (k, sun) in self.suns.iter().enumerate() {
                     let Some(s) = *sun else { continue };
                     for (p, point) in points.iter().enumerate() {
-                        let (lit, traced) = self.sees_sun(point, s);
+                        let (lit, traced) = self.sees_sun(point, s, &mut hint);
                         rays += traced as u64;
                         if lit {
                             out[p * words + k / 32] |= 1 << (k % 32);
@@ -345,7 +353,7 @@ impl Tracer<'_> {
                 for (p, point) in points.iter().enumerate() {
                     for (k, sun) in self.suns.iter().enumerate() {
                         let Some(s) = *sun else { continue };
-                        let (lit, traced) = self.sees_sun(point, s);
+                        let (lit, traced) = self.sees_sun(point, s, &mut hint);
                         rays += traced as u64;
                         if lit {
                             out[p * words + k / 32] |= 1 << (k % 32);
@@ -359,14 +367,19 @@ impl Tracer<'_> {
 
     /// Whether `point` sees the sun toward unit `s`, and whether a ray was traced.
     #[inline]
-    fn sees_sun(&self, point: &Point, s: Vec3) -> (bool, bool) {
+    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32) -> (bool, bool) {
         match self.params.mode {
             Mode::Open => {
                 if point.normal.dot(s) <= 0.0 {
                     return (false, false);
                 }
                 let origin = self.scene.offset_origin(point.position, point.face_normal, s);
-                (!self.scene.occluded(origin, s, f32::INFINITY), true)
+                let blocked = if self.params.shadow_cache {
+                    self.scene.occluded_cached(origin, s, f32::INFINITY, hint)
+                } else {
+                    self.scene.occluded(origin, s, f32::INFINITY)
+                };
+                (!blocked, true)
             }
             Mode::Window => {
                 let origin = self.scene.offset_origin(point.position, point.face_normal, s);

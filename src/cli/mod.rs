@@ -4,6 +4,7 @@
 
 pub mod bake_cmd;
 pub mod demo_cmd;
+pub mod generate_cmd;
 pub mod inspect_cmd;
 pub mod sun_cmd;
 pub mod verify_cmd;
