@@ -84,6 +84,8 @@ pub fn elevation_azimuth(direction: Vec3, north: Vec3, up: Vec3) -> (f32, f32) {
 
 /// A step for unit `direction` with sun colour and sky, time and angles zero.
 fn lit_step(direction: Vec3, frame: &SkyFrame) -> SunStep {
+    // Written as !(x > 0) so a NaN direction counts as night.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     let night = !(direction.dot(frame.up.normalize_or(Vec3::Y)) > 0.0);
     let sky = if night {
         SunSky::night(frame.sky_order)
