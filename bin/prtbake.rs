@@ -141,6 +141,90 @@ struct CleanArgs {
     quiet: bool,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum LoopOrderArg {
+    StepOuter,
+    PointOuter,
+}
+
+#[derive(clap::Args)]
+struct SunArgs {
+    /// A mesh (.obj, .gltf, .glb): a new bundle; or a bundle (.prtb): sun sections added, the rest kept.
+    input: PathBuf,
+    /// Bundle to write (.prtb); may be the input bundle.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Site latitude, degrees north (default: the Acropolis, 37.9715).
+    #[arg(long, allow_hyphen_values = true)]
+    lat: Option<f64>,
+    /// Site longitude, degrees east (default: the Acropolis, 23.7267).
+    #[arg(long, allow_hyphen_values = true)]
+    lon: Option<f64>,
+    /// Site elevation, metres (default 150).
+    #[arg(long, allow_hyphen_values = true)]
+    elevation: Option<f64>,
+    /// Local date YYYY-MM-DD (default 2026-03-20, the March equinox).
+    #[arg(long)]
+    date: Option<String>,
+    /// UTC offset ±HH:MM (default: Athens's on that date, +02:00 or +03:00).
+    #[arg(long, allow_hyphen_values = true)]
+    tz: Option<String>,
+    /// First step, local HH:MM.
+    #[arg(long, default_value = "06:57")]
+    from: String,
+    /// Last step, local HH:MM (included when it falls on a step).
+    #[arg(long, default_value = "17:34")]
+    to: String,
+    /// Minutes between steps (default 7: 92 steps from 06:57 to 17:34).
+    #[arg(long, conflicts_with = "steps")]
+    step: Option<f64>,
+    /// Number of steps evenly spread from --from to --to, both included (1..=1024).
+    #[arg(long)]
+    steps: Option<u32>,
+    /// Sun directions instead of a date: one `x,y,z` per line toward the sun, in the input's axes.
+    #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["lat", "lon", "elevation", "date", "tz", "step", "steps"])]
+    directions: Option<PathBuf>,
+    /// Geographic north as X,Y,Z in the input's axes (default −Z for +Y up, +Y for +Z up).
+    #[arg(long, allow_hyphen_values = true)]
+    north: Option<String>,
+    /// Up axis of OBJ files (glTF is always +Y up; bundles are already +Y up).
+    #[arg(long, value_enum, default_value_t = Up::Y)]
+    up: Up,
+    /// Light enters only through windows: materials or groups matching this glob (repeatable).
+    #[arg(long = "window", value_name = "PATTERN")]
+    windows: Vec<String>,
+    /// Window mode even without --window (materials with the window role only).
+    #[arg(long)]
+    window_mode: bool,
+    /// Preetham sky turbidity, 2..=10.
+    #[arg(long, default_value_t = 3.0)]
+    turbidity: f64,
+    /// SH order of the stored sky (bands l < n; 0 = no sky).
+    #[arg(long, default_value_t = 3)]
+    sky_order: usize,
+    /// Interior samples per vertex on average (spread by area, ≥ 1 per triangle).
+    #[arg(long, default_value_t = 2.0)]
+    samples_per_vertex: f32,
+    /// Seed of the sample placement (the same seed as `bake` gives the same points).
+    #[arg(long, default_value_t = 1)]
+    seed: u32,
+    /// Worker threads (0 = all cores). The output does not depend on it.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Tracing loop nesting (for measurement; the masks are the same).
+    #[arg(long, value_enum, default_value_t = LoopOrderArg::StepOuter)]
+    loop_order: LoopOrderArg,
+    /// Trace without the shadow cache (for measurement; the masks are the same).
+    #[arg(long)]
+    no_shadow_cache: bool,
+    /// Stats as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// No progress on stderr.
+    #[arg(long)]
+    quiet: bool,
+}
+
 #[derive(clap::Args)]
 struct ViewArgs {
     /// Bundle to view (.prtb).
@@ -208,6 +292,19 @@ enum Command {
     Bake(BakeArgs),
     /// Repair a mesh for PRT (duplicates, overlaps, cracks, T-junctions, slivers, winding) and report every change.
     Clean(CleanArgs),
+    /// Bake a day's sun-shadow bits per vertex, with per-step sun and sky, into a bundle.
+    Sun(SunArgs),
+    /// Write a generated scene (the colonnade monument) as .glb or .obj.
+    Generate {
+        /// Scene name: colonnade.
+        #[arg(value_parser = ["colonnade"])]
+        scene: String,
+        #[arg(short, long)]
+        output: PathBuf,
+        /// small (tests), monument (≈620k triangles), million (> 1M vertices).
+        #[arg(long, default_value = "monument", value_parser = ["small", "monument", "million"])]
+        detail: String,
+    },
     /// Show what a bundle holds.
     Inspect {
         bundle: PathBuf,
@@ -348,10 +445,101 @@ fn clean_config(a: CleanArgs) -> anyhow::Result<cli::clean_cmd::CleanConfig> {
     })
 }
 
+fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
+    use anyhow::{bail, Context};
+    use prtbake::sky;
+    let up = match a.up {
+        Up::Y => UpAxis::Y,
+        Up::Z => UpAxis::Z,
+    };
+    let source = match a.directions {
+        Some(path) => cli::sun_cmd::SunSource::Directions(path),
+        None => {
+            let acropolis = sky::Site::acropolis();
+            let (lat, lon, elevation) = (
+                a.lat.unwrap_or(acropolis.latitude_deg),
+                a.lon.unwrap_or(acropolis.longitude_deg),
+                a.elevation.unwrap_or(acropolis.elevation_m),
+            );
+            if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
+                bail!("--lat {lat} / --lon {lon}: latitude must be within -90..=90 and longitude within -180..=180");
+            }
+            if !elevation.is_finite() || !(-500.0..=9000.0).contains(&elevation) {
+                bail!("--elevation {elevation}: expected metres within -500..=9000");
+            }
+            let date = match &a.date {
+                Some(d) => sky::parse_date(d)?,
+                None => sky::default_date(),
+            };
+            let tz_minutes = match &a.tz {
+                Some(tz) => sky::parse_tz(tz)?,
+                None => sky::athens_utc_offset_minutes(date),
+            };
+            let steps = match (a.step, a.steps) {
+                (_, Some(n)) => sky::StepSpec::Count(n),
+                (Some(m), None) => sky::StepSpec::Step(m),
+                (None, None) => sky::StepSpec::Step(7.0),
+            };
+            cli::sun_cmd::SunSource::Solar {
+                site: sky::Site::new(lat, lon, elevation),
+                date,
+                tz_minutes,
+                from_min: f64::from(sky::parse_hhmm(&a.from).context("--from")?),
+                to_min: f64::from(sky::parse_hhmm(&a.to).context("--to")?),
+                steps,
+            }
+        }
+    };
+    let north = match &a.north {
+        None => None,
+        Some(text) => {
+            let v: Vec<f32> = text.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().with_context(|| format!("--north {text:?}: expected X,Y,Z"))?;
+            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+                bail!("--north {text:?}: expected three finite numbers X,Y,Z");
+            }
+            Some(glam::Vec3::new(v[0], v[1], v[2]))
+        }
+    };
+    if !(2.0..=10.0).contains(&a.turbidity) {
+        bail!("--turbidity {}: expected 2..=10", a.turbidity);
+    }
+    if a.sky_order > prtbake::sh::MAX_ORDER {
+        bail!("--sky-order {}: expected 0..={}", a.sky_order, prtbake::sh::MAX_ORDER);
+    }
+    let params = prtbake::bake::SunParams {
+        mode: if a.window_mode || !a.windows.is_empty() { Mode::Window } else { Mode::Open },
+        samples_per_vertex: a.samples_per_vertex,
+        max_per_triangle: 256,
+        seed: a.seed,
+        loop_order: match a.loop_order {
+            LoopOrderArg::StepOuter => prtbake::bake::LoopOrder::StepOuter,
+            LoopOrderArg::PointOuter => prtbake::bake::LoopOrder::PointOuter,
+        },
+        shadow_cache: !a.no_shadow_cache,
+        quiet: a.quiet || a.json,
+    };
+    params.check()?;
+    Ok(cli::sun_cmd::SunConfig {
+        input: a.input,
+        output: a.output,
+        up,
+        source,
+        north,
+        turbidity: a.turbidity,
+        sky_order: a.sky_order,
+        params,
+        window_patterns: a.windows,
+        threads: a.threads,
+        json: a.json,
+    })
+}
+
 fn run(command: Command) -> anyhow::Result<Outcome> {
     match command {
         Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
         Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
+        Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
+        Command::Generate { scene: _, output, detail } => cli::generate_cmd::run_colonnade(&output, &detail).map(|_| Outcome::Ok),
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => {
             cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)

@@ -5,6 +5,7 @@ mod bake_props;
 mod clean_props;
 mod cli;
 mod export;
+mod sun;
 mod util;
 #[cfg(feature = "viewer")]
 mod view;

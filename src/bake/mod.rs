@@ -6,11 +6,13 @@ pub mod hugepages;
 pub mod progress;
 pub mod sampling;
 pub mod scene;
+pub mod sun;
 pub mod surfaces;
 pub mod transfer;
 
 pub use sampling::DirectionPattern;
 pub use scene::{BuildQuality, Hit, Scene};
+pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
 pub use transfer::bake_transfer;
 

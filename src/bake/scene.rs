@@ -188,6 +188,38 @@ impl Scene {
         !self.bvh.ray_traverse_miss(ray, |r, leaf| self.leaf_triangles[leaf].intersect(r))
     }
 
+    /// [`Scene::occluded`] with a shadow cache for coherent rays (Haines &
+    /// Greenberg's light buffer idea, one entry): the leaf triangle in `hint`
+    /// (from the previous call; `u32::MAX` = none) is tested first, and the
+    /// leaf that occludes this ray is stored back. Neighbouring rays toward
+    /// the same light are usually blocked by the same triangle, so a shadowed
+    /// ray often costs one triangle test instead of a walk. Same answer as
+    /// [`Scene::occluded`].
+    #[inline]
+    pub fn occluded_cached(&self, origin: Vec3, direction: Vec3, t_max: f32, hint: &mut u32) -> bool {
+        if self.leaf_triangles.is_empty() {
+            return false;
+        }
+        let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
+        if let Some(tri) = self.leaf_triangles.get(*hint as usize) {
+            if tri.intersect(&ray) < ray.tmax {
+                return true;
+            }
+        }
+        let mut found = u32::MAX;
+        let miss = self.bvh.ray_traverse_miss(ray, |r, leaf| {
+            let t = self.leaf_triangles[leaf].intersect(r);
+            if t < r.tmax {
+                found = leaf as u32;
+            }
+            t
+        });
+        if !miss {
+            *hint = found;
+        }
+        !miss
+    }
+
     /// Number of triangles in the BVH.
     pub fn triangle_count(&self) -> usize {
         self.leaf_triangles.len()

@@ -315,9 +315,7 @@ pub fn bake_transfer(
 /// Lists the work items: triangles that are neither windows nor degenerate
 /// (interior sampling), or vertices of such triangles (vertex sampling).
 fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams) -> Items {
-    let sampled: Vec<u32> = (0..mesh.triangle_count() as u32)
-        .filter(|&t| surfaces.window_transmittance[t as usize].is_none() && triangle_area(mesh, t) > 0.0)
-        .collect();
+    let sampled = sampled_triangles(mesh, surfaces);
     match params.sampling {
         Sampling::Vertex => {
             let mut used = vec![false; mesh.vertex_count()];
@@ -329,19 +327,56 @@ fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams) -> Items {
             Items::Vertex { vertices: (0..mesh.vertex_count() as u32).filter(|&v| used[v as usize]).collect() }
         }
         Sampling::Interior { samples_per_vertex, max_per_triangle } => {
-            let total_area: f64 = sampled.iter().map(|&t| triangle_area(mesh, t) as f64).sum();
-            let density = samples_per_vertex as f64 * mesh.vertex_count() as f64 / total_area.max(f64::MIN_POSITIVE);
-            let counts: Vec<u32> =
-                sampled.iter().map(|&t| samples_in_triangle(triangle_area(mesh, t) as f64 * density, max_per_triangle)).collect();
-            let mut first_sample = Vec::with_capacity(counts.len());
-            let mut next = 0u32;
-            for &c in &counts {
-                first_sample.push(next);
-                next += c;
-            }
-            Items::Interior { triangles: sampled, counts, first_sample }
+            let layout = interior_layout(mesh, sampled, samples_per_vertex, max_per_triangle);
+            Items::Interior { triangles: layout.triangles, counts: layout.counts, first_sample: layout.first_sample }
         }
     }
+}
+
+/// Triangles that receive samples: neither windows nor degenerate.
+pub(crate) fn sampled_triangles(mesh: &Mesh, surfaces: &Surfaces) -> Vec<u32> {
+    (0..mesh.triangle_count() as u32)
+        .filter(|&t| surfaces.window_transmittance[t as usize].is_none() && triangle_area(mesh, t) > 0.0)
+        .collect()
+}
+
+/// Where interior samples go: `counts[k]` samples in `triangles[k]`, whose
+/// global sample indices start at `first_sample[k]` (a prefix sum).
+pub(crate) struct InteriorLayout {
+    pub triangles: Vec<u32>,
+    pub counts: Vec<u32>,
+    pub first_sample: Vec<u32>,
+}
+
+impl InteriorLayout {
+    /// Total number of samples.
+    pub fn sample_count(&self) -> u64 {
+        self.counts.iter().map(|&c| c as u64).sum()
+    }
+}
+
+/// Spreads about `samples_per_vertex × vertex count` samples over `triangles`
+/// by area (at least one, at most `max_per_triangle`, per triangle; see
+/// [`samples_in_triangle`]). The one placement rule transfer and sun masks share.
+pub(crate) fn interior_layout(mesh: &Mesh, triangles: Vec<u32>, samples_per_vertex: f32, max_per_triangle: u32) -> InteriorLayout {
+    let total_area: f64 = triangles.iter().map(|&t| triangle_area(mesh, t) as f64).sum();
+    let density = samples_per_vertex as f64 * mesh.vertex_count() as f64 / total_area.max(f64::MIN_POSITIVE);
+    let counts: Vec<u32> =
+        triangles.iter().map(|&t| samples_in_triangle(triangle_area(mesh, t) as f64 * density, max_per_triangle)).collect();
+    let mut first_sample = Vec::with_capacity(counts.len());
+    let mut next = 0u32;
+    for &c in &counts {
+        first_sample.push(next);
+        next += c;
+    }
+    InteriorLayout { triangles, counts, first_sample }
+}
+
+/// Barycentrics of sample `s` (of `count`) in mesh triangle `t` for a bake
+/// seeded with `seed`: the same points whatever pass asks (transfer, sun masks).
+#[inline]
+pub(crate) fn triangle_sample(pattern: super::DirectionPattern, seed: u32, t: u32, s: u32, count: u32) -> [f32; 3] {
+    interior_sample(pattern, s, count, hash_seed(&[seed, TAG_POSITION, t]))
 }
 
 /// Sample count for a triangle that should get `expected` samples: one at the
@@ -378,7 +413,7 @@ pub(crate) fn interior_sample(pattern: super::DirectionPattern, s: u32, count: u
     }
 }
 
-fn triangle_area(mesh: &Mesh, t: u32) -> f32 {
+pub(crate) fn triangle_area(mesh: &Mesh, t: u32) -> f32 {
     let [a, b, c] = mesh.triangle_positions(t as usize);
     0.5 * (b - a).cross(c - a).length()
 }
@@ -430,13 +465,12 @@ impl Pass<'_> {
                     let [pa, pb, pc] = self.mesh.triangle_positions(t as usize);
                     let [na, nb, nc] = [ia, ib, ic].map(|i| self.mesh.normals[i as usize]);
                     let face_normal = self.scene.face_normal(t);
-                    let position_seed = hash_seed(&[self.params.seed, TAG_POSITION, t]);
                     for s in 0..counts[item] {
                         let global = first_sample[item] + s;
                         if bounce > 0 && self.rejected[global as usize] {
                             continue;
                         }
-                        let b = interior_sample(self.params.pattern, s, counts[item], position_seed);
+                        let b = triangle_sample(self.params.pattern, self.params.seed, t, s, counts[item]);
                         let shading = (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal);
                         let point = Point {
                             position: pa * b[0] + pb * b[1] + pc * b[2],

@@ -106,6 +106,33 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
     Ok(Bundle { meta, mesh, transfer, sun })
 }
 
+/// Re-encodes the bundle `original` with new metadata and a new sun series,
+/// copying every other section's raw payload verbatim (MESH, MATL, XFER and
+/// sections this reader does not know), so the transfer stays bit-identical
+/// whatever its quantization. Sections keep their order; META is replaced in
+/// place, SUNM and SUND are replaced or appended.
+///
+/// `original` is fully decoded first (every check of [`decode_bundle`]); the
+/// sun series must match its mesh's vertex count.
+pub fn encode_with_sun(original: &[u8], meta: &serde_json::Value, sun: &SunSeries) -> Result<Vec<u8>, BundleError> {
+    let decoded = decode_bundle(original)?;
+    let container = Container::parse(original)?;
+    let vertex_count = decoded.mesh.vertex_count();
+    let sun_masks = sections::encode_sun_masks(sun, vertex_count)?;
+    let sun_data = sections::encode_sun_data(sun)?;
+    let mut parts = Vec::with_capacity(container.sections.len() + 2);
+    for info in &container.sections {
+        match info.tag {
+            META => parts.push((META, sections::encode_meta(meta)?)),
+            SUNM | SUND => {}
+            tag => parts.push((tag, container.payload(info)?.into_owned())),
+        }
+    }
+    parts.push((SUNM, sun_masks));
+    parts.push((SUND, sun_data));
+    write_container(&parts, EncodeOptions::default())
+}
+
 /// The section table of a bundle, after the header checks (magic, version, header
 /// CRC, length, layout); payloads are neither decompressed nor CRC-checked.
 /// For `prtbake inspect`.

@@ -558,3 +558,47 @@ fn duplicate_and_misplaced_sections_are_refused() {
     padded[152 + 2] = 1; // META padding
     assert!(matches!(decode_bundle(&padded), Err(BundleError::Layout(_))));
 }
+
+/// Adding a sun series to a bundle keeps every other section's bytes (an i16
+/// transfer would not survive decode + re-encode bit for bit in general) and
+/// replaces an existing series.
+#[test]
+fn encode_with_sun_keeps_other_sections_verbatim() {
+    let mut original = random_bundle(11, 60, 70, Quantization::I16PerVertexScale);
+    original.sun = None;
+    let bytes = encode_bundle(&original).unwrap();
+    let sun = random_sun(&mut Rng(12), 60, 5);
+    let meta = serde_json::json!({"sun": {"steps": 5}});
+    let with_sun = encode_with_sun(&bytes, &meta, &sun).unwrap();
+    let (a, b) = (Container::parse(&bytes).unwrap(), Container::parse(&with_sun).unwrap());
+    for tag in [sections::MESH, sections::MATL, sections::XFER] {
+        let pa = a.payload(a.find(tag).unwrap()).unwrap();
+        let pb = b.payload(b.find(tag).unwrap()).unwrap();
+        assert_eq!(pa, pb, "{:?}", Tag(tag));
+    }
+    let decoded = decode_bundle(&with_sun).unwrap();
+    assert_eq!(decoded.sun.as_ref(), Some(&sun));
+    assert_eq!(decoded.meta, meta);
+    assert_eq!(decoded.transfer, decode_bundle(&bytes).unwrap().transfer);
+    // Replacing: a second series takes the first one's place.
+    let sun2 = random_sun(&mut Rng(13), 60, 1);
+    let again = decode_bundle(&encode_with_sun(&with_sun, &meta, &sun2).unwrap()).unwrap();
+    assert_eq!(again.sun, Some(sun2));
+    // A series for another vertex count is refused.
+    assert!(encode_with_sun(&bytes, &meta, &random_sun(&mut Rng(14), 59, 5)).is_err());
+}
+
+/// The extreme step counts, 1 and 1,024, pack and round-trip.
+#[test]
+fn one_and_1024_steps_round_trip() {
+    for steps in [1usize, 1024] {
+        let mut b = random_bundle(21, 30, 20, Quantization::F32);
+        b.sun = Some(random_sun(&mut Rng(22), 30, steps));
+        let sun = b.sun.as_ref().unwrap();
+        assert_eq!(sun.words_per_vertex as usize, steps.div_ceil(32));
+        let back = decode_bundle(&encode_bundle(&b).unwrap()).unwrap();
+        assert_eq!(back.sun, b.sun);
+        let s = back.sun.unwrap();
+        assert!((0..30).all(|v| (0..steps).all(|k| s.bit(v, k) == sun.bit(v, k))));
+    }
+}

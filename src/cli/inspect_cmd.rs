@@ -18,8 +18,16 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             "layers": t.layers.iter().map(|l| format!("{:?}", l.kind)).collect::<Vec<_>>(),
         })
     });
+    let lapse = b.sun.as_ref().map(|s| time_lapse(s, b.mesh.vertex_count(), &b.meta));
     let sun = b.sun.as_ref().map(|s| {
-        json!({ "steps": s.step_count(), "sky_order": s.sky_order, "words_per_vertex": s.words_per_vertex })
+        json!({
+            "steps": s.step_count(), "sky_order": s.sky_order, "words_per_vertex": s.words_per_vertex,
+            "time_lapse": lapse.as_ref().map(|l| l.iter().map(|r| json!({
+                "step": r.step, "unix_time_utc": r.unix_time_utc, "local_time": r.local_time,
+                "elevation_deg": r.elevation_deg, "azimuth_deg": r.azimuth_deg, "night": r.night,
+                "lit_fraction": r.lit_fraction, "sun_rgb": r.sun_rgb,
+            })).collect::<Vec<_>>()),
+        })
     });
     let doc = json!({
         "file": path,
@@ -51,6 +59,18 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
     }
     if let Some(s) = &b.sun {
         println!("  sun: {} steps, sky order {}", s.step_count(), s.sky_order);
+        println!("    step  time   elevation  azimuth  lit");
+        for r in lapse.iter().flatten() {
+            println!(
+                "    {:>4}  {:>5}  {:>8.2}°  {:>6.2}°  {:>5.1}%{}",
+                r.step,
+                r.local_time.as_deref().unwrap_or("-"),
+                r.elevation_deg,
+                r.azimuth_deg,
+                100.0 * r.lit_fraction,
+                if r.night { "  night" } else { "" }
+            );
+        }
     }
     println!("  sections:");
     for s in &sections {
@@ -60,4 +80,52 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         println!("  params: {params}");
     }
     Ok(())
+}
+
+/// One row of the time lapse `inspect` shows.
+struct LapseRow {
+    step: usize,
+    unix_time_utc: f64,
+    /// `HH:MM` in the zone recorded in META (`sun.source.tz_minutes`), when the steps have times.
+    local_time: Option<String>,
+    elevation_deg: f32,
+    azimuth_deg: f32,
+    night: bool,
+    /// Fraction of vertices whose bit is set.
+    lit_fraction: f64,
+    sun_rgb: [f32; 3],
+}
+
+/// Per step: time, sun angles and the fraction of lit vertices.
+fn time_lapse(sun: &bundle::SunSeries, vertex_count: usize, meta: &serde_json::Value) -> Vec<LapseRow> {
+    let source = &meta["sun"]["source"];
+    let tz_minutes = (source["kind"] == "spa").then(|| source["tz_minutes"].as_i64()).flatten();
+    let words = sun.words_per_vertex as usize;
+    let mut lit = vec![0u64; sun.step_count()];
+    for vertex_words in sun.masks.chunks_exact(words.max(1)) {
+        for (w, &word) in vertex_words.iter().enumerate() {
+            let mut word = word;
+            while word != 0 {
+                lit[w * 32 + word.trailing_zeros() as usize] += 1;
+                word &= word - 1;
+            }
+        }
+    }
+    sun.steps
+        .iter()
+        .enumerate()
+        .map(|(k, s)| LapseRow {
+            step: k,
+            unix_time_utc: s.unix_time_utc,
+            local_time: tz_minutes.map(|tz| {
+                let minutes = ((s.unix_time_utc / 60.0).round() as i64 + tz).rem_euclid(1440);
+                format!("{:02}:{:02}", minutes / 60, minutes % 60)
+            }),
+            elevation_deg: s.elevation_deg,
+            azimuth_deg: s.azimuth_deg,
+            night: s.night,
+            lit_fraction: if vertex_count == 0 { 0.0 } else { lit[k] as f64 / vertex_count as f64 },
+            sun_rgb: s.sun_rgb,
+        })
+        .collect()
 }

@@ -6,7 +6,9 @@ pub mod bake_cmd;
 pub mod clean_cmd;
 pub mod demo_cmd;
 pub mod export_cmd;
+pub mod generate_cmd;
 pub mod inspect_cmd;
+pub mod sun_cmd;
 pub mod verify_cmd;
 pub mod view_cmd;
 

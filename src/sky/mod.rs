@@ -22,6 +22,7 @@
 //! Azimuth is measured from north, eastward, in [0, 360); zenith and
 //! elevation in degrees, elevation = 90° − zenith.
 
+pub mod day;
 pub mod preetham;
 pub mod sky_sh;
 pub mod solar;
@@ -30,6 +31,7 @@ pub mod sun_color;
 pub mod time;
 pub mod timeline;
 
+pub use day::{day_directions, day_steps, elevation_azimuth, parse_directions, steps_from_directions, DirectionsError, SkyFrame};
 pub use preetham::{PreethamSky, DEFAULT_TURBIDITY};
 pub use sky_sh::{preetham_sky, SunSky};
 pub use solar::{

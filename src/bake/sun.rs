@@ -1,0 +1,513 @@
+//! Sun-shadow bitmasks for a day's time lapse (Callieri et al. 2006, the
+//! Parthenon demo, seed 001 §4–§5; DESIGN.md "Sun masks").
+//!
+//! For each time step k with the sun toward unit `s_k`, vertex v gets bit k
+//! set when
+//! 1. the step is a day step (the caller passes `None` for night steps),
+//! 2. open mode: `n_v · s_k > 0` with `n_v` the vertex (shading) normal;
+//!    window mode skips this test (it is two-sided, like its transfer), and
+//! 3. the sun reaches the surface around v: of the interior samples of v's
+//!    adjacent triangles (the same points the transfer bake uses), weighted
+//!    by their barycentric weight for v, a strict majority see the sun.
+//!
+//! A sample sees the sun when (open mode) its interpolated shading normal
+//! faces the sun and a ray toward `s_k`, from the sample pushed off its
+//! surface by [`Scene::offset_origin`] (relative to scene scale), escapes; in
+//! window mode, when the first thing the ray hits is a window.
+//!
+//! Why samples and a vote rather than one ray from the vertex: a vertex
+//! slightly covered by an overlapping triangle would be dark at every step,
+//! and a vertex on a crease would start its ray on the wrong side of a
+//! neighbour. The vote decides from the surface around the vertex, so one
+//! bad neighbour cannot flip it. Vertices with no sample (only window or
+//! degenerate triangles around them) get 0.
+//!
+//! Bits pack into u32 words, step k in word k/32, bit k%32
+//! ([`crate::bundle::SunSeries::masks`]). Every sample's bits depend on that
+//! sample alone and each vertex's vote sums in a fixed order, so the masks do
+//! not depend on the thread count.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::progress::Progress;
+use super::scene::Scene;
+use super::surfaces::Surfaces;
+use super::transfer::{interior_layout, sampled_triangles, triangle_sample, InteriorLayout};
+use super::{BakeError, DirectionPattern, Mode};
+use crate::mesh::Mesh;
+
+/// Largest step count (1,024 steps = 32 words per vertex), as [`crate::sky::MAX_STEPS`].
+pub const MAX_SUN_STEPS: usize = crate::sky::MAX_STEPS;
+
+/// Triangles per parallel tracing task.
+const TRIANGLES_PER_TASK: usize = 256;
+/// Vertices per parallel voting task.
+const VERTICES_PER_TASK: usize = 4096;
+
+/// Which loop runs outside when tracing a task's points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoopOrder {
+    /// For each step, every point of the task: consecutive rays share a
+    /// direction and start close together (coherent).
+    StepOuter,
+    /// For each point, every step.
+    PointOuter,
+}
+
+/// Parameters of a sun-mask bake.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SunParams {
+    /// Open (escape = lit, one-sided) or window (first hit a window = lit, two-sided).
+    pub mode: Mode,
+    /// Interior samples per vertex on average (spread by area, ≥ 1 per triangle).
+    pub samples_per_vertex: f32,
+    /// At most this many samples per triangle.
+    pub max_per_triangle: u32,
+    /// Seed of the sample placement (the transfer bake's `seed` gives the same points).
+    pub seed: u32,
+    /// Loop nesting while tracing (the masks are the same either way; not stored).
+    #[serde(skip)]
+    pub loop_order: LoopOrder,
+    /// Test the triangle that blocked the previous ray first ([`Scene::occluded_cached`];
+    /// open mode; the masks are the same either way; not stored).
+    #[serde(skip)]
+    pub shadow_cache: bool,
+    /// No progress line on stderr (never stored).
+    #[serde(skip)]
+    pub quiet: bool,
+}
+
+impl Default for SunParams {
+    fn default() -> Self {
+        SunParams {
+            mode: Mode::Open,
+            samples_per_vertex: 2.0,
+            max_per_triangle: 256,
+            seed: 1,
+            loop_order: LoopOrder::StepOuter,
+            shadow_cache: true,
+            quiet: true,
+        }
+    }
+}
+
+impl SunParams {
+    /// Checks ranges; called by [`bake_sun_masks`].
+    pub fn check(&self) -> Result<(), BakeError> {
+        if !(self.samples_per_vertex > 0.0 && self.samples_per_vertex.is_finite()) || self.max_per_triangle == 0 {
+            return Err(BakeError::Params("sun masks need a positive sample density".into()));
+        }
+        Ok(())
+    }
+}
+
+/// What a sun-mask bake measured.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SunStats {
+    pub triangles: u64,
+    pub vertices: u64,
+    /// Interior sample points.
+    pub points: u64,
+    pub steps: u64,
+    /// Steps with the sun above the horizon.
+    pub day_steps: u64,
+    /// Vertices no sample reached: their bits are 0.
+    pub vertices_without_samples: u64,
+    /// Lit vertices per step.
+    pub lit_vertices: Vec<u64>,
+    /// Rays traced (points facing away from the sun, and night steps, trace none).
+    pub rays: u64,
+    pub seconds: f64,
+    pub rays_per_second: f64,
+}
+
+/// Baked masks in the layout of [`crate::bundle::SunSeries::masks`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunMasks {
+    /// `ceil(steps / 32)`.
+    pub words_per_vertex: u32,
+    /// Vertex-major words: vertex v, step k is bit `k % 32` of word `v · words_per_vertex + k / 32`.
+    pub masks: Vec<u32>,
+    pub stats: SunStats,
+}
+
+impl SunMasks {
+    /// Whether `vertex` is lit at `step`.
+    pub fn bit(&self, vertex: usize, step: usize) -> bool {
+        let w = self.words_per_vertex as usize;
+        (self.masks[vertex * w + step / 32] >> (step % 32)) & 1 == 1
+    }
+}
+
+/// A sample point of the bake.
+#[derive(Clone, Copy)]
+struct Point {
+    position: Vec3,
+    /// Interpolated shading normal (the facing test, open mode).
+    normal: Vec3,
+    /// Geometric normal (the origin offset).
+    face_normal: Vec3,
+}
+
+/// Bakes a sun bit per vertex and step.
+///
+/// `suns[k]` is the unit direction toward the sun at step k in the world
+/// frame, or `None` when the sun is below the horizon (all bits of that step
+/// are 0). Runs on the current rayon pool; no I/O.
+///
+/// Errors: bad parameters, a step count outside `1..=1024`, or a day
+/// direction that is not finite and non-zero.
+pub fn bake_sun_masks(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    suns: &[Option<Vec3>],
+    params: &SunParams,
+) -> Result<SunMasks, BakeError> {
+    params.check()?;
+    if suns.is_empty() || suns.len() > MAX_SUN_STEPS {
+        return Err(BakeError::Params(format!("{} sun steps, allowed 1..={MAX_SUN_STEPS}", suns.len())));
+    }
+    let suns: Vec<Option<Vec3>> = suns
+        .iter()
+        .enumerate()
+        .map(|(k, s)| match s {
+            None => Ok(None),
+            Some(d) => d
+                .try_normalize()
+                .map(Some)
+                .ok_or_else(|| BakeError::Params(format!("sun direction of step {k} is {d:?}, not a usable direction"))),
+        })
+        .collect::<Result<_, _>>()?;
+    let started = Instant::now();
+    let words = suns.len().div_ceil(32);
+    let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces), params.samples_per_vertex, params.max_per_triangle);
+    let point_count = layout.sample_count() as usize;
+    let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
+
+    // Trace: one bit per (sample, step), each task writing its own slice.
+    let mut sample_bits = vec![0u32; point_count * words];
+    let tracer = Tracer { mesh, scene, surfaces, params, layout: &layout, suns: &suns, words };
+    let progress = Progress::start("sun".into(), point_count as u64 * day_steps, params.quiet);
+    let mut tasks = Vec::new();
+    let mut rest: &mut [u32] = &mut sample_bits;
+    for start in (0..layout.triangles.len()).step_by(TRIANGLES_PER_TASK) {
+        let end = (start + TRIANGLES_PER_TASK).min(layout.triangles.len());
+        let samples = layout.counts[start..end].iter().map(|&c| c as usize).sum::<usize>();
+        let (mine, others) = rest.split_at_mut(samples * words);
+        rest = others;
+        tasks.push((start, end, mine));
+    }
+    let rays: u64 = tasks
+        .into_par_iter()
+        .map(|(start, end, out)| {
+            let rays = tracer.trace_task(start, end, out);
+            progress.add(layout.counts[start..end].iter().map(|&c| c as u64).sum::<u64>() * day_steps);
+            rays
+        })
+        .sum();
+    drop(progress);
+
+    // Vote: each vertex sums its samples' weights in adjacency order.
+    let adjacency = VertexAdjacency::build(mesh, &layout);
+    let vertex_count = mesh.vertex_count();
+    let mut masks = vec![0u32; vertex_count * words];
+    let without: u64 = masks
+        .par_chunks_mut(VERTICES_PER_TASK * words)
+        .enumerate()
+        .map(|(chunk, out)| {
+            let first = chunk * VERTICES_PER_TASK;
+            let mut lit_weight = vec![0.0f32; suns.len()];
+            let mut without = 0u64;
+            for (local, vertex_words) in out.chunks_exact_mut(words).enumerate() {
+                let v = first + local;
+                let total = tracer.vote(v, &adjacency, &sample_bits, &mut lit_weight);
+                if total <= 0.0 {
+                    without += 1;
+                    continue;
+                }
+                let normal = mesh.normals[v];
+                for (k, sun) in suns.iter().enumerate() {
+                    let Some(s) = sun else { continue };
+                    let facing = params.mode == Mode::Window || normal.dot(*s) > 0.0;
+                    if facing && 2.0 * lit_weight[k] > total {
+                        vertex_words[k / 32] |= 1 << (k % 32);
+                    }
+                }
+            }
+            without
+        })
+        .sum();
+
+    let lit_vertices = (0..suns.len())
+        .map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64)
+        .collect();
+    let seconds = started.elapsed().as_secs_f64();
+    let stats = SunStats {
+        triangles: mesh.triangle_count() as u64,
+        vertices: vertex_count as u64,
+        points: point_count as u64,
+        steps: suns.len() as u64,
+        day_steps,
+        vertices_without_samples: without,
+        lit_vertices,
+        rays,
+        seconds,
+        rays_per_second: rays as f64 / seconds.max(1e-9),
+    };
+    Ok(SunMasks { words_per_vertex: words as u32, masks, stats })
+}
+
+/// For each vertex, the (layout item, corner) pairs of the sampled triangles around it, in item order.
+struct VertexAdjacency {
+    /// `entries[offsets[v]..offsets[v+1]]` belong to vertex v.
+    offsets: Vec<u32>,
+    /// `(item, corner)`.
+    entries: Vec<(u32, u8)>,
+}
+
+impl VertexAdjacency {
+    fn build(mesh: &Mesh, layout: &InteriorLayout) -> VertexAdjacency {
+        let mut offsets = vec![0u32; mesh.vertex_count() + 1];
+        for &t in &layout.triangles {
+            for v in mesh.triangle(t as usize) {
+                offsets[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..mesh.vertex_count() {
+            offsets[v + 1] += offsets[v];
+        }
+        let mut fill = offsets.clone();
+        let mut entries = vec![(0u32, 0u8); offsets[mesh.vertex_count()] as usize];
+        for (item, &t) in layout.triangles.iter().enumerate() {
+            for (corner, v) in mesh.triangle(t as usize).into_iter().enumerate() {
+                let slot = &mut fill[v as usize];
+                entries[*slot as usize] = (item as u32, corner as u8);
+                *slot += 1;
+            }
+        }
+        VertexAdjacency { offsets, entries }
+    }
+}
+
+/// Shared read-only state of the tracing and voting passes.
+struct Tracer<'a> {
+    mesh: &'a Mesh,
+    scene: &'a Scene,
+    surfaces: &'a Surfaces,
+    params: &'a SunParams,
+    layout: &'a InteriorLayout,
+    suns: &'a [Option<Vec3>],
+    words: usize,
+}
+
+impl Tracer<'_> {
+    /// Barycentrics of sample `s` of layout item `item`.
+    #[inline]
+    fn barycentrics(&self, item: usize, s: u32) -> [f32; 3] {
+        let t = self.layout.triangles[item];
+        triangle_sample(DirectionPattern::Sobol, self.params.seed, t, s, self.layout.counts[item])
+    }
+
+    /// Traces the samples of layout items `start..end` at every day step into
+    /// `out` (`words` per sample, in sample order). Returns the rays traced.
+    fn trace_task(&self, start: usize, end: usize, out: &mut [u32]) -> u64 {
+        // Place the task's points once.
+        let mut points = Vec::with_capacity(out.len() / self.words.max(1));
+        for item in start..end {
+            let t = self.layout.triangles[item] as usize;
+            let [pa, pb, pc] = self.mesh.triangle_positions(t);
+            let [na, nb, nc] = self.mesh.triangle(t).map(|i| self.mesh.normals[i as usize]);
+            let face_normal = self.scene.face_normal(t as u32);
+            for s in 0..self.layout.counts[item] {
+                let b = self.barycentrics(item, s);
+                points.push(Point {
+                    position: pa * b[0] + pb * b[1] + pc * b[2],
+                    normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
+                    face_normal,
+                });
+            }
+        }
+        let words = self.words;
+        let mut rays = 0u64;
+        // One shadow-cache entry per task: the leaf that blocked the previous ray.
+        let mut hint = u32::MAX;
+        match self.params.loop_order {
+            LoopOrder::StepOuter => {
+                for (k, sun) in self.suns.iter().enumerate() {
+                    let Some(s) = *sun else { continue };
+                    for (p, point) in points.iter().enumerate() {
+                        let (lit, traced) = self.sees_sun(point, s, &mut hint);
+                        rays += traced as u64;
+                        if lit {
+                            out[p * words + k / 32] |= 1 << (k % 32);
+                        }
+                    }
+                }
+            }
+            LoopOrder::PointOuter => {
+                for (p, point) in points.iter().enumerate() {
+                    for (k, sun) in self.suns.iter().enumerate() {
+                        let Some(s) = *sun else { continue };
+                        let (lit, traced) = self.sees_sun(point, s, &mut hint);
+                        rays += traced as u64;
+                        if lit {
+                            out[p * words + k / 32] |= 1 << (k % 32);
+                        }
+                    }
+                }
+            }
+        }
+        rays
+    }
+
+    /// Whether `point` sees the sun toward unit `s`, and whether a ray was traced.
+    #[inline]
+    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32) -> (bool, bool) {
+        match self.params.mode {
+            Mode::Open => {
+                if point.normal.dot(s) <= 0.0 {
+                    return (false, false);
+                }
+                let origin = self.scene.offset_origin(point.position, point.face_normal, s);
+                let blocked = if self.params.shadow_cache {
+                    self.scene.occluded_cached(origin, s, f32::INFINITY, hint)
+                } else {
+                    self.scene.occluded(origin, s, f32::INFINITY)
+                };
+                (!blocked, true)
+            }
+            Mode::Window => {
+                let origin = self.scene.offset_origin(point.position, point.face_normal, s);
+                let lit = self
+                    .scene
+                    .closest_hit(origin, s, f32::INFINITY)
+                    .is_some_and(|hit| self.surfaces.window_transmittance[hit.triangle as usize].is_some_and(|tau| tau > 0.0));
+                (lit, true)
+            }
+        }
+    }
+
+    /// Sums, for vertex `v`, the barycentric weight of its samples that see
+    /// the sun at each step into `lit_weight` (overwritten); returns the total weight.
+    fn vote(&self, v: usize, adjacency: &VertexAdjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
+        lit_weight.fill(0.0);
+        let mut total = 0.0f32;
+        let range = adjacency.offsets[v] as usize..adjacency.offsets[v + 1] as usize;
+        for &(item, corner) in &adjacency.entries[range] {
+            let item = item as usize;
+            let first = self.layout.first_sample[item] as usize;
+            for s in 0..self.layout.counts[item] {
+                let w = self.barycentrics(item, s)[corner as usize];
+                total += w;
+                let bits = &sample_bits[(first + s as usize) * self.words..][..self.words];
+                for (word_index, &word) in bits.iter().enumerate() {
+                    let mut word = word;
+                    while word != 0 {
+                        let bit = word.trailing_zeros() as usize;
+                        lit_weight[word_index * 32 + bit] += w;
+                        word &= word - 1;
+                    }
+                }
+            }
+        }
+        total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bake::{BuildQuality, Scene};
+    use crate::mesh::Material;
+
+    /// A unit-square grid in the XZ plane at height y, normal ±Y.
+    fn floor(n: u32, y: f32, up: bool) -> Mesh {
+        let mut b = crate::fixtures::builder::MeshBuilder::new(vec![Material::opaque("grey", 0.5)]);
+        let (u, v) = if up { (Vec3::Z, Vec3::X) } else { (Vec3::X, Vec3::Z) };
+        b.grid("floor", Vec3::new(-0.5, y, -0.5), u, v, n, n, |_, _| 0);
+        b.mesh
+    }
+
+    fn bake(mesh: &Mesh, suns: &[Option<Vec3>], mode: Mode) -> SunMasks {
+        let surfaces = Surfaces::resolve(mesh, &[]).unwrap();
+        let scene = Scene::build(mesh, BuildQuality::Medium);
+        bake_sun_masks(mesh, &scene, &surfaces, suns, &SunParams { mode, ..SunParams::default() }).unwrap()
+    }
+
+    /// An open floor under a high sun: every vertex lit; sun below the horizon
+    /// (None) or behind the surface (n·s ≤ 0): every vertex dark.
+    #[test]
+    fn open_floor_is_lit_only_by_a_sun_in_front() {
+        let mesh = floor(8, 0.0, true);
+        assert!(mesh.normals.iter().all(|n| n.y > 0.99));
+        let suns = [Some(Vec3::new(0.3, 1.0, 0.2)), None, Some(Vec3::new(0.3, -1.0, 0.0)), Some(Vec3::X)];
+        let m = bake(&mesh, &suns, Mode::Open);
+        for v in 0..mesh.vertex_count() {
+            assert!(m.bit(v, 0));
+            assert!(!m.bit(v, 1) && !m.bit(v, 2) && !m.bit(v, 3), "vertex {v}");
+        }
+        assert_eq!(m.stats.lit_vertices, vec![mesh.vertex_count() as u64, 0, 0, 0]);
+        assert_eq!(m.stats.day_steps, 3);
+    }
+
+    #[test]
+    fn step_counts_outside_1_to_1024_are_refused() {
+        let mesh = floor(2, 0.0, true);
+        let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+        let scene = Scene::build(&mesh, BuildQuality::Medium);
+        let p = SunParams::default();
+        assert!(bake_sun_masks(&mesh, &scene, &surfaces, &[], &p).is_err());
+        assert!(bake_sun_masks(&mesh, &scene, &surfaces, &vec![None; 1025], &p).is_err());
+        assert!(bake_sun_masks(&mesh, &scene, &surfaces, &[Some(Vec3::ZERO)], &p).is_err());
+        let m = bake_sun_masks(&mesh, &scene, &surfaces, &vec![Some(Vec3::Y); 1024], &p).unwrap();
+        assert_eq!(m.words_per_vertex, 32);
+        assert!(m.masks.iter().all(|&w| w == u32::MAX));
+    }
+
+    /// Window mode: a floor under a window pane, the sun overhead. Vertices
+    /// under the pane are lit whichever way the floor faces; vertices whose
+    /// ray escapes past the pane are dark (a crack lets no light in).
+    #[test]
+    fn window_mode_is_two_sided_and_needs_the_window() {
+        for up in [true, false] {
+            let mut mesh = floor(10, 0.0, up);
+            let mut pane = crate::fixtures::builder::MeshBuilder::new(vec![Material {
+                role: crate::mesh::MaterialRole::Window,
+                ..Material::opaque("glass", 0.0)
+            }]);
+            pane.grid("pane", Vec3::new(-0.25, 0.5, -0.25), Vec3::Z * 0.5, Vec3::X * 0.5, 2, 2, |_, _| 0);
+            crate::verify::shapes::append(&mut mesh, &pane.mesh);
+            let floor_vertices = 121;
+            let m = bake(&mesh, &[Some(Vec3::Y)], Mode::Window);
+            for v in 0..floor_vertices {
+                let p = mesh.positions[v];
+                let inside = p.x.abs() < 0.2 && p.z.abs() < 0.2;
+                let outside = p.x.abs() > 0.3 || p.z.abs() > 0.3;
+                if inside {
+                    assert!(m.bit(v, 0), "vertex {v} at {p} under the pane (floor up {up})");
+                }
+                if outside {
+                    assert!(!m.bit(v, 0), "vertex {v} at {p} outside the pane (floor up {up})");
+                }
+            }
+        }
+    }
+
+    /// A vertex covered by a small overlapping triangle just above it: a ray
+    /// from the vertex is blocked, the vote of its surrounding samples is not.
+    #[test]
+    fn a_slightly_covered_vertex_keeps_its_sun() {
+        let mut mesh = floor(4, 0.0, true);
+        let centre = mesh.positions.iter().position(|p| p.x.abs() < 1e-6 && p.z.abs() < 1e-6).unwrap();
+        let mut cover = floor(1, 2e-3, true);
+        crate::verify::shapes::transform(&mut cover, 0.05, Vec3::ZERO);
+        crate::verify::shapes::append(&mut mesh, &cover);
+        let m = bake(&mesh, &[Some(Vec3::new(0.1, 1.0, 0.0))], Mode::Open);
+        assert!(m.bit(centre, 0));
+    }
+}

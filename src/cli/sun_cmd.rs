@@ -1,0 +1,255 @@
+//! `prtbake sun MESH_OR_BUNDLE -o OUT.prtb`: a day's sun masks and per-step
+//! sun and sky (seed 001, the Parthenon time lapse).
+//!
+//! Given a bundle, its mesh is reused vertex for vertex and every other
+//! section (transfer included) is copied byte for byte; given a mesh file, a
+//! new bundle holds the mesh and the sun sections (no transfer).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use glam::Vec3;
+use serde_json::json;
+
+use crate::bake::{self, BuildQuality, Mode, Scene, SunMasks, SunParams, Surfaces};
+use crate::bundle::{self, Bundle, SunSeries, SunStep};
+use crate::mesh::UpAxis;
+use crate::sky::{self, LocalDate, Site, SkyFrame, StepSpec};
+
+/// Where the sun's directions come from.
+#[derive(Clone, Debug)]
+pub enum SunSource {
+    /// NREL SPA at `site` over a time line.
+    Solar {
+        site: Site,
+        date: LocalDate,
+        /// Minutes east of UTC.
+        tz_minutes: i32,
+        /// Local minutes after midnight of `date`.
+        from_min: f64,
+        to_min: f64,
+        steps: StepSpec,
+    },
+    /// A CSV of directions (`x,y,z` per line, toward the sun).
+    Directions(PathBuf),
+}
+
+/// A checked `sun` configuration.
+#[derive(Clone, Debug)]
+pub struct SunConfig {
+    /// A mesh file (.obj, .gltf, .glb) or a bundle (.prtb, recognised by its magic).
+    pub input: PathBuf,
+    pub output: PathBuf,
+    /// Up axis of an OBJ input; `--north` and `--directions` are read in the input's own axes.
+    pub up: UpAxis,
+    pub source: SunSource,
+    /// Geographic north in the input's axes; `None` = −Z for +Y up, +Y for +Z up.
+    pub north: Option<Vec3>,
+    pub turbidity: f64,
+    pub sky_order: usize,
+    pub params: SunParams,
+    pub window_patterns: Vec<String>,
+    pub threads: usize,
+    pub json: bool,
+}
+
+/// What `sun` reports.
+pub struct SunReport {
+    pub output: PathBuf,
+    pub masks: SunMasks,
+    pub steps: Vec<SunStep>,
+    pub input_was_bundle: bool,
+    pub sky_seconds: f64,
+    pub build_seconds: f64,
+    pub bundle_bytes: u64,
+}
+
+/// Runs `sun` end to end and prints its report.
+pub fn run(config: &SunConfig) -> anyhow::Result<()> {
+    let report = sun_to_bundle(config)?;
+    print_report(&report, config.json)
+}
+
+fn is_bundle(path: &Path) -> anyhow::Result<bool> {
+    use std::io::Read;
+    let mut head = [0u8; 8];
+    let mut file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+    let n = file.read(&mut head).with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(n == 8 && head == bundle::MAGIC)
+}
+
+fn is_obj(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"))
+}
+
+/// Loads the input, computes the day, bakes the masks and writes the bundle.
+pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
+    let quiet = config.params.quiet;
+    let input = &config.input;
+    let input_was_bundle = is_bundle(input)?;
+    // The bake's world is +Y up; user vectors come in the input's axes.
+    let file_up = if input_was_bundle {
+        if config.up == UpAxis::Z {
+            anyhow::bail!("{}: a bundle's mesh is already +Y up; --up z applies to OBJ files only", input.display());
+        }
+        UpAxis::Y
+    } else if is_obj(input) {
+        config.up
+    } else {
+        UpAxis::Y
+    };
+    let (mesh, original_bytes) = if input_was_bundle {
+        let bytes = std::fs::read(input).with_context(|| format!("cannot read {}", input.display()))?;
+        let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
+        (b.mesh, Some((bytes, b.meta)))
+    } else {
+        (super::load_mesh(input, config.up, quiet)?, None)
+    };
+    let up = Vec3::Y;
+    let north = match config.north {
+        Some(n) => {
+            let n = file_up.to_y_up(n);
+            if !(n - up * n.dot(up)).is_finite() || (n - up * n.dot(up)).length() < 1e-6 {
+                anyhow::bail!("--north {:?} must be finite and not parallel to up", config.north.unwrap_or_default());
+            }
+            n
+        }
+        None => sky::default_north(up),
+    };
+    let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
+
+    let (steps, build_seconds, sky_seconds, masks) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+        // The day: sun positions, colour and sky per step.
+        let sky_start = Instant::now();
+        let steps = match &config.source {
+            SunSource::Solar { site, date, tz_minutes, from_min, to_min, steps } => {
+                let timeline = sky::timeline(*date, *tz_minutes, *from_min, *to_min, *steps).context("bad time line")?;
+                sky::day_steps(site, &timeline, sky::DEFAULT_DELTA_T_S, &frame)
+            }
+            SunSource::Directions(path) => {
+                let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+                let directions = sky::parse_directions(&text, bake::sun::MAX_SUN_STEPS)
+                    .map_err(|e| anyhow::anyhow!("{}:{}: {}", path.display(), e.line, e.message))?;
+                let world: Vec<Vec3> = directions.into_iter().map(|d| file_up.to_y_up(d)).collect();
+                sky::steps_from_directions(&world, &frame)
+            }
+        };
+        let sky_seconds = sky_start.elapsed().as_secs_f64();
+        // The masks.
+        let surfaces = Surfaces::resolve(&mesh, &config.window_patterns)?;
+        if config.params.mode == Mode::Window && surfaces.window_triangle_count() == 0 {
+            anyhow::bail!(
+                "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
+                input.display(),
+                config.window_patterns
+            );
+        }
+        let scene = Scene::build(&mesh, BuildQuality::Medium);
+        let masks = bake::bake_sun_masks(&mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params)?;
+        Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks))
+    })??;
+
+    let series = SunSeries {
+        sky_order: config.sky_order as u32,
+        steps: steps.clone(),
+        words_per_vertex: masks.words_per_vertex,
+        masks: masks.masks.clone(),
+    };
+    let sun_meta = sun_meta(config, &frame, &masks, input_was_bundle);
+    let output = &config.output;
+    match original_bytes {
+        Some((bytes, mut meta)) => {
+            if let Some(m) = meta.as_object_mut() {
+                m.insert("sun".into(), sun_meta);
+            } else {
+                meta = json!({ "previous_meta": meta, "sun": sun_meta });
+            }
+            let encoded = bundle::encode_with_sun(&bytes, &meta, &series).with_context(|| format!("cannot encode {}", output.display()))?;
+            crate::util::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
+        }
+        None => {
+            let meta = json!({
+                "tool": "prtbake",
+                "version": env!("CARGO_PKG_VERSION"),
+                "command": "sun",
+                "source": input.file_name().map(|n| n.to_string_lossy().to_string()),
+                "sun": sun_meta,
+                "conventions": super::conventions(),
+            });
+            let b = Bundle { meta, mesh, transfer: None, sun: Some(series) };
+            bundle::write_bundle(output, &b).with_context(|| format!("cannot write {}", output.display()))?;
+        }
+    }
+    let bundle_bytes = std::fs::metadata(output).map(|m| m.len()).unwrap_or(0);
+    Ok(SunReport { output: output.clone(), masks, steps, input_was_bundle, sky_seconds, build_seconds, bundle_bytes })
+}
+
+/// The sun parameters and deterministic stats recorded in META (no timings).
+fn sun_meta(config: &SunConfig, frame: &SkyFrame, masks: &SunMasks, input_was_bundle: bool) -> serde_json::Value {
+    let source = match &config.source {
+        SunSource::Solar { site, date, tz_minutes, from_min, to_min, steps } => json!({
+            "kind": "spa",
+            "site": { "latitude_deg": site.latitude_deg, "longitude_deg": site.longitude_deg, "elevation_m": site.elevation_m },
+            "date": format!("{:04}-{:02}-{:02}", date.year, date.month, date.day),
+            "tz_minutes": tz_minutes,
+            "from_min": from_min,
+            "to_min": to_min,
+            "step": match steps { StepSpec::Step(m) => json!({"minutes": m}), StepSpec::Count(n) => json!({"count": n}) },
+            "delta_t_s": sky::DEFAULT_DELTA_T_S,
+        }),
+        SunSource::Directions(path) => json!({
+            "kind": "directions",
+            "file": path.file_name().map(|n| n.to_string_lossy().to_string()),
+        }),
+    };
+    let s = &masks.stats;
+    json!({
+        "source": source,
+        "steps": s.steps,
+        "turbidity": frame.turbidity,
+        "sky_order": frame.sky_order,
+        "sky_model": "Preetham 1999, projected to SH by Gauss-Legendre quadrature (256 x 512)",
+        "north": frame.north.to_array(),
+        "up": frame.up.to_array(),
+        "input_up": match config.up { UpAxis::Y => "y", UpAxis::Z => "z" },
+        "params": config.params,
+        "window_patterns": config.window_patterns,
+        "added_to_bundle": input_was_bundle,
+        "bit_rule": "lit iff day step, n.s > 0 (open mode only), and a strict barycentric-weighted majority of the interior samples of the adjacent triangles see the sun",
+        "stats": {
+            "points": s.points, "day_steps": s.day_steps, "rays": s.rays,
+            "vertices_without_samples": s.vertices_without_samples, "lit_vertices": s.lit_vertices,
+        },
+    })
+}
+
+/// Prints the final line, or the JSON document with `--json`.
+pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
+    let s = &report.masks.stats;
+    if as_json {
+        return super::print_json(&json!({
+            "output": report.output,
+            "added_to_bundle": report.input_was_bundle,
+            "stats": s,
+            "sky_seconds": report.sky_seconds,
+            "bvh_build_seconds": report.build_seconds,
+            "bundle_bytes": report.bundle_bytes,
+            "peak_memory_bytes": bake::peak_memory_bytes(),
+        }));
+    }
+    println!(
+        "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
+        report.output.display(),
+        s.steps,
+        s.day_steps,
+        s.vertices,
+        s.points,
+        s.rays,
+        s.seconds,
+        s.rays_per_second / 1e6,
+        report.sky_seconds,
+        report.bundle_bytes
+    );
+    Ok(())
+}

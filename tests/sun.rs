@@ -1,0 +1,203 @@
+//! Sun masks: exact bits on plane + sphere against the analytic shadow, the
+//! `sun` command on meshes and bundles, thread-count independence.
+
+use glam::Vec3;
+use prtbake::bake::{bake_sun_masks, BuildQuality, LoopOrder, Scene, SunParams, Surfaces};
+use prtbake::bundle;
+use prtbake::verify::shapes;
+
+use crate::util::{prtbake, write_scene_obj, Scratch};
+
+/// Plane: 8 × 8 m, 200 × 200 cells (cell 0.04 m). Sphere: radius 1 m at height 1.6 m.
+const PLANE_SIZE: f32 = 8.0;
+const PLANE_CELLS: u32 = 200;
+const SPHERE_CENTRE: Vec3 = Vec3::new(0.0, 1.6, 0.0);
+const SPHERE_RADIUS: f32 = 1.0;
+/// Icosphere subdivisions: 10,242 vertices, edges ≈ 0.034 rad.
+const SPHERE_SUBDIVISIONS: u32 = 5;
+/// Shadow-edge band on the plane: vertices whose ray passes within this
+/// distance of the sphere's silhouette are not checked. A vertex's samples lie
+/// within one cell of it (centroids of its adjacent triangles), so a vote can
+/// only differ from the vertex's own ray when the edge is that close; one and
+/// a half cells leave room for the tessellated sphere (sagitta ≈ 1.5e-4 m).
+/// (Measured: the test still passes with one cell and |n·s| band 0.035.)
+const PLANE_BAND: f32 = 1.5 * PLANE_SIZE / PLANE_CELLS as f32;
+/// Terminator band on the sphere, in |n·s|: about two triangle angles.
+const SPHERE_BAND: f32 = 0.06;
+
+/// Directions toward the sun: four day steps, one below the horizon, one on it.
+const DIRECTIONS_CSV: &str = "# plane + sphere test\n\
+    0.3, 1.0, 0.2\n\
+    1.0, 0.6, -0.4\n\
+    -0.5, 0.8, 0.7   # afternoon\n\
+    0, 1, 0\n\
+    1.0, -0.2, 0.3\n\
+    0.0, 0.0, 1.0\n\
+    -0.2, 0.45, -1.0\n";
+
+fn plane_and_sphere() -> prtbake::mesh::Mesh {
+    let mut mesh = shapes::plane_grid(PLANE_CELLS, PLANE_SIZE);
+    let mut sphere = shapes::icosphere(SPHERE_SUBDIVISIONS);
+    shapes::transform(&mut sphere, SPHERE_RADIUS, SPHERE_CENTRE);
+    shapes::append(&mut mesh, &sphere);
+    mesh
+}
+
+/// The expected bit of a vertex at `p` for sun `s`, or `None` inside a band.
+fn expected_bit(p: Vec3, s: Vec3) -> Option<bool> {
+    if s.y <= 0.0 {
+        return Some(false); // below (or on) the horizon: night
+    }
+    if p.y.abs() < 1e-6 {
+        // On the plane: lit iff the ray toward the sun misses the sphere.
+        let to_centre = SPHERE_CENTRE - p;
+        let t = to_centre.dot(s).max(0.0);
+        let miss = (to_centre - s * t).length() - SPHERE_RADIUS;
+        return (miss.abs() >= PLANE_BAND).then_some(miss > 0.0);
+    }
+    // On the sphere: lit iff it faces the sun (nothing else is above it).
+    let n = (p - SPHERE_CENTRE).normalize();
+    (n.dot(s).abs() >= SPHERE_BAND).then_some(n.dot(s) > 0.0)
+}
+
+/// The whole path a user takes (OBJ + CSV → `prtbake sun` → bundle): every
+/// vertex outside the shadow-edge band has exactly the analytic bit at every
+/// step; below or on the horizon every bit is 0; on the sphere n·s ≤ 0 gives 0.
+#[test]
+fn plane_and_sphere_bits_match_the_analytic_shadow() {
+    let dir = Scratch::new("sun-sphere");
+    let obj = dir.path("scene.obj");
+    prtbake::mesh::write_obj(&obj, &plane_and_sphere()).unwrap();
+    let csv = dir.path("suns.csv");
+    std::fs::write(&csv, DIRECTIONS_CSV).unwrap();
+    let out = dir.path("s.prtb");
+    let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--directions", csv.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let b = bundle::read_bundle(&out).unwrap();
+    let sun = b.sun.unwrap();
+    let suns = prtbake::sky::parse_directions(DIRECTIONS_CSV, 1024).unwrap();
+    assert_eq!(sun.step_count(), suns.len());
+    let (mut checked, mut banded) = (0usize, 0usize);
+    for (k, &s) in suns.iter().enumerate() {
+        assert_eq!(sun.steps[k].night, s.y <= 0.0, "step {k}");
+        let mut shadowed_on_plane = 0;
+        for (v, &p) in b.mesh.positions.iter().enumerate() {
+            let bit = sun.bit(v, k);
+            match expected_bit(p, s) {
+                Some(want) => {
+                    assert_eq!(bit, want, "vertex {v} at {p}, step {k}, sun {s}");
+                    checked += 1;
+                    shadowed_on_plane += (p.y.abs() < 1e-6 && !want && s.y > 0.0) as usize;
+                }
+                None => banded += 1,
+            }
+        }
+        if s.y > 0.0 {
+            assert!(shadowed_on_plane > 500, "step {k}: only {shadowed_on_plane} shadowed plane vertices checked");
+        } else {
+            assert!((0..b.mesh.vertex_count()).all(|v| !sun.bit(v, k)), "night step {k} has a lit vertex");
+        }
+    }
+    // The band is thin: nearly every (vertex, step) is checked exactly.
+    assert!(banded * 20 < checked, "{banded} in the band, {checked} checked");
+}
+
+/// Same masks for 1 and 2 threads, both loop orders, with and without the shadow cache.
+#[test]
+fn masks_do_not_depend_on_threads_or_loop_order() {
+    let mesh = plane_and_sphere();
+    let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+    let scene = Scene::build(&mesh, BuildQuality::Medium);
+    let suns: Vec<Option<Vec3>> =
+        (0..40).map(|k| { let a = k as f32 * 0.15; Some(Vec3::new(a.cos(), 0.3 + 0.02 * k as f32, a.sin())) }).collect();
+    let bake = |threads: usize, loop_order, shadow_cache| {
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| {
+            let params = SunParams { loop_order, shadow_cache, ..SunParams::default() };
+            bake_sun_masks(&mesh, &scene, &surfaces, &suns, &params).unwrap()
+        })
+    };
+    let one = bake(1, LoopOrder::StepOuter, true);
+    let two = bake(2, LoopOrder::StepOuter, true);
+    let point_outer = bake(2, LoopOrder::PointOuter, true);
+    let uncached = bake(2, LoopOrder::StepOuter, false);
+    assert_eq!(one.masks, two.masks);
+    assert_eq!(one.masks, point_outer.masks);
+    assert_eq!(one.masks, uncached.masks);
+    assert_eq!(one.stats.rays, point_outer.stats.rays);
+    assert_eq!(one.stats.lit_vertices, two.stats.lit_vertices);
+}
+
+fn section(bytes: &[u8], tag: &str) -> Option<bundle::SectionInfo> {
+    bundle::list_sections(bytes).unwrap().into_iter().find(|s| s.tag_name() == tag)
+}
+
+/// `sun` on an OBJ makes a bundle whose `inspect --json` lists the default day's
+/// 92 steps; `sun` on a baked bundle adds the sun and keeps the transfer bytes;
+/// 1 and 2 threads give identical files.
+#[test]
+fn sun_command_on_mesh_and_bundle() {
+    let dir = Scratch::new("sun-cli");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let (s1, s2) = (dir.path("s1.prtb"), dir.path("s2.prtb"));
+    for (out, threads) in [(&s1, "1"), (&s2, "2")] {
+        let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--threads", threads, "--quiet", "--sky-order", "2"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert_eq!(std::fs::read(&s1).unwrap(), std::fs::read(&s2).unwrap(), "bundles differ between 1 and 2 threads");
+
+    let o = prtbake(&["inspect", s1.to_str().unwrap(), "--json"]);
+    assert!(o.status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(doc["transfer"].is_null());
+    let lapse = doc["sun"]["time_lapse"].as_array().unwrap();
+    assert_eq!(lapse.len(), 92);
+    assert_eq!(lapse[0]["local_time"], "06:57");
+    assert_eq!(lapse[91]["local_time"], "17:34");
+    for row in lapse {
+        let (e, f) = (row["elevation_deg"].as_f64().unwrap(), row["lit_fraction"].as_f64().unwrap());
+        assert!(e > 0.0 && (0.0..=1.0).contains(&f) && row["night"] == false, "{row}");
+    }
+    // Morning sun in the east, evening sun in the west.
+    assert!((80.0..110.0).contains(&lapse[0]["azimuth_deg"].as_f64().unwrap()));
+    assert!((250.0..280.0).contains(&lapse[91]["azimuth_deg"].as_f64().unwrap()));
+    assert_eq!(doc["meta"]["sun"]["source"]["date"], "2026-03-20");
+    assert_eq!(doc["meta"]["sun"]["sky_order"], 2);
+
+    // A baked bundle: sun sections added, the other sections' bytes kept.
+    let baked = dir.path("baked.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "32", "--quiet"]);
+    assert!(o.status.success());
+    let with_sun = dir.path("with-sun.prtb");
+    let o = prtbake(&["sun", baked.to_str().unwrap(), "-o", with_sun.to_str().unwrap(), "--steps", "1", "--from", "12:00", "--to", "12:00", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (before, after) = (std::fs::read(&baked).unwrap(), std::fs::read(&with_sun).unwrap());
+    for tag in ["MESH", "MATL", "XFER"] {
+        let (a, b) = (section(&before, tag).unwrap(), section(&after, tag).unwrap());
+        assert_eq!((a.raw_len, a.crc32), (b.raw_len, b.crc32), "{tag} changed");
+    }
+    let (a, b) = (bundle::decode_bundle(&before).unwrap(), bundle::decode_bundle(&after).unwrap());
+    assert_eq!(a.transfer, b.transfer);
+    assert_eq!(b.sun.as_ref().unwrap().step_count(), 1);
+    assert_eq!(b.meta["params"], a.meta["params"], "the bake's metadata is kept");
+    assert_eq!(b.meta["sun"]["steps"], 1);
+}
+
+/// A bad CSV row: exit 2, the message names the file and the line.
+#[test]
+fn bad_directions_name_file_and_line() {
+    let dir = Scratch::new("sun-bad");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let csv = dir.path("bad.csv");
+    std::fs::write(&csv, "0,1,0\n# fine\n1,zero,0\n").unwrap();
+    let out = dir.path("o.prtb");
+    let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--directions", csv.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.csv:3"), "{err}");
+    assert!(!out.exists());
+    let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--steps", "1025"]);
+    assert_eq!(o.status.code(), Some(2));
+}
