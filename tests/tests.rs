@@ -4,4 +4,5 @@ mod analytic;
 mod bake_props;
 mod clean_props;
 mod cli;
+mod storage;
 mod util;

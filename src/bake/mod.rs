@@ -2,6 +2,7 @@
 //! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
 //! arrays and statistics.
 
+pub mod cull;
 pub mod progress;
 pub mod sampling;
 pub mod scene;
@@ -11,7 +12,7 @@ pub mod transfer;
 pub use sampling::DirectionPattern;
 pub use scene::{BuildQuality, Hit, Scene};
 pub use surfaces::Surfaces;
-pub use transfer::bake_transfer;
+pub use transfer::{bake_transfer, bake_transfer_receivers};
 
 use crate::sh;
 

@@ -29,7 +29,7 @@ use std::path::Path;
 
 pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
 pub use error::{BundleError, Tag};
-pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16};
+pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
 pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
 
 use container::{write_container, Container};
