@@ -190,6 +190,20 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Sweep rays, direction pattern, sampling, SH order and bounces on analytic scenes and the
+    /// demo cabin; write speed-accuracy.csv/.svg and an equal-time summary.
+    Chart {
+        /// Output folder (the cabin reference bake is cached here).
+        #[arg(short, long, default_value = "chart-out")]
+        output: PathBuf,
+        /// A small sweep (seconds), for tests.
+        #[arg(long)]
+        quick: bool,
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Generate the demo cabin, bake it in window mode and write a bundle and a summary.
     Demo {
         /// Output folder.
@@ -309,6 +323,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Verify { rays, seed, threads, json } => {
             cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)
         }
+        Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
     }
 }

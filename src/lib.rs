@@ -8,6 +8,7 @@
 pub mod bake;
 pub mod budget;
 pub mod bundle;
+pub mod chart;
 pub mod clean;
 pub mod cli;
 pub mod fixtures;

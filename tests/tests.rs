@@ -2,7 +2,9 @@
 
 mod analytic;
 mod bake_props;
+mod chart;
 mod clean_props;
 mod cli;
+mod stability;
 mod storage;
 mod util;
