@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use prtbake::bake::{BakeParams, Channels, DirectionPattern, Mode, Sampling};
+use prtbake::bundle::Quantization;
 use prtbake::clean::{CleanParams, Tolerance};
 use prtbake::cli::{self, Outcome};
 use prtbake::mesh::UpAxis;
@@ -28,6 +29,16 @@ enum Up {
 enum SamplingArg {
     Interior,
     Vertex,
+}
+
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
+enum QuantizeArg {
+    F32,
+    F16,
+    I16,
+    /// f16 grey transfer and one f16 tint per channel (rank-one colour; lossy, measured).
+    F16Tinted,
+    Auto,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -87,6 +98,26 @@ struct BakeArgs {
     /// estimation; better for small distant windows, worse for large close ones).
     #[arg(long)]
     window_sampling: bool,
+    /// Transfer storage: f32, f16, i16 (per-vertex scale), f16-tinted (grey + per-channel tint), or auto (smallest within --max-error,
+    /// or within 0.1% shaded error without it).
+    /// [default: f32, or auto with --max-error]
+    #[arg(long, value_enum)]
+    quantize: Option<QuantizeArg>,
+    /// Error budget, relative RMS of shaded radiance under reference skies (e.g. 0.01 = 1%):
+    /// stores the lowest SH order, fewest channels and smallest quantization within it, and records
+    /// the choice and its measured error in the bundle. Implies --quantize auto unless given.
+    #[arg(long, value_name = "E")]
+    max_error: Option<f64>,
+    /// Store only triangles visible from this box, MINX,MINY,MINZ,MAXX,MAXY,MAXZ (world units, Y up
+    /// after --up), found by ray casting; occlusion and bounces still use the whole scene.
+    #[arg(long, value_name = "BOX", allow_hyphen_values = true)]
+    view_box: Option<String>,
+    /// Viewpoints sampled in the view box.
+    #[arg(long, default_value_t = 256)]
+    view_points: u32,
+    /// Rays per viewpoint (≤ 65536).
+    #[arg(long, default_value_t = 16384)]
+    view_rays: u32,
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
@@ -322,6 +353,20 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Sweep rays, direction pattern, sampling, SH order and bounces on analytic scenes and the
+    /// demo cabin; write speed-accuracy.csv/.svg and an equal-time summary.
+    Chart {
+        /// Output folder (the cabin reference bake is cached here).
+        #[arg(short, long, default_value = "chart-out")]
+        output: PathBuf,
+        /// A small sweep (seconds), for tests.
+        #[arg(long)]
+        quick: bool,
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Generate the demo cabin, bake it in window mode and write a bundle and a summary.
     Demo {
         /// Output folder.
@@ -400,6 +445,20 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         ..BakeParams::default()
     };
     params.check()?;
+    if let Some(e) = a.max_error {
+        if !(e.is_finite() && e >= 0.0) {
+            anyhow::bail!("--max-error {e}: expected a finite error ≥ 0 (e.g. 0.01 for 1%)");
+        }
+    }
+    // --max-error alone lets the quantization be chosen too.
+    let quantize = match a.quantize {
+        None if a.max_error.is_some() => None,
+        None | Some(QuantizeArg::F32) => Some(Quantization::F32),
+        Some(QuantizeArg::F16) => Some(Quantization::F16),
+        Some(QuantizeArg::I16) => Some(Quantization::I16PerVertexScale),
+        Some(QuantizeArg::F16Tinted) => Some(Quantization::F16Tinted),
+        Some(QuantizeArg::Auto) => None,
+    };
     Ok(cli::bake_cmd::BakeConfig {
         input: a.mesh,
         output: a.output,
@@ -409,6 +468,18 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         threads: a.threads,
         json: a.json,
         clean: a.clean.then(CleanParams::cad),
+        storage: cli::bake_cmd::StorageRequest { quantize, max_error: a.max_error },
+        view_box: match &a.view_box {
+            Some(text) => {
+                let view_box = prtbake::bake::cull::ViewBox::parse(text).map_err(anyhow::Error::msg)?;
+                if a.view_points == 0 || a.view_rays == 0 || a.view_rays > 65536 {
+                    anyhow::bail!("--view-points must be ≥ 1 and --view-rays in 1..=65536");
+                }
+                let params = prtbake::bake::cull::CullParams { points: a.view_points, rays_per_point: a.view_rays, seed: a.seed, ..Default::default() };
+                Some((view_box, params))
+            }
+            None => None,
+        },
     })
 }
 
@@ -544,6 +615,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Verify { rays, seed, threads, json } => {
             cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)
         }
+        Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),
         Command::Export { bundle, output, layer, json } => {

@@ -6,7 +6,9 @@
 //! ARCHITECTURE.md.
 
 pub mod bake;
+pub mod budget;
 pub mod bundle;
+pub mod chart;
 pub mod clean;
 pub mod cli;
 pub mod fixtures;

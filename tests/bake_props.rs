@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 use prtbake::bake::{bake_mesh, scene, BakeParams, BuildQuality, Mode, Sampling, Scene};
-use prtbake::mesh::{Material, MaterialRole, Mesh};
+use prtbake::mesh::{MaterialRole, Mesh};
 use prtbake::verify::shapes;
 
 fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
@@ -56,24 +56,7 @@ fn bvh_queries_match_brute_force() {
     assert!(hits > 500, "only {hits} hits: the test scene is too sparse");
 }
 
-/// A floor grid and a thin slab lying on it whose edge overhangs a row of
-/// floor vertices by 2% of a cell; the leak-free reference has the slab edge
-/// pulled back off those vertices. Vertex sampling darkens the covered row;
-/// interior sampling (with inside-geometry rejection) does not (seed 000 fig. 2).
-fn covered_floor(overhang: f32) -> (Mesh, Vec<usize>) {
-    let cells = 20;
-    let size = 2.0;
-    let cell = size / cells as f32;
-    let mut mesh = shapes::plane_grid(cells, size);
-    // Vertices of the column x = 0 (i = 10) are the covered row.
-    let covered: Vec<usize> = (0..=cells as usize).map(|j| j * (cells as usize + 1) + cells as usize / 2).collect();
-    // Slab from x = −0.6 to x = +overhang (past the row at x = 0 when overhang > 0), 1 cm thick, on the floor.
-    let (lo, hi) = (Vec3::new(-0.6, 0.0, -0.8), Vec3::new(overhang * cell, 0.01, 0.8));
-    let mut slab = prtbake::fixtures::builder::MeshBuilder::new(vec![Material::opaque("slab", 0.5)]);
-    slab.cuboid("slab", lo, hi, 40.0, 0);
-    shapes::append(&mut mesh, &slab.mesh);
-    (mesh, covered)
-}
+use shapes::covered_floor;
 
 #[test]
 fn interior_sampling_cures_covered_vertices() {

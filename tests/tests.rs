@@ -2,10 +2,13 @@
 
 mod analytic;
 mod bake_props;
+mod chart;
 mod clean_props;
 mod cli;
 mod export;
 mod sun;
+mod stability;
+mod storage;
 mod util;
 #[cfg(feature = "viewer")]
 mod view;

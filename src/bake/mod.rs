@@ -3,6 +3,7 @@
 //! arrays and statistics.
 
 pub mod hugepages;
+pub mod cull;
 pub mod progress;
 pub mod sampling;
 pub mod scene;
@@ -14,7 +15,7 @@ pub use sampling::DirectionPattern;
 pub use scene::{BuildQuality, Hit, Scene};
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
-pub use transfer::bake_transfer;
+pub use transfer::{bake_transfer, bake_transfer_receivers};
 
 use crate::sh;
 
@@ -207,6 +208,31 @@ pub fn peak_memory_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
+/// What the baker needs of a mesh: finite coordinates (NaN or infinity would
+/// poison the BVH build; loaders refuse them too, but meshes built in code
+/// reach here directly), indices in range, one normal per vertex, one material
+/// in range per triangle. UVs and colours are not read.
+pub fn check_mesh(mesh: &crate::mesh::Mesh) -> Result<(), BakeError> {
+    let bad = |m: String| Err(BakeError::Params(format!("invalid mesh: {m}")));
+    if let Some(v) = mesh.positions.iter().position(|p| !p.is_finite()) {
+        return bad(format!("vertex {v} has a non-finite coordinate {}", mesh.positions[v]));
+    }
+    if mesh.indices.len() % 3 != 0 || mesh.normals.len() != mesh.positions.len() {
+        return bad(format!("{} indices, {} normals for {} vertices", mesh.indices.len(), mesh.normals.len(), mesh.positions.len()));
+    }
+    if let Some(i) = mesh.indices.iter().position(|&i| i as usize >= mesh.positions.len()) {
+        return bad(format!("index {i} is {} but there are {} vertices", mesh.indices[i], mesh.positions.len()));
+    }
+    let triangles = mesh.triangle_count();
+    if mesh.tri_material.len() != triangles || mesh.tri_material.iter().any(|&m| m as usize >= mesh.materials.len()) {
+        return bad("a triangle has no material or one out of range".into());
+    }
+    if mesh.tri_group.len() != triangles || mesh.tri_group.iter().any(|&g| g as usize >= mesh.groups.len()) {
+        return bad("a triangle has no group or one out of range".into());
+    }
+    Ok(())
+}
+
 /// Builds the scene and surfaces for `mesh` and bakes its transfer: the one
 /// path `prtbake bake`, `verify` and the tests share.
 pub fn bake_mesh(
@@ -215,6 +241,7 @@ pub fn bake_mesh(
     window_patterns: &[String],
 ) -> Result<(TransferResult, Surfaces, f64), BakeError> {
     params.check()?;
+    check_mesh(mesh)?;
     let surfaces = Surfaces::resolve(mesh, window_patterns)?;
     let scene = Scene::build(mesh, BuildQuality::Medium);
     let build_seconds = scene.build_time.as_secs_f64();

@@ -176,13 +176,36 @@ pub fn bake_transfer(
     surfaces: &Surfaces,
     params: &BakeParams,
 ) -> Result<TransferResult, BakeError> {
+    bake_transfer_receivers(mesh, scene, surfaces, params, None)
+}
+
+/// [`bake_transfer`] with rays shot only from the triangles flagged in
+/// `receivers` (one flag per triangle; `None` = all), while every triangle
+/// still occludes: the view-box culling of seed 001 §5 ("precomputing shadows
+/// we use the whole dataset"). A kept triangle gets exactly the samples and
+/// rays it gets in a full bake (the sample density is that of the full mesh);
+/// vertices touching no receiver get zero. Bounces ≥ 1 gather from hit
+/// triangles' previous bounce, which is zero on non-receivers: pass `None`
+/// when bounces follow, or accept that light.
+///
+/// Precondition: `receivers`, if given, has one entry per triangle.
+pub fn bake_transfer_receivers(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    params: &BakeParams,
+    receivers: Option<&[bool]>,
+) -> Result<TransferResult, BakeError> {
     params.check()?;
+    if receivers.is_some_and(|r| r.len() != mesh.triangle_count()) {
+        return Err(BakeError::Params("receiver flags do not match the triangle count".into()));
+    }
     let started = Instant::now();
     let order = params.order;
     let coeffs = sh::coeff_count(order);
     let channels = params.channel_count(surfaces);
     let vertex_count = mesh.vertex_count();
-    let items = build_items(mesh, surfaces, params);
+    let items = build_items(mesh, surfaces, params, receivers);
     let point_count = items.point_count();
     let mut stats = BakeStats {
         triangles: mesh.triangle_count() as u64,
@@ -314,12 +337,13 @@ pub fn bake_transfer(
 
 /// Lists the work items: triangles that are neither windows nor degenerate
 /// (interior sampling), or vertices of such triangles (vertex sampling).
-fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams) -> Items {
+fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams, receivers: Option<&[bool]>) -> Items {
     let sampled = sampled_triangles(mesh, surfaces);
+    let receives = |t: u32| receivers.is_none_or(|r| r[t as usize]);
     match params.sampling {
         Sampling::Vertex => {
             let mut used = vec![false; mesh.vertex_count()];
-            for &t in &sampled {
+            for &t in sampled.iter().filter(|&&t| receives(t)) {
                 for v in mesh.triangle(t as usize) {
                     used[v as usize] = true;
                 }
@@ -327,8 +351,18 @@ fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams) -> Items {
             Items::Vertex { vertices: (0..mesh.vertex_count() as u32).filter(|&v| used[v as usize]).collect() }
         }
         Sampling::Interior { samples_per_vertex, max_per_triangle } => {
+            // Density comes from the whole scene, so a culled bake samples its
+            // kept triangles exactly as a full bake would.
             let layout = interior_layout(mesh, sampled, samples_per_vertex, max_per_triangle);
-            Items::Interior { triangles: layout.triangles, counts: layout.counts, first_sample: layout.first_sample }
+            let (triangles, counts): (Vec<u32>, Vec<u32>) =
+                layout.triangles.iter().zip(&layout.counts).filter(|(&t, _)| receives(t)).map(|(&t, &c)| (t, c)).unzip();
+            let mut first_sample = Vec::with_capacity(counts.len());
+            let mut next = 0u32;
+            for &c in &counts {
+                first_sample.push(next);
+                next += c;
+            }
+            Items::Interior { triangles, counts, first_sample }
         }
     }
 }

@@ -32,7 +32,7 @@ use std::path::Path;
 pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
 pub use error::{BundleError, Tag};
 pub use export_gltf::{export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX};
-pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16};
+pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
 pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
 
 use container::{write_container, Container};

@@ -40,11 +40,60 @@ pub fn dequantize_i16(q: i16, scale: f32) -> f32 {
     (q as f64 * scale as f64) as f32
 }
 
+/// The rank-one colour split of one vertex's `channels × n` values (see
+/// [`Quantization::F16Tinted`]): tints `k_c = t_c0 / g_0` and the grey mean `g`,
+/// before f16 rounding. Tints fall back to 1 where `g_0` is not positive or a
+/// ratio is not finite or beyond f16.
+pub fn tint_split(values: &[f32], channels: usize) -> (Vec<f32>, Vec<f32>) {
+    let channels = channels.max(1);
+    let n = values.len() / channels;
+    let g: Vec<f32> = (0..n).map(|i| (0..channels).map(|c| values[c * n + i]).sum::<f32>() / channels as f32).collect();
+    let tints = (0..channels)
+        .map(|c| {
+            let k = if n > 0 && g[0] > 0.0 { values[c * n] / g[0] } else { 1.0 };
+            if k.is_finite() && k.abs() <= 65504.0 { k } else { 1.0 }
+        })
+        .collect();
+    (tints, g)
+}
+
+/// What a reader gets back for `data` stored with `q` (`stride` values per
+/// vertex, `channels` channels).
+pub fn round_trip(data: &[f32], stride: usize, channels: usize, q: Quantization) -> Vec<f32> {
+    let stride = stride.max(1);
+    let h = |v: f32| f16::from_f32(v).to_f32();
+    match q {
+        Quantization::F32 => data.to_vec(),
+        Quantization::F16 => data.iter().map(|&v| h(v)).collect(),
+        Quantization::I16PerVertexScale => data
+            .chunks(stride)
+            .flat_map(|vertex| {
+                let s = i16_scale(vertex);
+                vertex.iter().map(move |&v| dequantize_i16(quantize_i16(v, s), s))
+            })
+            .collect(),
+        Quantization::F16Tinted => data
+            .chunks(stride)
+            .flat_map(|vertex| {
+                let (k, g) = tint_split(vertex, channels);
+                k.into_iter().flat_map(move |k| g.clone().into_iter().map(move |g| h(k) * h(g)))
+            })
+            .collect(),
+    }
+}
+
 /// Appends one layer's quantized data (V·stride values) in the layout above.
 ///
-/// Precondition: `data.len()` is a multiple of `stride` (callers check), `stride ≥ 1`.
-pub(crate) fn encode_layer(data: &[f32], stride: usize, q: Quantization, out: &mut Vec<u8>) {
+/// Precondition: `data.len()` is a multiple of `stride` (callers check), `stride ≥ 1`,
+/// and of `channels` for [`Quantization::F16Tinted`].
+pub(crate) fn encode_layer(data: &[f32], stride: usize, channels: usize, q: Quantization, out: &mut Vec<u8>) {
     match q {
+        Quantization::F16Tinted => {
+            for vertex in data.chunks(stride.max(1)) {
+                let (k, g) = tint_split(vertex, channels);
+                k.iter().chain(&g).for_each(|&v| put_u16(out, f16::from_f32(v).to_bits()));
+            }
+        }
         Quantization::F32 => data.iter().for_each(|&v| put_f32(out, v)),
         Quantization::F16 => data.iter().for_each(|&v| put_u16(out, f16::from_f32(v).to_bits())),
         Quantization::I16PerVertexScale => {
@@ -59,9 +108,13 @@ pub(crate) fn encode_layer(data: &[f32], stride: usize, q: Quantization, out: &m
 }
 
 /// Bytes one encoded layer occupies (with padding), or `None` on overflow.
-pub(crate) fn layer_bytes(vertex_count: u64, stride: u64, q: Quantization) -> Option<u64> {
+pub(crate) fn layer_bytes(vertex_count: u64, stride: u64, channels: u64, q: Quantization) -> Option<u64> {
     let values = vertex_count.checked_mul(stride)?;
     let raw = match q {
+        Quantization::F16Tinted => {
+            let grey = if channels == 0 || stride % channels != 0 { return None } else { stride / channels };
+            vertex_count.checked_mul(channels.checked_add(grey)?)?.checked_mul(2)?
+        }
         Quantization::F32 => values.checked_mul(4)?,
         Quantization::F16 => values.checked_mul(2)?,
         Quantization::I16PerVertexScale => vertex_count.checked_mul(4)?.checked_add(values.checked_mul(2)?)?,
@@ -71,9 +124,23 @@ pub(crate) fn layer_bytes(vertex_count: u64, stride: u64, q: Quantization) -> Op
 
 /// Reads one layer written by [`encode_layer`] and dequantizes it. Refuses
 /// non-finite values, negative or non-finite scales and the i16 code −32768.
-pub(crate) fn decode_layer(cur: &mut Cursor, vertex_count: u64, stride: u64, q: Quantization) -> Result<Vec<f32>, BundleError> {
+pub(crate) fn decode_layer(cur: &mut Cursor, vertex_count: u64, stride: u64, channels: u64, q: Quantization) -> Result<Vec<f32>, BundleError> {
     let values = vertex_count.checked_mul(stride).ok_or_else(|| cur.error("transfer size overflows"))?;
     let data = match q {
+        Quantization::F16Tinted => {
+            // layer_bytes already checked the length and that channels divides stride.
+            let (c, n) = (channels as usize, (stride / channels.max(1)) as usize);
+            let words = cur.u16s(vertex_count * (channels + stride / channels.max(1)), "tinted f16 transfer values")?;
+            let h = |b: u16| f16::from_bits(b).to_f32();
+            let mut out = Vec::with_capacity(values as usize);
+            for vertex in words.chunks_exact(c + n) {
+                let (k, g) = vertex.split_at(c);
+                for &k in k {
+                    out.extend(g.iter().map(|&g| h(k) * h(g)));
+                }
+            }
+            out
+        }
         Quantization::F32 => cur.f32s(values, "f32 transfer values")?,
         Quantization::F16 => {
             cur.u16s(values, "f16 transfer values")?.into_iter().map(|b| f16::from_bits(b).to_f32()).collect()
@@ -108,13 +175,8 @@ pub fn quantization_error(data: &[f32], channels: u32, order: u32, q: Quantizati
     let mut max_abs = 0.0f64;
     let mut sum_sq = 0.0f64;
     for values in data.chunks(stride) {
-        let scale = i16_scale(values);
-        for &v in values {
-            let back = match q {
-                Quantization::F32 => v,
-                Quantization::F16 => f16::from_f32(v).to_f32(),
-                Quantization::I16PerVertexScale => dequantize_i16(quantize_i16(v, scale), scale),
-            };
+        let back = round_trip(values, stride, channels as usize, q);
+        for (&v, &back) in values.iter().zip(&back) {
             let err = (v as f64 - back as f64).abs();
             max_abs = if err.is_nan() { f64::NAN } else { max_abs.max(err) };
             sum_sq += err * err;
@@ -190,20 +252,36 @@ mod tests {
 
     #[test]
     fn quantization_error_matches_codec_round_trip() {
-        let data = spread_values(9 * 40);
-        for q in [Quantization::F32, Quantization::F16, Quantization::I16PerVertexScale] {
+        // 40 vertices of 3 channels × order 2; positive DC so tints are meaningful.
+        let mut data = spread_values(12 * 40);
+        data.chunks_mut(4).for_each(|c| c[0] = c[0].abs() + 0.5);
+        for q in [Quantization::F32, Quantization::F16, Quantization::I16PerVertexScale, Quantization::F16Tinted] {
             let mut bytes = Vec::new();
-            encode_layer(&data, 9, q, &mut bytes);
-            assert_eq!(bytes.len() as u64, layer_bytes(40, 9, q).unwrap());
-            let back = decode_layer(&mut Cursor::new(&bytes, *b"XFER"), 40, 9, q).unwrap();
+            encode_layer(&data, 12, 3, q, &mut bytes);
+            assert_eq!(bytes.len() as u64, layer_bytes(40, 12, 3, q).unwrap());
+            let back = decode_layer(&mut Cursor::new(&bytes, *b"XFER"), 40, 12, 3, q).unwrap();
+            assert_eq!(back, round_trip(&data, 12, 3, q), "{q:?}");
             let measured = data.iter().zip(&back).map(|(a, b)| (*a as f64 - *b as f64).abs()).fold(0.0, f64::max);
-            let (max_abs, rms) = quantization_error(&data, 1, 3, q);
+            let (max_abs, rms) = quantization_error(&data, 3, 2, q);
             assert_eq!(max_abs, measured, "{q:?}");
             assert!(rms <= max_abs);
             if q == Quantization::F32 {
                 assert_eq!(back, data);
             }
         }
+    }
+
+    /// A vertex whose channels differ only by scale survives the tint exactly (to f16).
+    #[test]
+    fn tint_is_exact_for_scaled_channels() {
+        let g = [0.3f32, -0.1, 0.05, 0.02];
+        let data: Vec<f32> = [1.0f32, 0.5, 0.25].iter().flat_map(|k| g.iter().map(move |x| k * x)).collect();
+        let back = round_trip(&data, 12, 3, Quantization::F16Tinted);
+        for (a, b) in data.iter().zip(&back) {
+            assert!((a - b).abs() <= 2e-3 * a.abs().max(1e-3), "{a} vs {b}");
+        }
+        let (k, _) = tint_split(&[0.0; 12], 3);
+        assert_eq!(k, vec![1.0; 3]);
     }
 
     #[test]

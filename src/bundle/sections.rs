@@ -241,14 +241,14 @@ pub(crate) fn encode_transfer(t: &Transfer, vertex_count: usize) -> Result<Vec<u
         if let Some(j) = layer.data.iter().position(|v| !v.is_finite()) {
             return Err(invalid(format!("transfer layer {i} value {j} is not finite ({})", layer.data[j])));
         }
-        if t.quantization == Quantization::F16 {
+        if matches!(t.quantization, Quantization::F16 | Quantization::F16Tinted) {
             if let Some(j) = layer.data.iter().position(|v| !half::f16::from_f32(*v).is_finite()) {
                 return Err(invalid(format!("transfer layer {i} value {j} ({}) overflows f16", layer.data[j])));
             }
         }
         put_u32(&mut out, code);
         put_u32(&mut out, 0);
-        encode_layer(&layer.data, stride as usize, t.quantization, &mut out);
+        encode_layer(&layer.data, stride as usize, t.channels as usize, t.quantization, &mut out);
     }
     Ok(out)
 }
@@ -265,7 +265,7 @@ pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules)
     }
     let v = vertex_count as u64;
     let stride = (channels as u64).checked_mul((order as u64) * (order as u64));
-    let per_layer = stride.and_then(|s| layer_bytes(v, s, quantization)).and_then(|n| n.checked_add(8));
+    let per_layer = stride.and_then(|s| layer_bytes(v, s, channels as u64, quantization)).and_then(|n| n.checked_add(8));
     let expected = per_layer.and_then(|n| n.checked_mul(layer_count));
     check_exact_len(&cur, expected, || {
         format!("{layer_count} {} layers of order {order} × {channels} channels for {v} vertices", quantization.name())
@@ -282,7 +282,7 @@ pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules)
         if layers.iter().any(|l| l.kind == kind) {
             return Err(cur.error(format!("layer kind {kind:?} appears twice")));
         }
-        let data = decode_layer(&mut cur, v, stride, quantization)?;
+        let data = decode_layer(&mut cur, v, stride, channels as u64, quantization)?;
         layers.push(TransferLayer { kind, data });
     }
     cur.finish()?;

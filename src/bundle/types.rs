@@ -118,6 +118,12 @@ pub enum Quantization {
     /// Per vertex, scale s = max|v| / 32767 (f32) and values round(v / s) in
     /// −32767..=32767; |error| ≤ s/2 + half an f32 ulp of the result. On disk: 2.
     I16PerVertexScale,
+    /// Rank-one colour: per vertex one grey f16 vector `g` (the mean of the
+    /// channels) and one f16 tint `k_c` per channel (`t_c0 / g_0`, exact in
+    /// DC), decoded as `t_ci = k_c · g_i`. Lossy beyond quantization wherever
+    /// the channels differ in shape, not only in scale: measure it (see
+    /// `budget`). 2·(C + n²) bytes per vertex. On disk: 3.
+    F16Tinted,
 }
 
 impl Quantization {
@@ -127,6 +133,7 @@ impl Quantization {
             Quantization::F32 => 0,
             Quantization::F16 => 1,
             Quantization::I16PerVertexScale => 2,
+            Quantization::F16Tinted => 3,
         }
     }
     /// Inverse of [`Quantization::code`]; `None` for unknown codes.
@@ -135,15 +142,17 @@ impl Quantization {
             0 => Some(Quantization::F32),
             1 => Some(Quantization::F16),
             2 => Some(Quantization::I16PerVertexScale),
+            3 => Some(Quantization::F16Tinted),
             _ => None,
         }
     }
-    /// Short lowercase name for reports: `f32`, `f16`, `i16`.
+    /// Short lowercase name for reports: `f32`, `f16`, `i16`, `f16-tinted`.
     pub fn name(self) -> &'static str {
         match self {
             Quantization::F32 => "f32",
             Quantization::F16 => "f16",
             Quantization::I16PerVertexScale => "i16",
+            Quantization::F16Tinted => "f16-tinted",
         }
     }
 }

@@ -43,6 +43,8 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         threads,
         json: as_json,
         clean: None,
+        storage: Default::default(),
+        view_box: None,
     };
     let report = bake_to_bundle(&mesh, &config, json!({ "source": "demo cabin", "defects_injected": defects, "clean": clean_report }))?;
     let s = &report.result.stats;

@@ -3,6 +3,7 @@
 //! prints them and exits 2 (a failed check exits 1).
 
 pub mod bake_cmd;
+pub mod chart_cmd;
 pub mod clean_cmd;
 pub mod demo_cmd;
 pub mod export_cmd;

@@ -131,7 +131,7 @@ pub fn unoccluded_sphere(order: usize, v: VerifyParams) -> Result<Check, BakeErr
 
 /// Exact transfer of a point with normal +Y under a sphere (centre `c`, radius `r`):
 /// (Â_l/π)·y(n) minus the cap's cosine-weighted projection, by quadrature.
-fn plane_point_reference(order: usize, x: DVec3, c: DVec3, r: f64) -> Vec<f64> {
+pub fn plane_point_reference(order: usize, x: DVec3, c: DVec3, r: f64) -> Vec<f64> {
     let n = DVec3::Y;
     let pi = std::f64::consts::PI;
     let y_n = basis_f64(order, n);

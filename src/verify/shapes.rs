@@ -155,6 +155,24 @@ pub fn integrating_sphere(subdivisions: u32, albedo: f32, cap_height: f32, openi
     (mesh, cap_area / (cap_area + wall_area))
 }
 
+/// A floor grid (20×20 cells, side 2) and a 1 cm slab lying on it whose edge
+/// passes `overhang` cells beyond the floor vertex column at x = 0 (negative:
+/// short of it). With a positive overhang those vertices are covered: every
+/// ray from them starts under the slab (seed 000 fig. 2). Returns the mesh and
+/// the covered column's vertex indices.
+pub fn covered_floor(overhang: f32) -> (Mesh, Vec<usize>) {
+    let cells = 20;
+    let size = 2.0;
+    let cell = size / cells as f32;
+    let mut mesh = plane_grid(cells, size);
+    let covered: Vec<usize> = (0..=cells as usize).map(|j| j * (cells as usize + 1) + cells as usize / 2).collect();
+    let (lo, hi) = (Vec3::new(-0.6, 0.0, -0.8), Vec3::new(overhang * cell, 0.01, 0.8));
+    let mut slab = crate::fixtures::builder::MeshBuilder::new(vec![Material::opaque("slab", 0.5)]);
+    slab.cuboid("slab", lo, hi, 40.0, 0);
+    append(&mut mesh, &slab.mesh);
+    (mesh, covered)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,257 @@
+//! "No more data than a scene needs": the storage of a baked transfer (SH
+//! order, colour channels, quantization) chosen from an error budget and
+//! measured, so a bundle records what it dropped and what that cost.
+//!
+//! **Error in shaded radiance.** For a transfer `t` (per vertex, channel,
+//! coefficient) and a lighting `L` (RGB SH), the shaded radiance per unit
+//! albedo is `R_vc = Σ_i L_ic · t_vc'i` (c' = c for 3 channels, 0 for one).
+//! A storage choice gives `R'`; its error under `L` is the relative RMS
+//! `sqrt(Σ_vc (R'−R)²) / sqrt(Σ_vc R²)` over every vertex and colour channel.
+//! The reported error is the worst over [`reference_lightings`]: clear
+//! Preetham skies (sun disc excluded, black ground) at three elevations and
+//! four azimuths, so a reduction that only holds for one sky does not pass.
+//! The reference is the baked transfer itself (sampling noise is not counted).
+
+use glam::Vec3;
+
+use crate::bundle::{self, Quantization};
+use crate::sh;
+
+/// A lighting to measure shaded error under: RGB SH, `order²` entries.
+#[derive(Clone, Debug)]
+pub struct Lighting {
+    pub name: String,
+    pub sh: Vec<[f32; 3]>,
+}
+
+/// Clear skies at sun elevations 10°, 35° and 65° and azimuths 0°, 90°,
+/// 180°, 270° (world +Y up), projected to `order` (Preetham, turbidity 3).
+pub fn reference_lightings(order: usize) -> Vec<Lighting> {
+    let mut out = Vec::new();
+    for (k, elevation) in [10.0f32, 35.0, 65.0].into_iter().enumerate() {
+        let azimuth = 90.0 * k as f32 + 30.0;
+        for turn in 0..4 {
+            let a = (azimuth + 90.0 * turn as f32).to_radians();
+            let e = elevation.to_radians();
+            let sun = Vec3::new(e.cos() * a.sin(), e.sin(), -e.cos() * a.cos());
+            let sky = crate::sky::preetham_sky(sun, Vec3::Y, 3.0, order);
+            out.push(Lighting { name: format!("sky elevation {elevation}° azimuth {:.0}°", (azimuth + 90.0 * turn as f32) % 360.0), sh: sky.sky_sh });
+        }
+    }
+    out
+}
+
+/// Shaded radiance per unit albedo of every vertex and colour channel
+/// (`[vertex][rgb]`) of a transfer with `channels` (1 or 3) and `order`.
+/// Bands of `light` beyond `order` are ignored (they meet zero transfer).
+pub fn shade(transfer: &[f32], order: usize, channels: usize, light: &[[f32; 3]]) -> Vec<[f64; 3]> {
+    let n = sh::coeff_count(order);
+    let stride = channels * n;
+    transfer
+        .chunks_exact(stride.max(1))
+        .map(|v| {
+            let mut rgb = [0.0f64; 3];
+            for (c, out) in rgb.iter_mut().enumerate() {
+                let t = &v[if channels == 1 { 0 } else { c * n }..][..n];
+                *out = t.iter().zip(light).map(|(&t, l)| t as f64 * l[c] as f64).sum();
+            }
+            rgb
+        })
+        .collect()
+}
+
+/// Relative RMS difference of two shadings (see the module doc); 0 when both are zero.
+pub fn relative_rms(reference: &[[f64; 3]], other: &[[f64; 3]]) -> f64 {
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (a, b) in reference.iter().zip(other) {
+        for c in 0..3 {
+            num += (b[c] - a[c]).powi(2);
+            den += a[c] * a[c];
+        }
+    }
+    if den == 0.0 {
+        if num == 0.0 { 0.0 } else { f64::INFINITY }
+    } else {
+        (num / den).sqrt()
+    }
+}
+
+/// How a transfer is stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Storage {
+    pub order: usize,
+    pub channels: usize,
+    #[serde(serialize_with = "quantization_name")]
+    pub quantization: Quantization,
+}
+
+fn quantization_name<S: serde::Serializer>(q: &Quantization, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(q.name())
+}
+
+/// Bytes one vertex of one stored layer takes (i16 includes its per-vertex scale;
+/// the 4-byte padding of a whole layer is not counted).
+pub fn bytes_per_vertex(s: &Storage) -> usize {
+    let values = s.channels * s.order * s.order;
+    match s.quantization {
+        Quantization::F32 => 4 * values,
+        Quantization::F16 => 2 * values,
+        Quantization::I16PerVertexScale => 4 + 2 * values,
+        Quantization::F16Tinted => 2 * (s.channels + s.order * s.order),
+    }
+}
+
+/// Turns a transfer of `(order, channels)` into the values `storage` keeps:
+/// bands ≥ `storage.order` dropped, channels averaged to one when
+/// `storage.channels == 1`. Quantization is not applied here.
+///
+/// Precondition: `storage.order ≤ order`, `storage.channels` is `channels` or 1.
+pub fn reduce(transfer: &[f32], order: usize, channels: usize, storage: &Storage) -> Vec<f32> {
+    let n = sh::coeff_count(order);
+    let m = sh::coeff_count(storage.order);
+    let mut out = Vec::with_capacity(transfer.len() / (n * channels).max(1) * m * storage.channels);
+    for v in transfer.chunks_exact((channels * n).max(1)) {
+        if storage.channels == channels {
+            for c in 0..channels {
+                out.extend_from_slice(&v[c * n..][..m]);
+            }
+        } else {
+            out.extend((0..m).map(|i| (0..channels).map(|c| v[c * n + i]).sum::<f32>() / channels as f32));
+        }
+    }
+    out
+}
+
+/// What a reader gets back for `values` stored as `storage`.
+pub fn round_trip(values: &[f32], storage: &Storage) -> Vec<f32> {
+    let stride = storage.channels * storage.order * storage.order;
+    bundle::round_trip(values, stride, storage.channels, storage.quantization)
+}
+
+/// One measured storage option.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Candidate {
+    #[serde(flatten)]
+    pub storage: Storage,
+    pub bytes_per_vertex: usize,
+    /// Worst relative RMS error in shaded radiance over the reference lightings.
+    pub shaded_error: f64,
+    /// Largest |coefficient change| from quantization alone (after reduction).
+    pub quantization_max_abs: f64,
+}
+
+/// Measures `storage` against the baked transfer `(order, channels)`.
+pub fn measure(transfer: &[f32], order: usize, channels: usize, storage: &Storage, lightings: &[Lighting]) -> Candidate {
+    let reduced = reduce(transfer, order, channels, storage);
+    let stored = round_trip(&reduced, storage);
+    let quantization_max_abs = reduced.iter().zip(&stored).map(|(a, b)| (*a as f64 - *b as f64).abs()).fold(0.0, f64::max);
+    let shaded_error = lightings
+        .iter()
+        .map(|l| relative_rms(&shade(transfer, order, channels, &l.sh), &shade(&stored, storage.order, storage.channels, &l.sh)))
+        .fold(0.0, f64::max);
+    Candidate { storage: *storage, bytes_per_vertex: bytes_per_vertex(storage), shaded_error, quantization_max_abs }
+}
+
+/// Every storage at most as rich as the bake: orders 1..=order, channels
+/// (`channels`, and 1 when `channels` > 1), the allowed quantizations.
+pub fn candidates(order: usize, channels: usize, quantizations: &[Quantization]) -> Vec<Storage> {
+    let mut out = Vec::new();
+    for o in 1..=order {
+        let mut cs = vec![channels];
+        if channels > 1 {
+            cs.push(1);
+        }
+        for c in cs {
+            for &q in quantizations {
+                // A tint only makes sense on several channels.
+                if q != Quantization::F16Tinted || c > 1 {
+                    out.push(Storage { order: o, channels: c, quantization: q });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The outcome of a budgeted choice.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Choice {
+    pub chosen: Candidate,
+    /// Error budget (relative RMS in shaded radiance), if one was given.
+    pub budget: Option<f64>,
+    /// Every option measured, in the order tried.
+    pub measured: Vec<Candidate>,
+}
+
+/// The smallest storage (bytes per vertex; ties: smaller error) whose shaded
+/// error is within `budget`, among `storages`. Falls back to the bake as is
+/// (f32) when none fits. Non-finite errors never fit.
+pub fn choose(transfer: &[f32], order: usize, channels: usize, storages: &[Storage], budget: f64, lightings: &[Lighting]) -> Choice {
+    let measured: Vec<Candidate> = storages.iter().map(|s| measure(transfer, order, channels, s, lightings)).collect();
+    let fitting = measured.iter().filter(|c| c.shaded_error <= budget).min_by(|a, b| {
+        a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error))
+    });
+    let chosen = match fitting {
+        Some(c) => c.clone(),
+        None => measure(transfer, order, channels, &Storage { order, channels, quantization: Quantization::F32 }, lightings),
+    };
+    Choice { chosen, budget: Some(budget), measured }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn smooth_transfer(vertices: usize, order: usize, channels: usize) -> Vec<f32> {
+        let n = sh::coeff_count(order);
+        let mut out = Vec::new();
+        let mut basis = vec![0.0f32; n];
+        for v in 0..vertices {
+            let a = v as f32 * 0.37;
+            let normal = Vec3::new(a.cos(), 0.5 + 0.4 * (a * 1.3).sin(), a.sin()).normalize();
+            sh::eval_basis(order, normal, &mut basis);
+            for c in 0..channels {
+                let tint = 1.0 - 0.2 * c as f32;
+                for (i, y) in basis.iter().enumerate() {
+                    let l = sh::band_of_index(i);
+                    out.push(tint * sh::clamped_cosine_kernel(l) as f32 / std::f32::consts::PI * y);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn reduce_keeps_low_bands_and_averages_channels() {
+        let t: Vec<f32> = (0..2 * 3 * 9).map(|x| x as f32).collect();
+        let r = reduce(&t, 3, 3, &Storage { order: 2, channels: 3, quantization: Quantization::F32 });
+        assert_eq!(&r[..4], &[0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(&r[4..8], &[9.0, 10.0, 11.0, 12.0]);
+        assert_eq!(r.len(), 2 * 3 * 4);
+        let g = reduce(&t, 3, 3, &Storage { order: 1, channels: 1, quantization: Quantization::F32 });
+        assert_eq!(g, vec![9.0, 36.0]);
+    }
+
+    #[test]
+    fn identity_storage_has_zero_error() {
+        let t = smooth_transfer(50, 3, 3);
+        let lights = reference_lightings(3);
+        let c = measure(&t, 3, 3, &Storage { order: 3, channels: 3, quantization: Quantization::F32 }, &lights);
+        assert_eq!(c.shaded_error, 0.0);
+        assert_eq!(c.bytes_per_vertex, 108);
+    }
+
+    #[test]
+    fn a_loose_budget_drops_bands_and_a_tight_one_keeps_f32() {
+        let t = smooth_transfer(200, 3, 3);
+        let lights = reference_lightings(3);
+        let all = candidates(3, 3, &[Quantization::F32, Quantization::F16, Quantization::I16PerVertexScale]);
+        let tight = choose(&t, 3, 3, &all, 0.0, &lights);
+        assert_eq!(tight.chosen.storage, Storage { order: 3, channels: 3, quantization: Quantization::F32 });
+        let loose = choose(&t, 3, 3, &all, 0.5, &lights);
+        assert!(loose.chosen.storage.order < 3 && loose.chosen.shaded_error <= 0.5, "{:?}", loose.chosen);
+        // f16 at full order is far below 1%.
+        let f16 = measure(&t, 3, 3, &Storage { order: 3, channels: 3, quantization: Quantization::F16 }, &lights);
+        assert!(f16.shaded_error < 1e-3, "{}", f16.shaded_error);
+    }
+}
