@@ -625,6 +625,13 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
 }
 
 fn main() -> ExitCode {
+    // Die quietly on a closed pipe (`prtbake inspect … | head`), like other Unix tools,
+    // instead of panicking on the failed write.
+    #[cfg(target_os = "linux")]
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let parsed = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

@@ -19,7 +19,7 @@ use crate::mesh::UpAxis;
 /// from bounce 0's cached hits) and matter: on the cabin, 1 bounce leaves an
 /// 18% shaded-radiance error against 3.7% for 3 (docs/speed-accuracy.md).
 pub fn demo_params(quiet: bool) -> BakeParams {
-    BakeParams { order: 3, rays: 64, bounces: 3, mode: Mode::Window, quiet, ..BakeParams::default() }
+    BakeParams { order: 3, rays: 128, bounces: 3, mode: Mode::Window, quiet, ..BakeParams::default() }
 }
 
 /// Cells per metre of the demo cabin's tessellation (≈ 3.3·10⁵ triangles).
