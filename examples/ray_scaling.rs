@@ -2,7 +2,7 @@
 //! bounces, against a high-ray reference bake of the same scene.
 //!
 //! cargo run --release --example ray_scaling -- [MESH|cabin] [--window PATTERN] [--detail D]
-//!     [--bounces B] [--reference RAYS] [--max RAYS] [--no-window-sampling]
+//!     [--bounces B] [--reference RAYS] [--max RAYS] [--window-sampling]
 //!
 //! The error is the RMS over vertices of the total DC coefficient minus the
 //! reference's (seed 2), relative to the reference's mean DC; printed as a
@@ -24,7 +24,7 @@ fn main() {
     let bounces: u32 = arg(&args, "--bounces", 2);
     let reference_rays: u32 = arg(&args, "--reference", 4096);
     let max_rays: u32 = arg(&args, "--max", 4096);
-    let window_sampling = !args.iter().any(|a| a == "--no-window-sampling");
+    let window_sampling = args.iter().any(|a| a == "--window-sampling");
     let mesh = if source == "cabin" {
         generate_cabin(detail).0
     } else {
@@ -35,7 +35,7 @@ fn main() {
         let params = BakeParams { order: 3, rays, seed, bounces, mode: Mode::Window, window_sampling, ..BakeParams::default() };
         bake_mesh(&mesh, &params, &windows).unwrap().0
     };
-    let reference = bake(reference_rays, 2, true);
+    let reference = bake(reference_rays, 2, false);
     let channels = reference.channels;
     let dc = |r: &prtbake::bake::TransferResult, v: usize| r.coefficients(v, 0)[0] as f64;
     let lit: Vec<usize> = (0..mesh.vertex_count()).filter(|&v| dc(&reference, v) > 0.0).collect();
