@@ -76,10 +76,12 @@ pub struct BakeParams {
     pub pattern: DirectionPattern,
     /// Window mode: aim bounce 0's rays at points sampled on the glass (next-event
     /// estimation) rather than relying on cosine-distributed rays finding it.
-    /// Off by default: on the demo cabin, whose windows are large and close,
-    /// it measured worse (relative RMS DC error 0.152 vs 0.091 at 64 rays); it
-    /// wins for small, distant windows. Multiple importance sampling of both
-    /// would be the cure (not done).
+    /// Off by default: the 1/r² of points next to the glass makes it very
+    /// noisy there (on the Ferrari, whose glass meets the body, the error grew
+    /// with rays), and on the demo cabin's large close windows it measured
+    /// worse (relative RMS DC 0.152 vs 0.091 at 64 rays, against a reference
+    /// baked with it). Multiple importance sampling of both would be the cure
+    /// (not done).
     pub window_sampling: bool,
     /// A sample is inside geometry when most of its probe rays hit back faces
     /// closer than this fraction of the scene diagonal.
