@@ -40,22 +40,10 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
     }
 }
 
-/// A small OBJ: a ground quad and a floating box over it.
+/// Copies fixtures/scene.obj (a ground quad and a red box floating over it)
+/// and its scene.mtl to `path` and beside it.
 pub fn write_scene_obj(path: &Path) {
-    let mut s = String::from("mtllib scene.mtl\n");
-    s += "v -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2\n";
-    // Box 0.5 on a side, 0.5 above the ground.
-    for &(x, y, z) in &[
-        (-0.25, 0.5, -0.25), (0.25, 0.5, -0.25), (0.25, 1.0, -0.25), (-0.25, 1.0, -0.25),
-        (-0.25, 0.5, 0.25), (0.25, 0.5, 0.25), (0.25, 1.0, 0.25), (-0.25, 1.0, 0.25),
-    ] {
-        s += &format!("v {x} {y} {z}\n");
-    }
-    s += "o ground\nusemtl grey\nf 1 4 3\nf 1 3 2\n";
-    s += "o box\nusemtl red\n";
-    for f in [[5, 7, 6], [5, 8, 7], [9, 10, 11], [9, 11, 12], [5, 6, 10], [5, 10, 9], [8, 12, 11], [8, 11, 7], [5, 9, 12], [5, 12, 8], [6, 7, 11], [6, 11, 10]] {
-        s += &format!("f {} {} {}\n", f[0], f[1], f[2]);
-    }
-    std::fs::write(path, s).unwrap();
-    std::fs::write(path.with_file_name("scene.mtl"), "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl red\nKd 0.8 0.2 0.2\n").unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+    std::fs::copy(fixtures.join("scene.obj"), path).unwrap();
+    std::fs::copy(fixtures.join("scene.mtl"), path.with_file_name("scene.mtl")).unwrap();
 }
