@@ -47,10 +47,10 @@ fn pool(threads: usize) -> rayon::ThreadPool {
 fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     let mut group = c.benchmark_group(format!("build/{name}"));
     group.sample_size(10);
-    group.bench_function("cwbvh_medium", |b| b.iter(|| Scene::build(mesh, BuildQuality::Medium)));
+    group.bench_function("cwbvh_medium", |b| b.iter(|| Scene::build(mesh, BuildQuality::Sah)));
     group.finish();
 
-    let scene = Scene::build(mesh, BuildQuality::Medium);
+    let scene = Scene::build(mesh, BuildQuality::Sah);
     let rays = workload(mesh, &scene);
     let mut group = c.benchmark_group(format!("trace/{name}"));
     group.sample_size(10);

@@ -36,7 +36,7 @@ fn main() {
         load_mesh(source.as_ref(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh
     };
     let start = Instant::now();
-    let scene = Scene::build(&mesh, BuildQuality::Medium);
+    let scene = Scene::build(&mesh, BuildQuality::Sah);
     let build = start.elapsed().as_secs_f64();
 
     // Sample points: centroids of an even spread of triangles, in mesh order.

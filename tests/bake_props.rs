@@ -2,7 +2,7 @@
 //! side-blind window mode.
 
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, scene, BakeParams, BuildQuality, Mode, Sampling, Scene};
+use prtbake::bake::{bake_mesh, scene, BakeParams, BuildQuality, Mode, Sampling, Scene, Traversal};
 use prtbake::mesh::{MaterialRole, Mesh};
 use prtbake::verify::shapes;
 
@@ -26,34 +26,87 @@ fn bake_is_identical_for_any_thread_count() {
     }
 }
 
-/// Every ray of a random set against brute force: the BVH's closest hit and
-/// occlusion agree with testing every triangle.
+/// Every ray of a random set against brute force, on every traversal path
+/// (AVX2 when the CPU has it, and portable): closest hit, occlusion and the
+/// cached occlusion agree with testing every triangle. A fifth of the rays
+/// are axis-parallel, which exercises the box test's inverse guard, and the
+/// scene has flat axis-aligned boxes (the plane) and a closed shape.
 #[test]
 fn bvh_queries_match_brute_force() {
     let mut mesh = shapes::plane_grid(16, 4.0);
     let mut sphere = shapes::icosphere(2);
     shapes::transform(&mut sphere, 0.7, Vec3::new(0.3, 0.9, -0.2));
     shapes::append(&mut mesh, &sphere);
-    let scene = Scene::build(&mesh, BuildQuality::Medium);
-    let mut state = 12345u32;
-    let mut next = || {
-        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-        (state >> 8) as f32 / (1u32 << 24) as f32
-    };
-    let mut hits = 0;
-    for _ in 0..4000 {
-        let origin = Vec3::new(next() * 6.0 - 3.0, next() * 3.0 - 0.5, next() * 6.0 - 3.0);
-        let direction = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize();
-        let bvh = scene.closest_hit(origin, direction, f32::INFINITY);
-        let brute = scene::brute_force_closest(&mesh, origin, direction, f32::INFINITY);
-        assert_eq!(bvh.map(|h| h.triangle), brute.map(|b| b.0), "ray {origin} {direction}");
-        if let (Some(h), Some(b)) = (bvh, brute) {
-            assert!((h.t - b.1).abs() <= 1e-5 * b.1.max(1.0));
-            hits += 1;
-        }
-        assert_eq!(scene.occluded(origin, direction, f32::INFINITY), brute.is_some());
+    let mut scene = Scene::build(&mesh, BuildQuality::Sah);
+    let mut paths = vec![Traversal::Portable];
+    if scene.set_traversal(Traversal::Avx2) == Traversal::Avx2 {
+        paths.push(Traversal::Avx2);
+    } else {
+        eprintln!("AVX2 path not tested: this CPU lacks AVX2");
     }
-    assert!(hits > 500, "only {hits} hits: the test scene is too sparse");
+    for path in paths {
+        scene.set_traversal(path);
+        let mut state = 12345u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut hits = 0;
+        let mut hint = u32::MAX;
+        for i in 0..4000 {
+            let origin = Vec3::new(next() * 6.0 - 3.0, next() * 3.0 - 0.5, next() * 6.0 - 3.0);
+            let mut direction = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            if i % 5 == 0 {
+                direction[i / 5 % 3] = 0.0;
+            }
+            let direction = direction.normalize();
+            let bvh = scene.closest_hit(origin, direction, f32::INFINITY);
+            let brute = scene::brute_force_closest(&mesh, origin, direction, f32::INFINITY);
+            assert_eq!(bvh.map(|h| h.triangle), brute.map(|b| b.0), "{path:?}: ray {origin} {direction}");
+            if let (Some(h), Some(b)) = (bvh, brute) {
+                assert!((h.t - b.1).abs() <= 1e-5 * b.1.max(1.0));
+                hits += 1;
+            }
+            assert_eq!(scene.occluded(origin, direction, f32::INFINITY), brute.is_some(), "{path:?}");
+            assert_eq!(scene.occluded_cached(origin, direction, f32::INFINITY, &mut hint), brute.is_some(), "{path:?}");
+            let reach = next() * 3.0;
+            let brute_short = scene::brute_force_closest(&mesh, origin, direction, reach);
+            assert_eq!(scene.occluded(origin, direction, reach), brute_short.is_some(), "{path:?} reach {reach}");
+        }
+        assert!(hits > 500, "only {hits} hits: the test scene is too sparse");
+    }
+}
+
+/// Rays leaving the inside walls of a closed, finely tessellated box (the
+/// cabin's case: flat boxes, origins a hair off the surface) hit exactly
+/// what brute force hits, on every path.
+#[test]
+fn bvh_rays_from_walls_match_brute_force() {
+    let (mesh, _) = shapes::integrating_sphere(2, 0.2, 0.5, shapes::Opening::Hole);
+    let mut box_mesh = shapes::plane_grid(12, 2.0);
+    shapes::append(&mut box_mesh, &mesh);
+    let mut scene = Scene::build(&box_mesh, BuildQuality::Sah);
+    for path in [Traversal::Portable, Traversal::Avx2] {
+        if scene.set_traversal(path) != path {
+            continue;
+        }
+        let mut checked = 0;
+        for t in (0..box_mesh.triangle_count()).step_by(7) {
+            let n = scene.face_normal(t as u32);
+            let [a, b, c] = box_mesh.triangle_positions(t);
+            for k in 0..8u32 {
+                let (u1, u2) = prtbake::bake::sampling::sample_2d(prtbake::bake::DirectionPattern::Sobol, k, 0, t as u32);
+                let d = prtbake::bake::sampling::cosine_sphere(n, u1, u2);
+                let origin = scene.offset_origin((a + b + c) / 3.0, n, d);
+                let bvh = scene.closest_hit(origin, d, f32::INFINITY).map(|h| h.triangle);
+                let brute = scene::brute_force_closest(&box_mesh, origin, d, f32::INFINITY).map(|b| b.0);
+                assert_eq!(bvh, brute, "{path:?}: ray {origin} {d}");
+                assert_eq!(scene.occluded(origin, d, f32::INFINITY), brute.is_some());
+                checked += 1;
+            }
+        }
+        assert!(checked > 500);
+    }
 }
 
 use shapes::covered_floor;

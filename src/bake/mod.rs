@@ -2,9 +2,11 @@
 //! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
 //! arrays and statistics.
 
+pub mod bvh8;
 pub mod hugepages;
 pub mod cull;
 pub mod progress;
+pub mod sah;
 pub mod sampling;
 pub mod scene;
 pub mod sun;
@@ -12,7 +14,7 @@ pub mod surfaces;
 pub mod transfer;
 
 pub use sampling::DirectionPattern;
-pub use scene::{BuildQuality, Hit, Scene};
+pub use scene::{BuildQuality, Hit, Scene, Traversal};
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
 pub use transfer::{bake_transfer, bake_transfer_receivers};
@@ -245,7 +247,7 @@ pub fn bake_mesh(
     params.check()?;
     check_mesh(mesh)?;
     let surfaces = Surfaces::resolve(mesh, window_patterns)?;
-    let scene = Scene::build(mesh, BuildQuality::Medium);
+    let scene = Scene::build(mesh, BuildQuality::Sah);
     let build_seconds = scene.build_time.as_secs_f64();
     let result = bake_transfer(mesh, &scene, &surfaces, params)?;
     Ok((result, surfaces, build_seconds))

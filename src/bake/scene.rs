@@ -1,9 +1,10 @@
-//! The ray-tracing layer every pass shares: one CWBVH (obvhs) over the mesh's
-//! triangles, with the queries the bake needs: closest hit with barycentrics
-//! and facing, and occlusion (first hit ends the walk).
+//! The ray-tracing layer every pass shares: one 8-wide BVH over the mesh's
+//! triangles (built by obvhs, collapsed and walked by [`super::bvh8`]), with
+//! the queries the bake needs: closest hit with barycentrics and facing, and
+//! occlusion (first hit ends the walk), each with an AVX2 and a portable path.
 //!
 //! Triangles are copied once into BVH leaf order so traversal reads them
-//! without the `primitive_indices` indirection (obvhs `cornell_box_cwbvh.rs`).
+//! without an index indirection.
 //!
 //! Ties: real CAD models are double-sided (every surface doubled by a twin
 //! with opposite winding). Two hits closer than `tie_distance` count as one
@@ -12,15 +13,10 @@
 
 use std::time::{Duration, Instant};
 
-use glam::{UVec2, Vec3, Vec3A};
-use obvhs::{
-    cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
-    ray::Ray,
-    rt_triangle::RtTriangle,
-    traverse,
-    triangle::Triangle,
-    BvhBuildParams,
-};
+use glam::Vec3;
+use obvhs::{bvh2::{builder::build_bvh2_from_tris, leaf_collapser::collapse}, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle, BvhBuildParams};
+
+use super::bvh8::{self, Bvh8, LeafResult, Node8, NodeTest, RayBoxes, ScalarTest};
 
 use crate::mesh::Mesh;
 
@@ -38,17 +34,36 @@ pub struct Hit {
     pub back_face: bool,
 }
 
-/// Which BVH build preset to use. `Medium` minimises total bake time on the
-/// scenes we measured (the build is < 2% of a bake).
+/// Which builder makes the binary BVH that is collapsed to 8-wide nodes.
+/// `Sah` minimises total bake time on every scene we measured (the build is
+/// < 2% of a bake); `Ploc` is kept for comparison (docs/performance.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BuildQuality {
-    Fast,
-    Medium,
+    /// Top-down binned SAH ([`super::sah`]).
+    Sah,
+    /// obvhs's bottom-up PLOC with its medium preset (reinsertion on).
+    Ploc,
 }
+
+/// Which node-test code the walks run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Traversal {
+    /// Eight boxes per AVX2 instruction (x86-64 CPUs that have it).
+    Avx2,
+    /// Plain Rust, any CPU.
+    Portable,
+}
+
+/// Triangles per BVH leaf at most; the SAH leaf collapse picks smaller
+/// leaves where they pay. 4 measured best on the Ferrari (1, 2, 4, 8, 15 tried).
+const LEAF_TRIANGLES: u32 = 4;
+/// Cost of a node visit relative to one triangle test, for the leaf collapse.
+const NODE_COST: f32 = 3.0;
 
 /// A built acceleration structure over a mesh.
 pub struct Scene {
-    bvh: CwBvh,
+    nodes: Vec<Node8>,
+    traversal: Traversal,
     /// Triangles in BVH leaf order.
     leaf_triangles: Vec<RtTriangle>,
     /// Leaf order → mesh triangle index.
@@ -82,20 +97,25 @@ impl Scene {
             .iter()
             .map(|t| Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero())
             .collect();
-        let params = match quality {
-            BuildQuality::Fast => BvhBuildParams::fast_build(),
-            BuildQuality::Medium => BvhBuildParams::medium_build(),
-        };
-        let (bvh, leaf_to_mesh, leaf_triangles) = if triangles.is_empty() {
-            (CwBvh::default(), Vec::new(), Vec::new())
+        let (nodes, leaf_to_mesh, leaf_triangles) = if triangles.is_empty() {
+            (Vec::new(), Vec::new(), Vec::new())
         } else {
-            let mut bvh = build_cwbvh_from_tris(&triangles, params, &mut Duration::default());
-            let leaf_to_mesh = bvh.primitive_indices.clone();
+            let mut bvh2 = match quality {
+                BuildQuality::Sah => {
+                    let boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|t| t.aabb()).collect();
+                    super::sah::build_bvh2_sah(&boxes)
+                }
+                BuildQuality::Ploc => {
+                    let params = BvhBuildParams { max_prims_per_leaf: 1, ..BvhBuildParams::medium_build() };
+                    build_bvh2_from_tris(&triangles, params, &mut Duration::default())
+                }
+            };
+            collapse(&mut bvh2, LEAF_TRIANGLES, NODE_COST);
+            let Bvh8 { nodes, primitive_order, .. } = Bvh8::from_bvh2(&bvh2, 1);
             let leaf_triangles: Vec<RtTriangle> =
-                leaf_to_mesh.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
+                primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
             // The two arrays every ray walks: back them with huge pages.
-            bvh.nodes = super::hugepages::copy_to_huge_pages(&bvh.nodes);
-            (bvh, leaf_to_mesh, super::hugepages::copy_to_huge_pages(&leaf_triangles))
+            (super::hugepages::copy_to_huge_pages(&nodes), primitive_order, super::hugepages::copy_to_huge_pages(&leaf_triangles))
         };
         let (lo, hi) = mesh.bounds();
         let diagonal = (hi - lo).length().max(f32::MIN_POSITIVE);
@@ -105,7 +125,8 @@ impl Scene {
         let ulp_floor = max_coordinate * f32::EPSILON * 64.0;
         let origin_offset = (diagonal * 1e-6).max(ulp_floor);
         Scene {
-            bvh,
+            nodes,
+            traversal: if bvh8::avx2_available() { Traversal::Avx2 } else { Traversal::Portable },
             leaf_triangles,
             leaf_to_mesh,
             face_normals,
@@ -132,25 +153,50 @@ impl Scene {
         point + face_normal * (side * self.origin_offset)
     }
 
+    /// The node-test code the queries run.
+    pub fn traversal(&self) -> Traversal {
+        self.traversal
+    }
+
+    /// Chooses the node-test code (tests compare both paths). Asking for AVX2
+    /// on a CPU without it keeps the portable path; returns what is in use.
+    pub fn set_traversal(&mut self, traversal: Traversal) -> Traversal {
+        self.traversal = if traversal == Traversal::Avx2 && !bvh8::avx2_available() { Traversal::Portable } else { traversal };
+        self.traversal
+    }
+
     /// Closest hit along a unit `direction` from `origin` within `(0, t_max]`.
     pub fn closest_hit(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        if self.leaf_triangles.is_empty() {
-            return None;
+        #[cfg(target_arch = "x86_64")]
+        if self.traversal == Traversal::Avx2 {
+            // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
+            return unsafe { self.closest_hit_avx2(origin, direction, t_max) };
         }
-        let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
-        let mut traverse_ray = ray;
+        self.closest_hit_with::<ScalarTest>(origin, direction, t_max)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn closest_hit_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
+        self.closest_hit_with::<bvh8::Avx2Test>(origin, direction, t_max)
+    }
+
+    #[inline(always)]
+    fn closest_hit_with<T: NodeTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
+        let mut ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
         let mut best_t = f32::INFINITY;
         let mut best_leaf = u32::MAX;
         let mut best_back = false;
         let mut best_mesh = u32::MAX;
-        let mut state = self.bvh.new_traversal(ray.direction);
-        let mut node;
         let tie = self.tie_distance;
-        traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
-            let leaf = state.primitive_id;
-            let tri = &self.leaf_triangles[leaf as usize];
-            let t = tri.intersect(&traverse_ray);
-            if t.is_finite() {
+        bvh8::walk::<T, _>(&self.nodes, &self.leaf_triangles, &RayBoxes::new(origin, direction), 0.0, t_max, |first, count, walk_t_max| {
+            ray.tmax = walk_t_max;
+            for leaf in first..first + count {
+                let tri = &self.leaf_triangles[leaf as usize];
+                let t = tri.intersect(&ray);
+                if !t.is_finite() {
+                    continue;
+                }
                 // `ng` of RtTriangle points against the winding normal.
                 let back = tri.ng.dot(ray.direction) < 0.0;
                 let mesh_index = self.leaf_to_mesh[leaf as usize];
@@ -167,9 +213,10 @@ impl Scene {
                     best_leaf = leaf;
                     best_back = back;
                     best_mesh = mesh_index;
-                    traverse_ray.tmax = (t + tie).min(ray.tmax);
+                    ray.tmax = (t + tie).min(t_max);
                 }
             }
+            LeafResult::Continue(ray.tmax)
         });
         if best_leaf == u32::MAX {
             return None;
@@ -181,11 +228,40 @@ impl Scene {
 
     /// True when anything lies along `direction` from `origin` within `(0, t_max]`.
     pub fn occluded(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
-        if self.leaf_triangles.is_empty() {
-            return false;
+        self.occluder(origin, direction, t_max).is_some()
+    }
+
+    /// Leaf index of some triangle blocking the ray (not necessarily the nearest).
+    #[inline]
+    fn occluder(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
+        #[cfg(target_arch = "x86_64")]
+        if self.traversal == Traversal::Avx2 {
+            // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
+            return unsafe { self.occluder_avx2(origin, direction, t_max) };
         }
+        self.occluder_with::<ScalarTest>(origin, direction, t_max)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn occluder_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
+        self.occluder_with::<bvh8::Avx2Test>(origin, direction, t_max)
+    }
+
+    #[inline(always)]
+    fn occluder_with<T: NodeTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
         let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
-        !self.bvh.ray_traverse_miss(ray, |r, leaf| self.leaf_triangles[leaf].intersect(r))
+        let mut found = None;
+        bvh8::walk::<T, _>(&self.nodes, &self.leaf_triangles, &RayBoxes::new(origin, direction), 0.0, t_max, |first, count, _| {
+            for leaf in first..first + count {
+                if self.leaf_triangles[leaf as usize].intersect(&ray).is_finite() {
+                    found = Some(leaf);
+                    return LeafResult::Stop;
+                }
+            }
+            LeafResult::Continue(t_max)
+        });
+        found
     }
 
     /// [`Scene::occluded`] with a shadow cache for coherent rays (Haines &
@@ -197,27 +273,19 @@ impl Scene {
     /// [`Scene::occluded`].
     #[inline]
     pub fn occluded_cached(&self, origin: Vec3, direction: Vec3, t_max: f32, hint: &mut u32) -> bool {
-        if self.leaf_triangles.is_empty() {
-            return false;
-        }
-        let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
         if let Some(tri) = self.leaf_triangles.get(*hint as usize) {
-            if tri.intersect(&ray) < ray.tmax {
+            let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
+            if tri.intersect(&ray).is_finite() {
                 return true;
             }
         }
-        let mut found = u32::MAX;
-        let miss = self.bvh.ray_traverse_miss(ray, |r, leaf| {
-            let t = self.leaf_triangles[leaf].intersect(r);
-            if t < r.tmax {
-                found = leaf as u32;
+        match self.occluder(origin, direction, t_max) {
+            Some(leaf) => {
+                *hint = leaf;
+                true
             }
-            t
-        });
-        if !miss {
-            *hint = found;
+            None => false,
         }
-        !miss
     }
 
     /// Number of triangles in the BVH.
@@ -229,10 +297,9 @@ impl Scene {
 /// Barycentric weights (of vertices 1 and 2) of `p`, which lies on `tri`'s plane.
 fn barycentrics(tri: &RtTriangle, p: Vec3) -> (f32, f32) {
     // RtTriangle stores v0, e1 = v0 − v1, e2 = v2 − v0.
-    let v0: Vec3A = tri.v0;
-    let a = -tri.e1;
-    let b = tri.e2;
-    let d = Vec3A::from(p) - v0;
+    let a = Vec3::from(-tri.e1);
+    let b = Vec3::from(tri.e2);
+    let d = p - Vec3::from(tri.v0);
     let (aa, ab, bb) = (a.dot(a), a.dot(b), b.dot(b));
     let (da, db) = (d.dot(a), d.dot(b));
     let det = aa * bb - ab * ab;

@@ -435,7 +435,7 @@ mod tests {
 
     fn bake(mesh: &Mesh, suns: &[Option<Vec3>], mode: Mode) -> SunMasks {
         let surfaces = Surfaces::resolve(mesh, &[]).unwrap();
-        let scene = Scene::build(mesh, BuildQuality::Medium);
+        let scene = Scene::build(mesh, BuildQuality::Sah);
         bake_sun_masks(mesh, &scene, &surfaces, suns, &SunParams { mode, ..SunParams::default() }).unwrap()
     }
 
@@ -459,7 +459,7 @@ mod tests {
     fn step_counts_outside_1_to_1024_are_refused() {
         let mesh = floor(2, 0.0, true);
         let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
-        let scene = Scene::build(&mesh, BuildQuality::Medium);
+        let scene = Scene::build(&mesh, BuildQuality::Sah);
         let p = SunParams::default();
         assert!(bake_sun_masks(&mesh, &scene, &surfaces, &[], &p).is_err());
         assert!(bake_sun_masks(&mesh, &scene, &surfaces, &vec![None; 1025], &p).is_err());

@@ -183,7 +183,7 @@ fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bak
     };
     config.params.check()?;
     let surfaces = bake::Surfaces::resolve(mesh, &config.window_patterns)?;
-    let scene = bake::Scene::build(mesh, bake::BuildQuality::Medium);
+    let scene = bake::Scene::build(mesh, bake::BuildQuality::Sah);
     let (visible, report) = bake::cull::visible_triangles(mesh, &scene, &surfaces, view_box, cull_params);
     // Bounces gather from every triangle's previous bounce, so they need the full bake.
     let receivers = (config.params.bounces == 0).then_some(visible.as_slice());

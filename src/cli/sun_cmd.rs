@@ -145,7 +145,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
                 config.window_patterns
             );
         }
-        let scene = Scene::build(&mesh, BuildQuality::Medium);
+        let scene = Scene::build(&mesh, BuildQuality::Sah);
         let masks = bake::bake_sun_masks(&mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params)?;
         Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks))
     })??;
