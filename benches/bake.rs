@@ -9,7 +9,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, sampling, BakeParams, BuildQuality, Mode, Scene};
+use prtbake::bake::{bake_mesh, sampling, BakeParams, BuildQuality, Traversal, Mode, Scene};
 use prtbake::fixtures::cabin::generate_cabin;
 use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
 use rayon::prelude::*;
@@ -47,7 +47,8 @@ fn pool(threads: usize) -> rayon::ThreadPool {
 fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     let mut group = c.benchmark_group(format!("build/{name}"));
     group.sample_size(10);
-    group.bench_function("cwbvh_medium", |b| b.iter(|| Scene::build(mesh, BuildQuality::Sah)));
+    group.bench_function("sah", |b| b.iter(|| Scene::build(mesh, BuildQuality::Sah)));
+    group.bench_function("ploc", |b| b.iter(|| Scene::build(mesh, BuildQuality::Ploc)));
     group.finish();
 
     let scene = Scene::build(mesh, BuildQuality::Sah);
@@ -55,15 +56,26 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     let mut group = c.benchmark_group(format!("trace/{name}"));
     group.sample_size(10);
     group.throughput(Throughput::Elements(rays.len() as u64));
+    let occlusion = |scene: &Scene, pool: &rayon::ThreadPool| {
+        pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.occluded(*o, *d, f32::INFINITY)).count()).sum::<usize>())
+    };
+    let closest = |scene: &Scene, pool: &rayon::ThreadPool| {
+        pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some()).count()).sum::<usize>())
+    };
     for threads in [1, 2] {
         let pool = pool(threads);
-        group.bench_function(format!("occlusion/{threads}t"), |b| {
-            b.iter(|| pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.occluded(*o, *d, f32::INFINITY)).count()).sum::<usize>()))
-        });
-        group.bench_function(format!("closest_hit/{threads}t"), |b| {
-            b.iter(|| pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some()).count()).sum::<usize>()))
-        });
+        group.bench_function(format!("occlusion/{threads}t"), |b| b.iter(|| occlusion(&scene, &pool)));
+        group.bench_function(format!("closest_hit/{threads}t"), |b| b.iter(|| closest(&scene, &pool)));
     }
+    // The alternatives, on one thread: the portable walk and the PLOC tree.
+    let pool = pool(1);
+    let mut portable = Scene::build(mesh, BuildQuality::Sah);
+    portable.set_traversal(Traversal::Portable);
+    group.bench_function("occlusion_portable/1t", |b| b.iter(|| occlusion(&portable, &pool)));
+    group.bench_function("closest_hit_portable/1t", |b| b.iter(|| closest(&portable, &pool)));
+    let ploc = Scene::build(mesh, BuildQuality::Ploc);
+    group.bench_function("occlusion_ploc/1t", |b| b.iter(|| occlusion(&ploc, &pool)));
+    group.bench_function("closest_hit_ploc/1t", |b| b.iter(|| closest(&ploc, &pool)));
     group.finish();
 }
 

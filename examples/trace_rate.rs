@@ -3,7 +3,7 @@
 //! sphere), and optionally exports the exact rays for `benches/embree_compare.py`.
 //!
 //! cargo run --release --example trace_rate -- [MESH|cabin] [--rays-per-point N] [--points N]
-//!     [--threads T] [--runs R] [--export DIR]
+//!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable]
 //!
 //! Prints min / median / max Mrays/s over R runs for occlusion and closest hit.
 
@@ -36,7 +36,11 @@ fn main() {
         load_mesh(source.as_ref(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh
     };
     let start = Instant::now();
-    let scene = Scene::build(&mesh, BuildQuality::Sah);
+    let quality = if arg(&args, "--build", "sah".to_string()) == "ploc" { BuildQuality::Ploc } else { BuildQuality::Sah };
+    let mut scene = Scene::build(&mesh, quality);
+    if args.iter().any(|a| a == "--portable") {
+        scene.set_traversal(prtbake::bake::Traversal::Portable);
+    }
     let build = start.elapsed().as_secs_f64();
 
     // Sample points: centroids of an even spread of triangles, in mesh order.
@@ -74,9 +78,10 @@ fn main() {
         );
     };
     println!(
-        "{source}: {} triangles, BVH build {:.3}s, {} rays ({} points x {})",
+        "{source}: {} triangles, {quality:?} BVH build {:.3}s, {:?} traversal, {} rays ({} points x {})",
         mesh.triangle_count(),
         build,
+        scene.traversal(),
         rays.len(),
         rays.len() as u32 / rays_per_point,
         rays_per_point
