@@ -68,6 +68,11 @@ pub struct BakeParams {
     pub rays: u32,
     /// Seed of every random stream.
     pub seed: u32,
+    /// Seed of the sample positions inside triangles, when it should differ
+    /// from `seed` (`None`: `seed`). A study can then vary the rays and keep
+    /// the points (examples/ray_scaling.rs separates the two error sources).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub point_seed: Option<u32>,
     pub mode: Mode,
     pub sampling: Sampling,
     /// Interreflection bounces after the direct one (0 = shadowed transfer only).
@@ -99,6 +104,7 @@ impl Default for BakeParams {
             order: 3,
             rays: 256,
             seed: 1,
+            point_seed: None,
             mode: Mode::Open,
             sampling: Sampling::interior(),
             bounces: 0,

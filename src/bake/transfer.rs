@@ -504,7 +504,7 @@ impl Pass<'_> {
                         if bounce > 0 && self.rejected[global as usize] {
                             continue;
                         }
-                        let b = triangle_sample(self.params.pattern, self.params.seed, t, s, counts[item]);
+                        let b = triangle_sample(self.params.pattern, self.params.point_seed.unwrap_or(self.params.seed), t, s, counts[item]);
                         let shading = (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal);
                         let point = Point {
                             position: pa * b[0] + pb * b[1] + pc * b[2],
