@@ -14,12 +14,13 @@ use crate::fixtures::cabin;
 use crate::mesh::UpAxis;
 
 /// Demo settings: chosen so the bake finishes in well under two minutes on
-/// two cores and the cabin still reads right (soft window light, seat shadows,
-/// coloured interreflection). Three bounces cost little (bounces ≥ 1 gather
+/// two cores (27 s bake, 30 s in all, measured) and the cabin reads right:
+/// soft window light, seat shadows, coloured interreflection, and no visible
+/// mottling on the roof (128 rays, 7 s, still showed it). Three bounces cost little (bounces ≥ 1 gather
 /// from bounce 0's cached hits) and matter: on the cabin, 1 bounce leaves an
 /// 18% shaded-radiance error against 3.7% for 3 (docs/speed-accuracy.md).
 pub fn demo_params(quiet: bool) -> BakeParams {
-    BakeParams { order: 3, rays: 128, bounces: 3, mode: Mode::Window, quiet, ..BakeParams::default() }
+    BakeParams { order: 3, rays: 512, bounces: 3, mode: Mode::Window, quiet, ..BakeParams::default() }
 }
 
 /// Cells per metre of the demo cabin's tessellation (≈ 3.3·10⁵ triangles).
