@@ -62,8 +62,7 @@ fn is_leaf(child: u32) -> bool {
 #[derive(Default)]
 pub struct Bvh8 {
     pub nodes: Vec<Node8>,
-    /// Leaf order → index of the primitive in the BVH2's input, or
-    /// `u32::MAX` for padding (each leaf starts at a multiple of the alignment).
+    /// Leaf order → index of the primitive in the BVH2's input.
     pub primitive_order: Vec<u32>,
     /// Levels of inner nodes on the longest root-to-leaf path.
     pub depth: u32,
@@ -73,9 +72,8 @@ impl Bvh8 {
     /// Collapses `bvh2` (leaves of at most [`MAX_LEAF_TRIANGLES`] primitives):
     /// each node starts from a BVH2 inner node's two children and repeatedly
     /// opens the inner child with the largest surface area until it has
-    /// eight children (the standard greedy SAH collapse). Each leaf's
-    /// primitives start at a multiple of `leaf_alignment` in leaf order.
-    pub fn from_bvh2(bvh2: &Bvh2, leaf_alignment: usize) -> Bvh8 {
+    /// eight children (the standard greedy SAH collapse).
+    pub fn from_bvh2(bvh2: &Bvh2) -> Bvh8 {
         let mut out = Bvh8::default();
         if bvh2.nodes.is_empty() {
             return out;
@@ -105,6 +103,9 @@ impl Bvh8 {
                 kids[slot] = opened;
                 kids.push(opened + 1);
             }
+            // Largest boxes first: the occlusion walk takes children in slot
+            // order, and a big box is the likeliest to hold a blocker.
+            kids.sort_by(|&a, &b| bvh2.nodes[b as usize].aabb().half_area().total_cmp(&bvh2.nodes[a as usize].aabb().half_area()));
             for (slot, &kid) in kids.iter().enumerate() {
                 let node = &bvh2.nodes[kid as usize];
                 let aabb = node.aabb();
@@ -114,9 +115,6 @@ impl Bvh8 {
                     bounds[2 * axis + 1][slot] = aabb.max[axis];
                 }
                 let child = if node.is_leaf() {
-                    while out.primitive_order.len() % leaf_alignment != 0 {
-                        out.primitive_order.push(u32::MAX);
-                    }
                     let first = out.primitive_order.len() as u32;
                     let count = node.prim_count;
                     assert!(count <= MAX_LEAF_TRIANGLES, "leaf of {count} primitives");
@@ -420,9 +418,10 @@ mod tests {
         let mut params = BvhBuildParams::medium_build();
         params.max_prims_per_leaf = 4;
         let bvh2 = build_bvh2_from_tris(&tris, params, &mut Default::default());
-        let bvh8 = Bvh8::from_bvh2(&bvh2, 4);
+        let bvh8 = Bvh8::from_bvh2(&bvh2);
+        assert_eq!(bvh8.primitive_order.len(), tris.len());
         let mut seen = vec![0u32; tris.len()];
-        for &p in bvh8.primitive_order.iter().filter(|&&p| p != u32::MAX) {
+        for &p in &bvh8.primitive_order {
             seen[p as usize] += 1;
         }
         assert!(seen.iter().all(|&c| c == 1), "every triangle in exactly one leaf");
@@ -433,7 +432,6 @@ mod tests {
                     continue;
                 }
                 let (first, count) = leaf_range(child);
-                assert_eq!(first % 4, 0, "leaves start on a block");
                 for k in first..first + count {
                     let t = &tris[bvh8.primitive_order[k as usize] as usize];
                     for v in [t.v0, t.v1, t.v2] {
@@ -456,7 +454,7 @@ mod tests {
         }
         let tris = grid_triangles(12);
         let bvh2 = build_bvh2_from_tris(&tris, BvhBuildParams::medium_build(), &mut Default::default());
-        let bvh8 = Bvh8::from_bvh2(&bvh2, 1);
+        let bvh8 = Bvh8::from_bvh2(&bvh2);
         let mut state = 12345u32;
         let mut rand = || {
             state ^= state << 13;

@@ -111,7 +111,7 @@ impl Scene {
                 }
             };
             collapse(&mut bvh2, LEAF_TRIANGLES, NODE_COST);
-            let Bvh8 { nodes, primitive_order, .. } = Bvh8::from_bvh2(&bvh2, 1);
+            let Bvh8 { nodes, primitive_order, .. } = Bvh8::from_bvh2(&bvh2);
             let leaf_triangles: Vec<RtTriangle> =
                 primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
             // The two arrays every ray walks: back them with huge pages.
