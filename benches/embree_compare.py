@@ -4,9 +4,9 @@
 usage: python3 benches/embree_compare.py [MESH|cabin] [--runs 3] [--rays-per-point 64] [--points 16384]
 
 It runs `cargo run --release --example trace_rate` (which measures prtbake and
-exports the exact rays it traced), then traces those rays with Embree on 1 and
-2 threads, and prints Mrays/s (min/median/max over the runs) and the ratio
-prtbake / Embree. Optional for users: on first use it creates a virtualenv
+exports the exact rays it traced) and traces those rays with Embree, on 1 and
+2 threads, alternating the two tracers run by run, and prints Mrays/s
+(min/median/max over the runs) and the ratio prtbake / Embree. Optional for users: on first use it creates a virtualenv
 .venv-embree/ with embreex and numpy (from PyPI).
 """
 import argparse
@@ -39,9 +39,9 @@ def ensure_embree():
     sys.exit("embreex is not importable even in " + VENV)
 
 
-def prtbake_rates(args, threads, export_dir):
+def prtbake_rates(args, threads, export_dir, runs):
     cmd = ["cargo", "run", "--quiet", "--release", "--example", "trace_rate", "--", args.mesh,
-           "--runs", str(args.runs), "--threads", str(threads),
+           "--runs", str(runs), "--threads", str(threads),
            "--rays-per-point", str(args.rays_per_point), "--points", str(args.points)]
     if export_dir:
         cmd += ["--export", export_dir]
@@ -89,18 +89,29 @@ def main():
     p.add_argument("--points", type=int, default=16384)
     args = p.parse_args()
     ensure_embree()
+    names = ("occlusion", "closest_hit")
+    ours = {t: {n: [] for n in names} for t in (1, 2)}
+    theirs = {t: {n: [] for n in names} for t in (1, 2)}
     with tempfile.TemporaryDirectory() as tmp:
-        ours = {1: prtbake_rates(args, 1, tmp), 2: prtbake_rates(args, 2, None)}
-        print("| query | threads | prtbake Mrays/s (min/med/max) | Embree Mrays/s (min/med/max) | ratio (median) |")
-        print("|---|---|---|---|---|")
-        for threads in (1, 2):
-            theirs, build, count = embree_rates(tmp, args.runs, threads)
-            for name in ("occlusion", "closest_hit"):
-                a, b = ours[threads][name], theirs[name]
-                fmt = lambda r: "%.2f / %.2f / %.2f" % r
-                print("| %s | %d | %s | %s | %.2f |" % (name, threads, fmt(a), fmt(b), a[1] / b[1]))
-        print("(%d rays; Embree scene build %.3fs)" % (count, build), file=sys.stderr)
-
+        # Rounds interleave the two tracers (one run each per thread count), so
+        # a slow spell on a shared machine hits both alike.
+        for round_index in range(args.runs):
+            for threads in (1, 2):
+                export = tmp if round_index == 0 and threads == 1 else None
+                a = prtbake_rates(args, threads, export, 1)
+                b, build, count = embree_rates(tmp, 1, threads)
+                for name in names:
+                    ours[threads][name].append(a[name][1])
+                    theirs[threads][name].append(b[name][1])
+    summary = lambda xs: (min(xs), sorted(xs)[len(xs) // 2], max(xs))
+    fmt = lambda r: "%.2f / %.2f / %.2f" % r
+    print("| query | threads | prtbake Mrays/s (min/med/max) | Embree Mrays/s (min/med/max) | ratio (median) |")
+    print("|---|---|---|---|---|")
+    for threads in (1, 2):
+        for name in names:
+            a, b = summary(ours[threads][name]), summary(theirs[threads][name])
+            print("| %s | %d | %s | %s | %.2f |" % (name, threads, fmt(a), fmt(b), a[1] / b[1]))
+    print("(%d rays, %d interleaved rounds; Embree scene build %.3fs)" % (count, args.runs, build), file=sys.stderr)
 
 if __name__ == "__main__":
     main()

@@ -269,9 +269,9 @@ impl Stack {
 /// Walks the tree: with `NEAREST_FIRST` (closest hit) children hit by the
 /// ray are visited nearest first, and a stacked child whose entry lies
 /// beyond the current maximum distance is skipped. Without it (occlusion)
-/// they are visited in slot order: measured 17% faster on the Ferrari, whose
-/// nearest boxes hold the ray's own surface and its twin, and 5% slower on
-/// the cabin (docs/performance.md). `leaf(first, count, t_max)` tests a leaf's
+/// they are visited in slot order, largest box first: measured 17% faster
+/// on the Ferrari than nearest-first (its nearest boxes hold the ray's own
+/// surface and its twin) and 5% slower on the cabin (docs/performance.md). `leaf(first, count, t_max)` tests a leaf's
 /// triangles. The walk order depends only on the ray, never on threads.
 #[inline(always)]
 pub fn walk<T: NodeTest, L, const NEAREST_FIRST: bool>(
