@@ -241,13 +241,7 @@ mod tests {
     /// node for node, on one thread and on two.
     #[test]
     fn parallel_build_is_valid_and_thread_independent() {
-        let mut state = 7u32;
-        let mut rand = || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32
-        };
+        let mut rand = crate::bake::sampling::test_stream(7);
         let boxes: Vec<Aabb> = (0..3 * PARALLEL_SPAN)
             .map(|_| {
                 let p = Vec3A::new(rand() * 10.0, rand(), rand() * 4.0);

@@ -169,3 +169,16 @@ mod tests {
         assert_ne!(hash_seed(&[0, 0]), hash_seed(&[0, 1]));
     }
 }
+
+/// A deterministic stream of floats in [0, 1] (xorshift32) for tests that
+/// need arbitrary but repeatable rays and boxes.
+#[cfg(test)]
+pub(crate) fn test_stream(seed: u32) -> impl FnMut() -> f32 {
+    let mut state = seed.max(1);
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    }
+}
