@@ -12,8 +12,7 @@
 //! A child reference is a `u32`: an inner node index, or (top bit set) a
 //! leaf holding `count` consecutive triangles from `first`.
 
-use glam::Vec3;
-use obvhs::bvh2::Bvh2;
+use obvhs::{bvh2::Bvh2, ray::Ray};
 
 /// Children per node.
 pub const WIDTH: usize = 8;
@@ -145,13 +144,14 @@ pub struct RayBoxes {
 }
 
 impl RayBoxes {
-    pub fn new(origin: Vec3, direction: Vec3) -> RayBoxes {
-        // Same guard as obvhs's `safe_inverse`: keep the inverse finite, so a
-        // box test never multiplies 0 by infinity.
-        let inv = |x: f32| if x.abs() <= f32::EPSILON { x.signum() / f32::EPSILON } else { 1.0 / x };
-        let inverse = [inv(direction.x), inv(direction.y), inv(direction.z)];
+    /// Takes the inverse direction the ray already holds (obvhs keeps it
+    /// finite: near-zero components map to ±1/ε, so a box test never
+    /// multiplies 0 by infinity).
+    #[inline(always)]
+    pub fn from_ray(ray: &Ray) -> RayBoxes {
+        let inverse = ray.inv_direction.to_array();
         let row = |axis: usize| 2 * axis + usize::from(inverse[axis] < 0.0);
-        RayBoxes { origin: origin.to_array(), inverse, near_row: [row(0), row(1), row(2)] }
+        RayBoxes { origin: ray.origin.to_array(), inverse, near_row: [row(0), row(1), row(2)] }
     }
 }
 
@@ -394,6 +394,7 @@ pub fn avx2_available() -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
     use obvhs::{bvh2::builder::build_bvh2_from_tris, triangle::Triangle, BvhBuildParams};
 
     fn grid_triangles(n: usize) -> Vec<Triangle> {
@@ -463,7 +464,7 @@ mod tests {
                 d.y = 0.0; // axis-parallel rays exercise the inverse guard
                 d = d.normalize();
             }
-            let ray = RayBoxes::new(o, d);
+            let ray = RayBoxes::from_ray(&Ray::new(o.into(), d.into(), 0.0, 50.0));
             for node in &bvh8.nodes {
                 let (mut a, mut b) = ([0.0; WIDTH], [0.0; WIDTH]);
                 let ma = ScalarTest::test(node, &ray, 0.0, 50.0, &mut a);

@@ -189,7 +189,7 @@ impl Scene {
         let mut best_back = false;
         let mut best_mesh = u32::MAX;
         let tie = self.tie_distance;
-        bvh8::walk::<T, _, true>(&self.nodes, &self.leaf_triangles, &RayBoxes::new(origin, direction), 0.0, t_max, |first, count, walk_t_max| {
+        bvh8::walk::<T, _, true>(&self.nodes, &self.leaf_triangles, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, walk_t_max| {
             ray.tmax = walk_t_max;
             for leaf in first..first + count {
                 let tri = &self.leaf_triangles[leaf as usize];
@@ -252,7 +252,7 @@ impl Scene {
     fn occluder_with<T: NodeTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
         let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
         let mut found = None;
-        bvh8::walk::<T, _, false>(&self.nodes, &self.leaf_triangles, &RayBoxes::new(origin, direction), 0.0, t_max, |first, count, _| {
+        bvh8::walk::<T, _, false>(&self.nodes, &self.leaf_triangles, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, _| {
             for leaf in first..first + count {
                 if self.leaf_triangles[leaf as usize].intersect(&ray).is_finite() {
                     found = Some(leaf);
