@@ -4,6 +4,7 @@
 
 pub mod bvh8;
 pub mod hugepages;
+pub mod leaf_blocks;
 pub mod cull;
 pub mod progress;
 pub mod sah;

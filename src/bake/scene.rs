@@ -17,6 +17,7 @@ use glam::Vec3;
 use obvhs::{bvh2::{builder::build_bvh2_from_tris, leaf_collapser::collapse}, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle, BvhBuildParams};
 
 use super::bvh8::{self, Bvh8, LeafResult, Node8, NodeTest, RayBoxes, ScalarTest};
+use super::leaf_blocks::{LeafBlocks, LeafTest, ScalarLeaf};
 
 use crate::mesh::Mesh;
 
@@ -64,8 +65,8 @@ const NODE_COST: f32 = 3.0;
 pub struct Scene {
     nodes: Vec<Node8>,
     traversal: Traversal,
-    /// Triangles in BVH leaf order.
-    leaf_triangles: Vec<RtTriangle>,
+    /// Triangles in BVH leaf order, one SoA block per leaf.
+    leaf_triangles: LeafBlocks,
     /// Leaf order → mesh triangle index.
     leaf_to_mesh: Vec<u32>,
     /// Unit geometric normals per mesh triangle (zero for degenerate ones).
@@ -98,7 +99,7 @@ impl Scene {
             .map(|t| Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero())
             .collect();
         let (nodes, leaf_to_mesh, leaf_triangles) = if triangles.is_empty() {
-            (Vec::new(), Vec::new(), Vec::new())
+            (Vec::new(), Vec::new(), LeafBlocks::new(&[], []))
         } else {
             let mut bvh2 = match quality {
                 BuildQuality::Sah => {
@@ -111,11 +112,12 @@ impl Scene {
                 }
             };
             collapse(&mut bvh2, LEAF_TRIANGLES, NODE_COST);
-            let Bvh8 { nodes, primitive_order, .. } = Bvh8::from_bvh2(&bvh2);
-            let leaf_triangles: Vec<RtTriangle> =
-                primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
-            // The two arrays every ray walks: back them with huge pages.
-            (super::hugepages::copy_to_huge_pages(&nodes), primitive_order, super::hugepages::copy_to_huge_pages(&leaf_triangles))
+            let bvh8 = Bvh8::from_bvh2(&bvh2);
+            let in_leaf_order: Vec<RtTriangle> =
+                bvh8.primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
+            let blocks = LeafBlocks::new(&in_leaf_order, bvh8.leaves());
+            // The two arrays every ray walks (nodes and blocks) sit on huge pages.
+            (super::hugepages::copy_to_huge_pages(&bvh8.nodes), bvh8.primitive_order, blocks)
         };
         let (lo, hi) = mesh.bounds();
         let diagonal = (hi - lo).length().max(f32::MIN_POSITIVE);
@@ -172,33 +174,38 @@ impl Scene {
             // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
             return unsafe { self.closest_hit_avx2(origin, direction, t_max) };
         }
-        self.closest_hit_with::<ScalarTest>(origin, direction, t_max)
+        self.closest_hit_with::<ScalarTest, ScalarLeaf>(origin, direction, t_max)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn closest_hit_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        self.closest_hit_with::<bvh8::Avx2Test>(origin, direction, t_max)
+        self.closest_hit_with::<bvh8::Avx2Test, super::leaf_blocks::SseLeaf>(origin, direction, t_max)
     }
 
     #[inline(always)]
-    fn closest_hit_with<T: NodeTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        let mut ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
+    fn closest_hit_with<T: NodeTest, Lf: LeafTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
+        let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
+        let mut reach = t_max;
         let mut best_t = f32::INFINITY;
         let mut best_leaf = u32::MAX;
         let mut best_back = false;
         let mut best_mesh = u32::MAX;
         let tie = self.tie_distance;
-        bvh8::walk::<T, _, true>(&self.nodes, &self.leaf_triangles, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, walk_t_max| {
-            ray.tmax = walk_t_max;
-            for leaf in first..first + count {
-                let tri = &self.leaf_triangles[leaf as usize];
-                let t = tri.intersect(&ray);
-                if !t.is_finite() {
-                    continue;
-                }
+        let blocks = &self.leaf_triangles;
+        let prefetch = |first, count| blocks.prefetch(first, count);
+        bvh8::walk::<T, true>(&self.nodes, prefetch, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, walk_t_max| {
+            reach = walk_t_max;
+            let hits = Lf::test_leaf(blocks, first, count, &ray, reach);
+            let mut lanes = hits.mask;
+            // Lanes in leaf order, each against the reach left by the ones before.
+            while lanes != 0 {
+                let lane = lanes.trailing_zeros();
+                lanes &= lanes - 1;
+                let t = hits.t[lane as usize];
                 // `ng` of RtTriangle points against the winding normal.
-                let back = tri.ng.dot(ray.direction) < 0.0;
+                let back = hits.back >> lane & 1 == 1;
+                let leaf = first + lane;
                 let mesh_index = self.leaf_to_mesh[leaf as usize];
                 let better = if t < best_t - tie {
                     true
@@ -213,16 +220,15 @@ impl Scene {
                     best_leaf = leaf;
                     best_back = back;
                     best_mesh = mesh_index;
-                    ray.tmax = (t + tie).min(t_max);
+                    reach = (t + tie).min(t_max);
                 }
             }
-            LeafResult::Continue(ray.tmax)
+            LeafResult::Continue(reach)
         });
         if best_leaf == u32::MAX {
             return None;
         }
-        let tri = &self.leaf_triangles[best_leaf as usize];
-        let (u, v) = barycentrics(tri, origin + direction * best_t);
+        let (u, v) = barycentrics(&self.leaf_triangles.triangle(best_leaf), origin + direction * best_t);
         Some(Hit { triangle: best_mesh, t: best_t, u, v, back_face: best_back })
     }
 
@@ -239,25 +245,26 @@ impl Scene {
             // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
             return unsafe { self.occluder_avx2(origin, direction, t_max) };
         }
-        self.occluder_with::<ScalarTest>(origin, direction, t_max)
+        self.occluder_with::<ScalarTest, ScalarLeaf>(origin, direction, t_max)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn occluder_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
-        self.occluder_with::<bvh8::Avx2Test>(origin, direction, t_max)
+        self.occluder_with::<bvh8::Avx2Test, super::leaf_blocks::SseLeaf>(origin, direction, t_max)
     }
 
     #[inline(always)]
-    fn occluder_with<T: NodeTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
+    fn occluder_with<T: NodeTest, Lf: LeafTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
         let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
         let mut found = None;
-        bvh8::walk::<T, _, false>(&self.nodes, &self.leaf_triangles, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, _| {
-            for leaf in first..first + count {
-                if self.leaf_triangles[leaf as usize].intersect(&ray).is_finite() {
-                    found = Some(leaf);
-                    return LeafResult::Stop;
-                }
+        let blocks = &self.leaf_triangles;
+        let prefetch = |first, count| blocks.prefetch(first, count);
+        bvh8::walk::<T, false>(&self.nodes, prefetch, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, _| {
+            let hits = Lf::test_leaf(blocks, first, count, &ray, t_max);
+            if hits.mask != 0 {
+                found = Some(first + hits.mask.trailing_zeros());
+                return LeafResult::Stop;
             }
             LeafResult::Continue(t_max)
         });
@@ -273,9 +280,9 @@ impl Scene {
     /// [`Scene::occluded`].
     #[inline]
     pub fn occluded_cached(&self, origin: Vec3, direction: Vec3, t_max: f32, hint: &mut u32) -> bool {
-        if let Some(tri) = self.leaf_triangles.get(*hint as usize) {
+        if (*hint as usize) < self.leaf_triangles.len() {
             let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
-            if tri.intersect(&ray).is_finite() {
+            if self.leaf_triangles.triangle(*hint).intersect(&ray).is_finite() {
                 return true;
             }
         }

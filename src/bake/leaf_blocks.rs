@@ -1,0 +1,258 @@
+//! The triangles of each BVH leaf as one struct-of-arrays block, tested a
+//! whole leaf (up to four triangles) per SIMD pass.
+//!
+//! A leaf of `n` triangles is 12 rows of `n` floats: v0, e1 = v0 − v1,
+//! e2 = v2 − v0 and ng = e1 × e2 (obvhs `RtTriangle`'s precomputed form),
+//! x, y, z each. Rows are exactly `n` wide, so a leaf of one triangle costs
+//! 48 bytes, not a padded four-lane block (padded 4-wide blocks measured
+//! slower: docs/performance.md); a lane past `n` reads the next row and is
+//! masked off. The test is obvhs's Möller–Trumbore with the same operations
+//! in the same order and no fused multiply-add, so every lane gives the bits
+//! `RtTriangle::intersect` gives for that triangle: the SIMD and portable
+//! paths, and the brute-force oracle, agree exactly.
+
+use obvhs::{ray::Ray, rt_triangle::RtTriangle};
+
+/// Floats per triangle in a block.
+pub const ROWS: usize = 12;
+/// Most triangles one block holds (lanes of one SSE register).
+pub const MAX_LANES: u32 = 4;
+/// Floats past the last block that a four-lane read of a short row may touch.
+const TAIL: usize = MAX_LANES as usize;
+
+/// All leaves' blocks, back to back in leaf order: the block of the leaf
+/// whose triangles start at leaf-order position `first` begins at float
+/// `ROWS · first`.
+pub struct LeafBlocks {
+    data: Vec<f32>,
+    /// Per triangle in leaf order: `lane << 4 | leaf count`.
+    place: Vec<u8>,
+}
+
+/// A leaf test's answer: `mask` has bit `k` set when lane `k` is hit within
+/// `[t_min, t_max]` (and at a finite distance); `t` holds each lane's distance
+/// and `back` has bit `k` set when the ray meets lane `k`'s back face.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LeafHits {
+    pub mask: u32,
+    pub back: u32,
+    pub t: [f32; MAX_LANES as usize],
+}
+
+impl LeafBlocks {
+    /// Packs `triangles` (in leaf order) into blocks; `leaves` lists every
+    /// leaf as `(first, count)`, covering `0..triangles.len()` exactly once.
+    pub fn new(triangles: &[RtTriangle], leaves: impl IntoIterator<Item = (u32, u32)>) -> LeafBlocks {
+        let mut data = vec![0.0f32; ROWS * triangles.len() + TAIL];
+        let mut place = vec![u8::MAX; triangles.len()];
+        for (first, count) in leaves {
+            assert!((1..=MAX_LANES).contains(&count), "leaf of {count} triangles");
+            let base = ROWS * first as usize;
+            let n = count as usize;
+            for lane in 0..n {
+                let tri = &triangles[first as usize + lane];
+                for (k, v) in [tri.v0, tri.e1, tri.e2, tri.ng].iter().enumerate() {
+                    for axis in 0..3 {
+                        data[base + (3 * k + axis) * n + lane] = v[axis];
+                    }
+                }
+                place[first as usize + lane] = (lane as u8) << 4 | count as u8;
+            }
+        }
+        assert!(place.iter().all(|&p| p != u8::MAX), "a triangle in no leaf");
+        LeafBlocks { data: super::hugepages::copy_to_huge_pages(&data), place }
+    }
+
+    /// Number of triangles.
+    pub fn len(&self) -> usize {
+        self.place.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.place.is_empty()
+    }
+
+    /// The triangle at leaf-order position `position`, unpacked.
+    pub fn triangle(&self, position: u32) -> RtTriangle {
+        let place = self.place[position as usize];
+        let (lane, n) = ((place >> 4) as usize, (place & 0xf) as usize);
+        let base = ROWS * (position as usize - lane);
+        let value = |row: usize| self.data[base + row * n + lane];
+        let vector = |k: usize| glam::Vec3A::new(value(3 * k), value(3 * k + 1), value(3 * k + 2));
+        RtTriangle { v0: vector(0), e1: vector(1), e2: vector(2), ng: vector(3) }
+    }
+
+    /// Asks for the cache lines of the leaf `(first, count)`.
+    #[inline(always)]
+    pub fn prefetch(&self, first: u32, count: u32) {
+        let start = ROWS * first as usize;
+        if let Some(block) = self.data.get(start..start + ROWS * count as usize) {
+            super::bvh8::prefetch_bytes(block.as_ptr(), std::mem::size_of_val(block));
+        }
+    }
+
+    /// The block of leaf `(first, count)`, with the tail a four-lane read may touch.
+    #[inline(always)]
+    fn block(&self, first: u32, count: u32) -> &[f32] {
+        let start = ROWS * first as usize;
+        &self.data[start..start + ROWS * count as usize + TAIL]
+    }
+}
+
+/// Tests every triangle of one leaf against a ray.
+pub trait LeafTest {
+    fn test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits;
+}
+
+/// Portable path: one lane at a time, the same operations as the SIMD path.
+pub struct ScalarLeaf;
+
+impl LeafTest for ScalarLeaf {
+    #[inline(always)]
+    fn test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits {
+        let block = blocks.block(first, count);
+        let n = count as usize;
+        let (o, d) = (ray.origin, ray.direction);
+        let mut hits = LeafHits::default();
+        for lane in 0..n {
+            let row = |r: usize| block[r * n + lane];
+            let (cx, cy, cz) = (row(0) - o.x, row(1) - o.y, row(2) - o.z);
+            let (rx, ry, rz) = (d.y * cz - d.z * cy, d.z * cx - d.x * cz, d.x * cy - d.y * cx);
+            let (e1, e2, ng) = ([row(3), row(4), row(5)], [row(6), row(7), row(8)], [row(9), row(10), row(11)]);
+            let den = ng[0] * d.x + ng[1] * d.y + ng[2] * d.z;
+            let inv = 1.0 / den;
+            let u = (rx * e2[0] + ry * e2[1] + rz * e2[2]) * inv;
+            let v = (rx * e1[0] + ry * e1[1] + rz * e1[2]) * inv;
+            let w = 1.0 - u - v;
+            let t = (ng[0] * cx + ng[1] * cy + ng[2] * cz) * inv;
+            let inside = (u.to_bits() | v.to_bits() | w.to_bits()) & 0x8000_0000 == 0;
+            let hit = inv != 0.0 && inside && t >= ray.tmin && t <= t_max && t < f32::INFINITY;
+            hits.t[lane] = t;
+            hits.mask |= u32::from(hit) << lane;
+            hits.back |= u32::from(den < 0.0) << lane;
+        }
+        hits
+    }
+}
+
+/// SSE path (every x86-64 CPU has SSE2): the leaf's lanes in one register.
+#[cfg(target_arch = "x86_64")]
+pub struct SseLeaf;
+
+#[cfg(target_arch = "x86_64")]
+impl LeafTest for SseLeaf {
+    #[inline(always)]
+    fn test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits {
+        use std::arch::x86_64::*;
+        let block = blocks.block(first, count);
+        let n = count as usize;
+        // SAFETY: SSE2 is part of x86-64; every read is four floats from
+        // row start `r·n` with `r ≤ 11`, which ends at most at
+        // `11n + 4 ≤ 12n + TAIL`, inside `block`.
+        unsafe {
+            let p = block.as_ptr();
+            let row = |r: usize| _mm_loadu_ps(p.add(r * n));
+            let (ox, oy, oz) = (_mm_set1_ps(ray.origin.x), _mm_set1_ps(ray.origin.y), _mm_set1_ps(ray.origin.z));
+            let (dx, dy, dz) = (_mm_set1_ps(ray.direction.x), _mm_set1_ps(ray.direction.y), _mm_set1_ps(ray.direction.z));
+            let (cx, cy, cz) = (_mm_sub_ps(row(0), ox), _mm_sub_ps(row(1), oy), _mm_sub_ps(row(2), oz));
+            let cross = |a: __m128, b: __m128, c: __m128, d: __m128| _mm_sub_ps(_mm_mul_ps(a, b), _mm_mul_ps(c, d));
+            let (rx, ry, rz) = (cross(dy, cz, dz, cy), cross(dz, cx, dx, cz), cross(dx, cy, dy, cx));
+            let dot = |ax: __m128, ay: __m128, az: __m128, bx: __m128, by: __m128, bz: __m128| {
+                _mm_add_ps(_mm_add_ps(_mm_mul_ps(ax, bx), _mm_mul_ps(ay, by)), _mm_mul_ps(az, bz))
+            };
+            let (ngx, ngy, ngz) = (row(9), row(10), row(11));
+            let den = dot(ngx, ngy, ngz, dx, dy, dz);
+            let inv = _mm_div_ps(_mm_set1_ps(1.0), den);
+            let u = _mm_mul_ps(dot(rx, ry, rz, row(6), row(7), row(8)), inv);
+            let v = _mm_mul_ps(dot(rx, ry, rz, row(3), row(4), row(5)), inv);
+            let w = _mm_sub_ps(_mm_sub_ps(_mm_set1_ps(1.0), u), v);
+            let t = _mm_mul_ps(dot(ngx, ngy, ngz, cx, cy, cz), inv);
+            let outside = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(u, v), w)) as u32;
+            let valid = _mm_and_ps(
+                _mm_and_ps(_mm_cmpneq_ps(inv, _mm_setzero_ps()), _mm_cmpge_ps(t, _mm_set1_ps(ray.tmin))),
+                _mm_and_ps(_mm_cmple_ps(t, _mm_set1_ps(t_max)), _mm_cmplt_ps(t, _mm_set1_ps(f32::INFINITY))),
+            );
+            let lanes = (1u32 << n) - 1;
+            let mut hits = LeafHits {
+                mask: _mm_movemask_ps(valid) as u32 & !outside & lanes,
+                back: _mm_movemask_ps(_mm_cmplt_ps(den, _mm_setzero_ps())) as u32 & lanes,
+                t: [0.0; MAX_LANES as usize],
+            };
+            _mm_storeu_ps(hits.t.as_mut_ptr(), t);
+            hits
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3A;
+
+    fn random_triangles(count: usize) -> Vec<RtTriangle> {
+        let mut rand = crate::bake::sampling::test_stream(7);
+        (0..count)
+            .map(|_| {
+                let mut p = || Vec3A::new(rand() * 2.0 - 1.0, rand() * 2.0 - 1.0, rand() * 2.0 - 1.0);
+                let a = p();
+                RtTriangle::new(a, a + p() * 0.8, a + p() * 0.8)
+            })
+            .collect()
+    }
+
+    /// Leaves of 1–4 triangles; every lane of every path gives
+    /// `RtTriangle::intersect`'s answer bit for bit, and unpacking gives the
+    /// triangle back.
+    #[test]
+    fn blocks_agree_with_rt_triangle_bit_for_bit() {
+        let triangles = random_triangles(1000);
+        let mut leaves = Vec::new();
+        let mut first = 0u32;
+        while (first as usize) < triangles.len() {
+            let count = (1 + first % 4).min(triangles.len() as u32 - first);
+            leaves.push((first, count));
+            first += count;
+        }
+        let blocks = LeafBlocks::new(&triangles, leaves.iter().copied());
+        for (i, tri) in triangles.iter().enumerate() {
+            let back = blocks.triangle(i as u32);
+            assert_eq!((back.v0, back.e1, back.e2, back.ng), (tri.v0, tri.e1, tri.e2, tri.ng));
+        }
+        let mut rand = crate::bake::sampling::test_stream(99);
+        let mut hit_lanes = 0;
+        for k in 0..3000 {
+            let o = Vec3A::new(rand() * 4.0 - 2.0, rand() * 4.0 - 2.0, rand() * 4.0 - 2.0);
+            let mut d = Vec3A::new(rand() - 0.5, rand() - 0.5, rand() - 0.5);
+            if k % 7 == 0 {
+                d.x = 0.0;
+            }
+            let t_max = if k % 3 == 0 { f32::INFINITY } else { rand() * 3.0 };
+            let ray = Ray::new(o, d.normalize(), 0.0, t_max);
+            for &(first, count) in &leaves {
+                let scalar = ScalarLeaf::test_leaf(&blocks, first, count, &ray, t_max);
+                #[cfg(target_arch = "x86_64")]
+                {
+                    let sse = SseLeaf::test_leaf(&blocks, first, count, &ray, t_max);
+                    assert_eq!((scalar.mask, scalar.back), (sse.mask, sse.back));
+                    for lane in 0..count as usize {
+                        if scalar.mask >> lane & 1 == 1 {
+                            assert_eq!(scalar.t[lane].to_bits(), sse.t[lane].to_bits());
+                        }
+                    }
+                }
+                for lane in 0..count {
+                    let tri = &triangles[(first + lane) as usize];
+                    let expected = tri.intersect(&Ray { tmax: t_max, ..ray });
+                    let hit = scalar.mask >> lane & 1 == 1;
+                    assert_eq!(hit, expected.is_finite(), "lane {lane} of leaf {first}");
+                    if hit {
+                        hit_lanes += 1;
+                        assert_eq!(scalar.t[lane as usize].to_bits(), expected.to_bits());
+                        assert_eq!(scalar.back >> lane & 1 == 1, tri.ng.dot(ray.direction) < 0.0);
+                    }
+                }
+            }
+        }
+        assert!(hit_lanes > 1000, "only {hit_lanes} hits");
+    }
+}
