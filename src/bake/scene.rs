@@ -3,8 +3,9 @@
 //! the queries the bake needs: closest hit with barycentrics and facing, and
 //! occlusion (first hit ends the walk), each with an AVX2 and a portable path.
 //!
-//! Triangles are copied once into BVH leaf order so traversal reads them
-//! without an index indirection.
+//! Triangles are copied once into BVH leaf order, a struct-of-arrays block
+//! per leaf ([`super::leaf_blocks`]), so a leaf visit is one contiguous read
+//! and one SIMD test, without an index indirection.
 //!
 //! Ties: real CAD models are double-sided (every surface doubled by a twin
 //! with opposite winding). Two hits closer than `tie_distance` count as one
