@@ -1,13 +1,15 @@
 //! The triangles of each BVH leaf as one struct-of-arrays block, tested a
-//! whole leaf (up to four triangles) per SIMD pass.
+//! whole leaf (up to eight triangles) per AVX pass.
 //!
 //! A leaf of `n` triangles is 12 rows of `n` floats: v0, e1 = v0 − v1,
 //! e2 = v2 − v0 and ng = e1 × e2 (obvhs `RtTriangle`'s precomputed form),
 //! x, y, z each. Rows are exactly `n` wide, so a leaf of one triangle costs
-//! 48 bytes, not a padded four-lane block (padded 4-wide blocks measured
+//! 48 bytes, not a padded eight-lane block (padded 4-wide blocks measured
 //! slower: docs/performance.md); a lane past `n` reads the next row and is
-//! masked off. The test is obvhs's Möller–Trumbore with the same operations
-//! in the same order and no fused multiply-add, so every lane gives the bits
+//! masked off. Testing a leaf costs the same whatever `n` ≤ 8, which is why
+//! the BVH uses leaves of up to eight triangles (`scene::LEAF_TRIANGLES`).
+//! The test is obvhs's Möller–Trumbore with the same operations in the same
+//! order and no fused multiply-add, so every lane gives the bits
 //! `RtTriangle::intersect` gives for that triangle: the SIMD and portable
 //! paths, and the brute-force oracle, agree exactly.
 
@@ -15,8 +17,8 @@ use obvhs::{ray::Ray, rt_triangle::RtTriangle};
 
 /// Floats per triangle in a block.
 pub const ROWS: usize = 12;
-/// Most triangles one block holds (lanes of one SSE register).
-pub const MAX_LANES: u32 = 4;
+/// Most triangles one block holds (lanes of one AVX register).
+pub const MAX_LANES: u32 = 8;
 /// Floats past the last block that a four-lane read of a short row may touch.
 const TAIL: usize = MAX_LANES as usize;
 
@@ -135,50 +137,54 @@ impl LeafTest for ScalarLeaf {
     }
 }
 
-/// SSE path (every x86-64 CPU has SSE2): the leaf's lanes in one register.
+/// AVX path: up to eight lanes in one register. Only called from the
+/// AVX2 walks (`#[target_feature(enable = "avx2")]`, runtime-detected).
 #[cfg(target_arch = "x86_64")]
-pub struct SseLeaf;
+pub struct AvxLeaf;
 
 #[cfg(target_arch = "x86_64")]
-impl LeafTest for SseLeaf {
+impl LeafTest for AvxLeaf {
     #[inline(always)]
     fn test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits {
         use std::arch::x86_64::*;
         let block = blocks.block(first, count);
         let n = count as usize;
-        // SAFETY: SSE2 is part of x86-64; every read is four floats from
-        // row start `r·n` with `r ≤ 11`, which ends at most at
-        // `11n + 4 ≤ 12n + TAIL`, inside `block`.
+        // SAFETY: reached only from functions compiled with AVX2 after
+        // runtime detection; every read is eight floats from row start `r·n`
+        // with `r ≤ 11`, which ends at most at `11n + 8 ≤ 12n + TAIL`,
+        // inside `block`.
         unsafe {
             let p = block.as_ptr();
-            let row = |r: usize| _mm_loadu_ps(p.add(r * n));
-            let (ox, oy, oz) = (_mm_set1_ps(ray.origin.x), _mm_set1_ps(ray.origin.y), _mm_set1_ps(ray.origin.z));
-            let (dx, dy, dz) = (_mm_set1_ps(ray.direction.x), _mm_set1_ps(ray.direction.y), _mm_set1_ps(ray.direction.z));
-            let (cx, cy, cz) = (_mm_sub_ps(row(0), ox), _mm_sub_ps(row(1), oy), _mm_sub_ps(row(2), oz));
-            let cross = |a: __m128, b: __m128, c: __m128, d: __m128| _mm_sub_ps(_mm_mul_ps(a, b), _mm_mul_ps(c, d));
+            let row = |r: usize| _mm256_loadu_ps(p.add(r * n));
+            let splat = _mm256_set1_ps;
+            let (ox, oy, oz) = (splat(ray.origin.x), splat(ray.origin.y), splat(ray.origin.z));
+            let (dx, dy, dz) = (splat(ray.direction.x), splat(ray.direction.y), splat(ray.direction.z));
+            let (cx, cy, cz) = (_mm256_sub_ps(row(0), ox), _mm256_sub_ps(row(1), oy), _mm256_sub_ps(row(2), oz));
+            let cross = |a: __m256, b: __m256, c: __m256, d: __m256| _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d));
             let (rx, ry, rz) = (cross(dy, cz, dz, cy), cross(dz, cx, dx, cz), cross(dx, cy, dy, cx));
-            let dot = |ax: __m128, ay: __m128, az: __m128, bx: __m128, by: __m128, bz: __m128| {
-                _mm_add_ps(_mm_add_ps(_mm_mul_ps(ax, bx), _mm_mul_ps(ay, by)), _mm_mul_ps(az, bz))
+            let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
+                _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz))
             };
             let (ngx, ngy, ngz) = (row(9), row(10), row(11));
             let den = dot(ngx, ngy, ngz, dx, dy, dz);
-            let inv = _mm_div_ps(_mm_set1_ps(1.0), den);
-            let u = _mm_mul_ps(dot(rx, ry, rz, row(6), row(7), row(8)), inv);
-            let v = _mm_mul_ps(dot(rx, ry, rz, row(3), row(4), row(5)), inv);
-            let w = _mm_sub_ps(_mm_sub_ps(_mm_set1_ps(1.0), u), v);
-            let t = _mm_mul_ps(dot(ngx, ngy, ngz, cx, cy, cz), inv);
-            let outside = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(u, v), w)) as u32;
-            let valid = _mm_and_ps(
-                _mm_and_ps(_mm_cmpneq_ps(inv, _mm_setzero_ps()), _mm_cmpge_ps(t, _mm_set1_ps(ray.tmin))),
-                _mm_and_ps(_mm_cmple_ps(t, _mm_set1_ps(t_max)), _mm_cmplt_ps(t, _mm_set1_ps(f32::INFINITY))),
+            let inv = _mm256_div_ps(splat(1.0), den);
+            let u = _mm256_mul_ps(dot(rx, ry, rz, row(6), row(7), row(8)), inv);
+            let v = _mm256_mul_ps(dot(rx, ry, rz, row(3), row(4), row(5)), inv);
+            let w = _mm256_sub_ps(_mm256_sub_ps(splat(1.0), u), v);
+            let t = _mm256_mul_ps(dot(ngx, ngy, ngz, cx, cy, cz), inv);
+            let outside = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
+            // Predicates as Rust's operators: `!=` is true for NaN, the rest false.
+            let valid = _mm256_and_ps(
+                _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv, _mm256_setzero_ps()), _mm256_cmp_ps::<_CMP_GE_OQ>(t, splat(ray.tmin))),
+                _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t, splat(t_max)), _mm256_cmp_ps::<_CMP_LT_OQ>(t, splat(f32::INFINITY))),
             );
             let lanes = (1u32 << n) - 1;
             let mut hits = LeafHits {
-                mask: _mm_movemask_ps(valid) as u32 & !outside & lanes,
-                back: _mm_movemask_ps(_mm_cmplt_ps(den, _mm_setzero_ps())) as u32 & lanes,
+                mask: _mm256_movemask_ps(valid) as u32 & !outside & lanes,
+                back: _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(den, _mm256_setzero_ps())) as u32 & lanes,
                 t: [0.0; MAX_LANES as usize],
             };
-            _mm_storeu_ps(hits.t.as_mut_ptr(), t);
+            _mm256_storeu_ps(hits.t.as_mut_ptr(), t);
             hits
         }
     }
@@ -209,7 +215,7 @@ mod tests {
         let mut leaves = Vec::new();
         let mut first = 0u32;
         while (first as usize) < triangles.len() {
-            let count = (1 + first % 4).min(triangles.len() as u32 - first);
+            let count = (1 + first % MAX_LANES).min(triangles.len() as u32 - first);
             leaves.push((first, count));
             first += count;
         }
@@ -231,8 +237,9 @@ mod tests {
             for &(first, count) in &leaves {
                 let scalar = ScalarLeaf::test_leaf(&blocks, first, count, &ray, t_max);
                 #[cfg(target_arch = "x86_64")]
-                {
-                    let sse = SseLeaf::test_leaf(&blocks, first, count, &ray, t_max);
+                if crate::bake::bvh8::avx2_available() {
+                    // SAFETY: AVX2 was detected.
+                    let sse = unsafe { avx_test_leaf(&blocks, first, count, &ray, t_max) };
                     assert_eq!((scalar.mask, scalar.back), (sse.mask, sse.back));
                     for lane in 0..count as usize {
                         if scalar.mask >> lane & 1 == 1 {
@@ -254,5 +261,11 @@ mod tests {
             }
         }
         assert!(hit_lanes > 1000, "only {hit_lanes} hits");
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn avx_test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits {
+        AvxLeaf::test_leaf(blocks, first, count, ray, t_max)
     }
 }

@@ -57,10 +57,13 @@ pub enum Traversal {
 }
 
 /// Triangles per BVH leaf at most; the SAH leaf collapse picks smaller
-/// leaves where they pay. 4 measured best on the Ferrari (1, 2, 4, 8, 15 tried).
-const LEAF_TRIANGLES: u32 = 4;
-/// Cost of a node visit relative to one triangle test, for the leaf collapse.
-const NODE_COST: f32 = 3.0;
+/// leaves where they pay. A leaf of up to eight is one AVX test
+/// ([`super::leaf_blocks`]), so 8 measured best on the Ferrari and the
+/// cabin (4, 8, 12, 15 tried; docs/performance.md).
+const LEAF_TRIANGLES: u32 = 8;
+/// Cost of a node visit relative to one triangle test, for the leaf
+/// collapse (3, 6, 10, 15 tried with 8-triangle leaves: 6–10 equal, 3 worse).
+const NODE_COST: f32 = 6.0;
 
 /// A built acceleration structure over a mesh.
 pub struct Scene {
@@ -181,7 +184,7 @@ impl Scene {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn closest_hit_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        self.closest_hit_with::<bvh8::Avx2Test, super::leaf_blocks::SseLeaf>(origin, direction, t_max)
+        self.closest_hit_with::<bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(origin, direction, t_max)
     }
 
     #[inline(always)]
@@ -252,7 +255,7 @@ impl Scene {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn occluder_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
-        self.occluder_with::<bvh8::Avx2Test, super::leaf_blocks::SseLeaf>(origin, direction, t_max)
+        self.occluder_with::<bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(origin, direction, t_max)
     }
 
     #[inline(always)]
