@@ -19,7 +19,7 @@ use obvhs::{ray::Ray, rt_triangle::RtTriangle};
 pub const ROWS: usize = 12;
 /// Most triangles one block holds (lanes of one AVX register).
 pub const MAX_LANES: u32 = 8;
-/// Floats past the last block that a four-lane read of a short row may touch.
+/// Floats past the last block that an eight-lane read of a short row may touch.
 const TAIL: usize = MAX_LANES as usize;
 
 /// All leaves' blocks, back to back in leaf order: the block of the leaf
@@ -93,7 +93,7 @@ impl LeafBlocks {
         }
     }
 
-    /// The block of leaf `(first, count)`, with the tail a four-lane read may touch.
+    /// The block of leaf `(first, count)`, with the tail an eight-lane read may touch.
     #[inline(always)]
     fn block(&self, first: u32, count: u32) -> &[f32] {
         let start = ROWS * first as usize;
@@ -206,7 +206,7 @@ mod tests {
             .collect()
     }
 
-    /// Leaves of 1–4 triangles; every lane of every path gives
+    /// Leaves of 1–8 triangles; every lane of every path gives
     /// `RtTriangle::intersect`'s answer bit for bit, and unpacking gives the
     /// triangle back.
     #[test]
