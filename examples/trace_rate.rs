@@ -3,7 +3,7 @@
 //! sphere), and optionally exports the exact rays for `benches/embree_compare.py`.
 //!
 //! cargo run --release --example trace_rate -- [MESH|cabin] [--rays-per-point N] [--points N]
-//!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable]
+//!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable] [--share G]
 //!
 //! Prints min / median / max Mrays/s over R runs for occlusion and closest hit.
 
@@ -44,19 +44,27 @@ fn main() {
     let build = start.elapsed().as_secs_f64();
 
     // Sample points: centroids of an even spread of triangles, in mesh order.
+    // `--share G`: G consecutive points use one direction set (the first
+    // point's) and their rays go direction-major, a measure of what sharing
+    // directions between neighbours would buy (1: every point its own set).
+    let share: u32 = arg(&args, "--share", 1).max(1);
     let step = (mesh.triangle_count() as u32 / points).max(1);
     let mut rays: Vec<(Vec3, Vec3)> = Vec::new();
-    for p in 0..points {
-        let t = ((p * step) as usize).min(mesh.triangle_count() - 1);
-        let n = scene.face_normal(t as u32);
-        if n == Vec3::ZERO {
-            continue;
-        }
-        let [a, b, c] = mesh.triangle_positions(t);
+    for group in (0..points).step_by(share as usize) {
+        let members: Vec<(Vec3, Vec3)> = (group..(group + share).min(points))
+            .filter_map(|p| {
+                let t = ((p * step) as usize).min(mesh.triangle_count() - 1);
+                let n = scene.face_normal(t as u32);
+                let [a, b, c] = mesh.triangle_positions(t);
+                (n != Vec3::ZERO).then_some(((a + b + c) / 3.0, n))
+            })
+            .collect();
         for k in 0..rays_per_point {
-            let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, p);
-            let d = sampling::cosine_sphere(n, u1, u2);
-            rays.push((scene.offset_origin((a + b + c) / 3.0, n, d), d));
+            let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, group);
+            for &(centroid, n) in &members {
+                let d = sampling::cosine_sphere(n, u1, u2);
+                rays.push((scene.offset_origin(centroid, n, d), d));
+            }
         }
     }
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
