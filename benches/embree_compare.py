@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Trace the same rays with prtbake and with Embree (PyPI `embreex`), side by side.
 
-usage: python3 benches/embree_compare.py [MESH|cabin] [--runs 3] [--rays-per-point 64] [--points 16384]
+usage: python3 benches/embree_compare.py [MESH|cabin] [--runs 3] [--rays-per-point 64] [--points 16384] [--share G] [--sort]
 
 It runs `cargo run --release --example trace_rate` (which measures prtbake and
 exports the exact rays it traced) and traces those rays with Embree, on 1 and
@@ -42,7 +42,7 @@ def ensure_embree():
 def prtbake_rates(args, threads, export_dir, runs):
     cmd = ["cargo", "run", "--quiet", "--release", "--example", "trace_rate", "--", args.mesh,
            "--runs", str(runs), "--threads", str(threads),
-           "--rays-per-point", str(args.rays_per_point), "--points", str(args.points)]
+           "--rays-per-point", str(args.rays_per_point), "--points", str(args.points)] + args.trace_rate_args
     if export_dir:
         cmd += ["--export", export_dir]
     out = subprocess.check_output(cmd, cwd=ROOT, text=True)
@@ -87,7 +87,10 @@ def main():
     p.add_argument("--runs", type=int, default=3)
     p.add_argument("--rays-per-point", type=int, default=64)
     p.add_argument("--points", type=int, default=16384)
+    p.add_argument("--share", type=int, help="trace_rate --share G: G neighbouring points share one direction set")
+    p.add_argument("--sort", action="store_true", help="trace_rate --sort: a point's rays in Morton order of their Sobol pairs")
     args = p.parse_args()
+    args.trace_rate_args = (["--share", str(args.share)] if args.share else []) + (["--sort"] if args.sort else [])
     ensure_embree()
     names = ("occlusion", "closest_hit")
     ours = {t: {n: [] for n in names} for t in (1, 2)}

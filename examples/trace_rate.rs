@@ -48,6 +48,7 @@ fn main() {
     // point's) and their rays go direction-major, a measure of what sharing
     // directions between neighbours would buy (1: every point its own set).
     let share: u32 = arg(&args, "--share", 1).max(1);
+    let sort = args.iter().any(|a| a == "--sort");
     let step = (mesh.triangle_count() as u32 / points).max(1);
     let mut rays: Vec<(Vec3, Vec3)> = Vec::new();
     for group in (0..points).step_by(share as usize) {
@@ -59,8 +60,21 @@ fn main() {
                 (n != Vec3::ZERO).then_some(((a + b + c) / 3.0, n))
             })
             .collect();
-        for k in 0..rays_per_point {
-            let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, group);
+        let mut pairs: Vec<(f32, f32)> =
+            (0..rays_per_point).map(|k| sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, group)).collect();
+        if sort {
+            // Morton order of the (u1, u2) square: neighbouring rays leave in neighbouring directions.
+            let spread = |x: f32| {
+                let mut v = (x * 65535.0) as u64;
+                v = (v | v << 16) & 0x0000_ffff_0000_ffff;
+                v = (v | v << 8) & 0x00ff_00ff_00ff_00ff;
+                v = (v | v << 4) & 0x0f0f_0f0f_0f0f_0f0f;
+                v = (v | v << 2) & 0x3333_3333_3333_3333;
+                (v | v << 1) & 0x5555_5555_5555_5555
+            };
+            pairs.sort_by_key(|&(u1, u2)| spread(u1) << 1 | spread(u2));
+        }
+        for &(u1, u2) in &pairs {
             for &(centroid, n) in &members {
                 let d = sampling::cosine_sphere(n, u1, u2);
                 rays.push((scene.offset_origin(centroid, n, d), d));
