@@ -9,7 +9,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, sampling, BakeParams, BuildQuality, Traversal, Mode, Scene};
+use prtbake::bake::{bake_mesh, sampling, BakeParams, BuildQuality, Mode, Scene, Traversal};
 use prtbake::fixtures::cabin::generate_cabin;
 use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
 use rayon::prelude::*;
@@ -57,10 +57,16 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     group.sample_size(10);
     group.throughput(Throughput::Elements(rays.len() as u64));
     let occlusion = |scene: &Scene, pool: &rayon::ThreadPool| {
-        pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.occluded(*o, *d, f32::INFINITY)).count()).sum::<usize>())
+        pool.install(|| {
+            rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.occluded(*o, *d, f32::INFINITY)).count()).sum::<usize>()
+        })
     };
     let closest = |scene: &Scene, pool: &rayon::ThreadPool| {
-        pool.install(|| rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some()).count()).sum::<usize>())
+        pool.install(|| {
+            rays.par_chunks(4096)
+                .map(|chunk| chunk.iter().filter(|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some()).count())
+                .sum::<usize>()
+        })
     };
     for threads in [1, 2] {
         let pool = pool(threads);

@@ -475,7 +475,12 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
                 if a.view_points == 0 || a.view_rays == 0 || a.view_rays > 65536 {
                     anyhow::bail!("--view-points must be ≥ 1 and --view-rays in 1..=65536");
                 }
-                let params = prtbake::bake::cull::CullParams { points: a.view_points, rays_per_point: a.view_rays, seed: a.seed, ..Default::default() };
+                let params = prtbake::bake::cull::CullParams {
+                    points: a.view_points,
+                    rays_per_point: a.view_rays,
+                    seed: a.seed,
+                    ..Default::default()
+                };
                 Some((view_box, params))
             }
             None => None,
@@ -564,7 +569,11 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     let north = match &a.north {
         None => None,
         Some(text) => {
-            let v: Vec<f32> = text.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().with_context(|| format!("--north {text:?}: expected X,Y,Z"))?;
+            let v: Vec<f32> = text
+                .split(',')
+                .map(|x| x.trim().parse::<f32>())
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("--north {text:?}: expected X,Y,Z"))?;
             if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
                 bail!("--north {text:?}: expected three finite numbers X,Y,Z");
             }
@@ -612,9 +621,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
         Command::Generate { scene: _, output, detail } => cli::generate_cmd::run_colonnade(&output, &detail).map(|_| Outcome::Ok),
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
-        Command::Verify { rays, seed, threads, json } => {
-            cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json)
-        }
+        Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
         Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),

@@ -45,7 +45,13 @@ fn main() {
     let dc = |r: &prtbake::bake::TransferResult, v: usize| r.coefficients(v, 0)[0] as f64;
     let lit: Vec<usize> = (0..mesh.vertex_count()).filter(|&v| dc(&reference, v) > 0.0).collect();
     let mean = lit.iter().map(|&v| dc(&reference, v)).sum::<f64>() / lit.len().max(1) as f64;
-    println!("{source}: {} triangles, {} vertices, {} channel(s), {bounces} bounces, reference {reference_rays} rays (seed 2, {} points)", mesh.triangle_count(), mesh.vertex_count(), channels, if same_points { "the same" } else { "its own" });
+    println!(
+        "{source}: {} triangles, {} vertices, {} channel(s), {bounces} bounces, reference {reference_rays} rays (seed 2, {} points)",
+        mesh.triangle_count(),
+        mesh.vertex_count(),
+        channels,
+        if same_points { "the same" } else { "its own" }
+    );
     println!("| rays per sample | seconds | Mrays/s | relative RMS DC error |");
     println!("|---|---|---|---|");
     let mut rays = 64;

@@ -35,7 +35,10 @@ pub fn reference_lightings(order: usize) -> Vec<Lighting> {
             let e = elevation.to_radians();
             let sun = Vec3::new(e.cos() * a.sin(), e.sin(), -e.cos() * a.cos());
             let sky = crate::sky::preetham_sky(sun, Vec3::Y, 3.0, order);
-            out.push(Lighting { name: format!("sky elevation {elevation}° azimuth {:.0}°", (azimuth + 90.0 * turn as f32) % 360.0), sh: sky.sky_sh });
+            out.push(Lighting {
+                name: format!("sky elevation {elevation}° azimuth {:.0}°", (azimuth + 90.0 * turn as f32) % 360.0),
+                sh: sky.sky_sh,
+            });
         }
     }
     out
@@ -70,7 +73,11 @@ pub fn relative_rms(reference: &[[f64; 3]], other: &[[f64; 3]]) -> f64 {
         }
     }
     if den == 0.0 {
-        if num == 0.0 { 0.0 } else { f64::INFINITY }
+        if num == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        }
     } else {
         (num / den).sqrt()
     }
@@ -188,9 +195,10 @@ pub struct Choice {
 /// (f32) when none fits. Non-finite errors never fit.
 pub fn choose(transfer: &[f32], order: usize, channels: usize, storages: &[Storage], budget: f64, lightings: &[Lighting]) -> Choice {
     let measured: Vec<Candidate> = storages.iter().map(|s| measure(transfer, order, channels, s, lightings)).collect();
-    let fitting = measured.iter().filter(|c| c.shaded_error <= budget).min_by(|a, b| {
-        a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error))
-    });
+    let fitting = measured
+        .iter()
+        .filter(|c| c.shaded_error <= budget)
+        .min_by(|a, b| a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error)));
     let chosen = match fitting {
         Some(c) => c.clone(),
         None => measure(transfer, order, channels, &Storage { order, channels, quantization: Quantization::F32 }, lightings),

@@ -26,9 +26,7 @@ fn plane_under_sphere_matches_closed_form() {
 #[test]
 fn integrating_sphere_every_bounce_window_and_hole() {
     let v = VerifyParams { rays: 512, seed: 3 };
-    for (mode, cap_height, albedo) in
-        [(Mode::Window, 0.8, 0.5), (Mode::Window, 0.5, 0.8), (Mode::Open, 0.8, 0.8), (Mode::Open, 0.5, 0.5)]
-    {
+    for (mode, cap_height, albedo) in [(Mode::Window, 0.8, 0.5), (Mode::Window, 0.5, 0.8), (Mode::Open, 0.8, 0.8), (Mode::Open, 0.5, 0.5)] {
         assert_check(verify::integrating_sphere(mode, cap_height, albedo, v).unwrap());
     }
 }
@@ -76,7 +74,15 @@ fn sobol_converges_faster_than_random() {
 fn integrating_sphere_with_window_sampling() {
     use prtbake::bake::{bake_mesh, BakeParams, Mode};
     let (mesh, f) = shapes::integrating_sphere(3, 0.6, 0.7, shapes::Opening::Window);
-    let params = BakeParams { order: 1, rays: 512, mode: Mode::Window, bounces: 2, store_bounces: true, window_sampling: true, ..BakeParams::default() };
+    let params = BakeParams {
+        order: 1,
+        rays: 512,
+        mode: Mode::Window,
+        bounces: 2,
+        store_bounces: true,
+        window_sampling: true,
+        ..BakeParams::default()
+    };
     let (r, surfaces, _) = bake_mesh(&mesh, &params, &[]).unwrap();
     let mut on_wall = vec![true; mesh.vertex_count()];
     for t in 0..mesh.triangle_count() {

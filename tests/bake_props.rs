@@ -128,7 +128,10 @@ fn interior_sampling_cures_covered_vertices() {
     };
     let vertex_error = error(Sampling::Vertex);
     let interior_error = error(interior);
-    eprintln!("covered-vertex RMS DC error: vertex sampling {vertex_error:.4e}, interior sampling {interior_error:.4e}, ratio {:.1}", vertex_error / interior_error);
+    eprintln!(
+        "covered-vertex RMS DC error: vertex sampling {vertex_error:.4e}, interior sampling {interior_error:.4e}, ratio {:.1}",
+        vertex_error / interior_error
+    );
     assert!(vertex_error > 0.05, "vertex sampling should darken the covered row (error {vertex_error})");
     assert!(interior_error * 5.0 <= vertex_error, "interior {interior_error} vs vertex {vertex_error}");
 }

@@ -35,7 +35,11 @@ fn cleaning_closes_the_light_leak_of_a_cracked_box() {
     let after = receiver_dc(&cleaned);
     // One escaping ray of one vertex adds y00·(2/N)… ≈ 3.4e-5/81 to the mean: "clearly above zero" is ≥ 10 such rays.
     let one_ray = 0.282_095 / params.rays as f64 / 81.0;
-    eprintln!("cracked box: receiver mean DC before {before:.3e} ({:.0} rays' worth), after {after:.3e}; {} T-junctions fixed", before / one_ray, report.tjunctions_fixed);
+    eprintln!(
+        "cracked box: receiver mean DC before {before:.3e} ({:.0} rays' worth), after {after:.3e}; {} T-junctions fixed",
+        before / one_ray,
+        report.tjunctions_fixed
+    );
     assert!(before >= 10.0 * one_ray, "no leak measured before cleaning: {before}");
     assert!(after <= one_ray, "light still leaks after cleaning: {after}");
     assert_eq!(report.boundary_edges_after, 0);

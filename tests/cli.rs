@@ -31,7 +31,8 @@ fn bake_inspect_round_trip_and_thread_independence() {
     assert_eq!(doc["transfer"]["channels"], 3);
     assert_eq!(doc["meta"]["params"]["seed"], 7);
     // No temporary files are left behind.
-    let leftovers: Vec<_> = std::fs::read_dir(&dir.0).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains(".tmp")).collect();
+    let leftovers: Vec<_> =
+        std::fs::read_dir(&dir.0).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains(".tmp")).collect();
     assert!(leftovers.is_empty());
 }
 
@@ -99,7 +100,19 @@ fn ferrari_window_mode_bakes() {
     let Some(car) = shared_data("car-ferrari458/ferrari_nodraco.glb") else { return };
     let dir = Scratch::new("car");
     let out = dir.path("car.prtb");
-    let o = prtbake(&["bake", car.to_str().unwrap(), "-o", out.to_str().unwrap(), "--window", "Glass_Gray", "--rays", "4", "--order", "2", "--json"]);
+    let o = prtbake(&[
+        "bake",
+        car.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--window",
+        "Glass_Gray",
+        "--rays",
+        "4",
+        "--order",
+        "2",
+        "--json",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(doc["stats"]["triangles"], 358_788);

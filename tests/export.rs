@@ -16,9 +16,7 @@ fn sample_bundle() -> Bundle {
     shapes::append(&mut mesh, &sphere);
     let (order, channels) = (3u32, 3u32);
     let per_vertex = (order * order * channels) as usize;
-    let values = |seed: f32| -> Vec<f32> {
-        (0..mesh.vertex_count() * per_vertex).map(|i| (i as f32 * 0.37 + seed).sin() * 0.5).collect()
-    };
+    let values = |seed: f32| -> Vec<f32> { (0..mesh.vertex_count() * per_vertex).map(|i| (i as f32 * 0.37 + seed).sin() * 0.5).collect() };
     let steps: Vec<SunStep> = (0..40)
         .map(|k| SunStep {
             unix_time_utc: 1.7e9 + 420.0 * k as f64,
@@ -52,7 +50,8 @@ fn sample_bundle() -> Bundle {
 fn group_vertices(mesh: &Mesh) -> Vec<Vec<u32>> {
     (0..mesh.groups.len() as u32)
         .map(|g| {
-            let mut used: Vec<u32> = (0..mesh.triangle_count()).filter(|&t| mesh.tri_group[t] == g).flat_map(|t| mesh.triangle(t)).collect();
+            let mut used: Vec<u32> =
+                (0..mesh.triangle_count()).filter(|&t| mesh.tri_group[t] == g).flat_map(|t| mesh.triangle(t)).collect();
             used.sort_unstable();
             used.dedup();
             used

@@ -38,7 +38,11 @@ fn sh_ringing_under_a_small_bright_source() {
         let source = sh::project_function(order, 256, |d| if d.dot(axis) >= cos_radius { [1000.0; 3] } else { [0.0; 3] });
         let radiance: Vec<f32> = source.iter().map(|c| c[0]).collect();
         let mut rows = Vec::new();
-        for (name, window) in [("none", Window::None), ("hanning", Window::Hanning { width: order as f32 + 1.0 }), ("lanczos", Window::Lanczos { width: order as f32 + 1.0 })] {
+        for (name, window) in [
+            ("none", Window::None),
+            ("hanning", Window::Hanning { width: order as f32 + 1.0 }),
+            ("lanczos", Window::Lanczos { width: order as f32 + 1.0 }),
+        ] {
             let mut l = radiance.clone();
             sh::apply_window(&mut l, 1, order, window);
             let (rlo, rhi) = sh_extremes(&l, order);
@@ -47,7 +51,9 @@ fn sh_ringing_under_a_small_bright_source() {
             let (elo, ehi) = sh_extremes(&e, order);
             eprintln!(
                 "ringing order {order} window {name:<8}: radiance min/max {:>7.2}%  irradiance min/max {:>7.3}%  irradiance peak {:.3}",
-                100.0 * rlo / rhi, 100.0 * elo / ehi, ehi
+                100.0 * rlo / rhi,
+                100.0 * elo / ehi,
+                ehi
             );
             rows.push((rlo / rhi, elo / ehi));
         }
@@ -64,7 +70,11 @@ fn sh_ringing_under_a_small_bright_source() {
             let (lo, hi) = sh_extremes(&y, order);
             sh::apply_window(&mut y, 1, order, Window::Hanning { width: order as f32 + 1.0 });
             let (wlo, whi) = sh_extremes(&y, order);
-            eprintln!("ringing sunset.exr order {order}: luminance min/max {:.2}% raw, {:.2}% with Hanning", 100.0 * lo / hi, 100.0 * wlo / whi);
+            eprintln!(
+                "ringing sunset.exr order {order}: luminance min/max {:.2}% raw, {:.2}% with Hanning",
+                100.0 * lo / hi,
+                100.0 * wlo / whi
+            );
         }
     }
 }
@@ -168,7 +178,9 @@ fn slivers_smear_and_cleaning_cures() {
             .filter(|&v| {
                 let p = mesh.positions[v];
                 let cell = size / cells as f32;
-                p.y.abs() < 1e-6 && ((p.x / cell).fract().abs() < 1e-4 || (p.x / cell).fract().abs() > 1.0 - 1e-4) && ((p.z / cell).fract().abs() < 1e-4 || (p.z / cell).fract().abs() > 1.0 - 1e-4)
+                p.y.abs() < 1e-6
+                    && ((p.x / cell).fract().abs() < 1e-4 || (p.x / cell).fract().abs() > 1.0 - 1e-4)
+                    && ((p.z / cell).fract().abs() < 1e-4 || (p.z / cell).fract().abs() > 1.0 - 1e-4)
             })
             .collect()
     };
@@ -220,13 +232,19 @@ fn scale_relative_epsilons() {
                 let to_centre = centre - x;
                 let alpha = (radius / to_centre.length()).asin();
                 let beta = to_centre.normalize().dot(DVec3::Y).acos();
-                let exact = if alpha + beta < std::f64::consts::FRAC_PI_2 { Y00 * (1.0 - alpha.sin().powi(2) * beta.cos()) } else {
+                let exact = if alpha + beta < std::f64::consts::FRAC_PI_2 {
+                    Y00 * (1.0 - alpha.sin().powi(2) * beta.cos())
+                } else {
                     plane_point_reference(1, x, centre, radius)[0]
                 };
                 s += (r.total[v] as f64 - exact).powi(2);
             }
             let rel = (s / count as f64).sqrt() / Y00;
-            eprintln!("scale {scale:>6} m at {offset:>6} m, {}: DC RMS error / y00 = {rel:.3e} (offset {:.3e})", if fixed.is_some() { "fixed epsilon 1e-4" } else { "relative epsilons" }, scene.origin_offset);
+            eprintln!(
+                "scale {scale:>6} m at {offset:>6} m, {}: DC RMS error / y00 = {rel:.3e} (offset {:.3e})",
+                if fixed.is_some() { "fixed epsilon 1e-4" } else { "relative epsilons" },
+                scene.origin_offset
+            );
             row.push(rel);
         }
         errors.push(row);
@@ -234,7 +252,10 @@ fn scale_relative_epsilons() {
     let relative: Vec<f64> = errors.iter().map(|r| r[0]).collect();
     let (lo, hi) = relative.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &e| (a.min(e), b.max(e)));
     assert!(hi < 0.05 && hi < 2.0 * lo, "relative epsilons should behave alike at every scale: {relative:?}");
-    assert!(errors[0][1] > 3.0 * errors[0][0] || errors[2][1] > 3.0 * errors[2][0], "a fixed epsilon should fail at some scale: {errors:?}");
+    assert!(
+        errors[0][1] > 3.0 * errors[0][0] || errors[2][1] > 3.0 * errors[2][0],
+        "a fixed epsilon should fail at some scale: {errors:?}"
+    );
 }
 
 /// NaN and infinity: a mesh file or an environment map holding them is

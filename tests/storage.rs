@@ -102,7 +102,11 @@ fn view_box_culls_the_hidden_and_keeps_transfer() {
     let mut touches_kept = vec![false; mesh.vertex_count()];
     for t in 0..mesh.triangle_count() {
         for v in mesh.triangle(t) {
-            if visible[t] { touches_kept[v as usize] = true } else { touches_culled[v as usize] = true }
+            if visible[t] {
+                touches_kept[v as usize] = true
+            } else {
+                touches_culled[v as usize] = true
+            }
         }
     }
     let n = 4;
@@ -133,8 +137,18 @@ fn grey_white_room_culling() {
     let scene = bake::Scene::build(&mesh, bake::BuildQuality::Sah);
     let view = cull::ViewBox::around_centre(&mesh, 0.5);
     let (visible, report) = cull::visible_triangles(&mesh, &scene, &surfaces, &view, &cull::CullParams::default());
-    eprintln!("grey-white room, view box {:?}..{:?}: {} of {} triangles removed, {} kept; {} of {} vertices kept; {} rays, {} escaped",
-        view.min, view.max, report.triangles_removed, report.triangles_before, report.triangles_kept, report.vertices_kept, report.vertices_before, report.rays, report.rays_escaped);
+    eprintln!(
+        "grey-white room, view box {:?}..{:?}: {} of {} triangles removed, {} kept; {} of {} vertices kept; {} rays, {} escaped",
+        view.min,
+        view.max,
+        report.triangles_removed,
+        report.triangles_before,
+        report.triangles_kept,
+        report.vertices_kept,
+        report.vertices_before,
+        report.rays,
+        report.rays_escaped
+    );
     assert!(report.triangles_removed > 0);
     let params = BakeParams { order: 2, rays: 32, ..BakeParams::default() };
     let full = bake::bake_transfer(&mesh, &scene, &surfaces, &params).unwrap();

@@ -109,8 +109,12 @@ fn masks_do_not_depend_on_threads_or_loop_order() {
     let mesh = plane_and_sphere();
     let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
     let scene = Scene::build(&mesh, BuildQuality::Sah);
-    let suns: Vec<Option<Vec3>> =
-        (0..40).map(|k| { let a = k as f32 * 0.15; Some(Vec3::new(a.cos(), 0.3 + 0.02 * k as f32, a.sin())) }).collect();
+    let suns: Vec<Option<Vec3>> = (0..40)
+        .map(|k| {
+            let a = k as f32 * 0.15;
+            Some(Vec3::new(a.cos(), 0.3 + 0.02 * k as f32, a.sin()))
+        })
+        .collect();
     let bake = |threads: usize, loop_order, shadow_cache| {
         rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| {
             let params = SunParams { loop_order, shadow_cache, ..SunParams::default() };
@@ -170,7 +174,19 @@ fn sun_command_on_mesh_and_bundle() {
     let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "32", "--quiet"]);
     assert!(o.status.success());
     let with_sun = dir.path("with-sun.prtb");
-    let o = prtbake(&["sun", baked.to_str().unwrap(), "-o", with_sun.to_str().unwrap(), "--steps", "1", "--from", "12:00", "--to", "12:00", "--quiet"]);
+    let o = prtbake(&[
+        "sun",
+        baked.to_str().unwrap(),
+        "-o",
+        with_sun.to_str().unwrap(),
+        "--steps",
+        "1",
+        "--from",
+        "12:00",
+        "--to",
+        "12:00",
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (before, after) = (std::fs::read(&baked).unwrap(), std::fs::read(&with_sun).unwrap());
     for tag in ["MESH", "MATL", "XFER"] {

@@ -6,9 +6,9 @@ mod chart;
 mod clean_props;
 mod cli;
 mod export;
-mod sun;
 mod stability;
 mod storage;
+mod sun;
 mod util;
 #[cfg(feature = "viewer")]
 mod view;

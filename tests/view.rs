@@ -142,7 +142,8 @@ fn sphere_matches_cpu_shading_pixel_for_pixel() {
     let (mut compared, mut background_checked, mut max_diff, mut sum_diff) = (0, 0, 0, 0i64);
     for y in 0..height as i64 {
         for x in 0..width as i64 {
-            let neighbours: Vec<Option<Option<[u8; 3]>>> = (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))).map(|(dx, dy)| at(x + dx, y + dy)).collect();
+            let neighbours: Vec<Option<Option<[u8; 3]>>> =
+                (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (dx, dy))).map(|(dx, dy)| at(x + dx, y + dy)).collect();
             // Skip the silhouette: coverage of pixels cut by it is a rasterisation rule, not shading.
             if neighbours.iter().all(|n| matches!(n, Some(Some(_)))) {
                 let want = expected[(y * width as i64 + x) as usize].unwrap();
@@ -153,12 +154,19 @@ fn sphere_matches_cpu_shading_pixel_for_pixel() {
                 sum_diff += diff as i64;
                 compared += 1;
             } else if neighbours.iter().all(|n| matches!(n, Some(None))) {
-                assert!(background(&image, x as u32, y as u32), "pixel ({x}, {y}) should be background, is {:?}", image.pixel(x as u32, y as u32));
+                assert!(
+                    background(&image, x as u32, y as u32),
+                    "pixel ({x}, {y}) should be background, is {:?}",
+                    image.pixel(x as u32, y as u32)
+                );
                 background_checked += 1;
             }
         }
     }
-    eprintln!("sphere: {compared} pixels compared, max difference {max_diff} codes, mean {:.3}; {background_checked} background pixels", sum_diff as f64 / compared as f64);
+    eprintln!(
+        "sphere: {compared} pixels compared, max difference {max_diff} codes, mean {:.3}; {background_checked} background pixels",
+        sum_diff as f64 / compared as f64
+    );
     assert!(compared > 4000, "only {compared} interior pixels");
     assert!(background_checked > 4000);
     assert!((sum_diff as f64) / (compared as f64) < 0.5, "mean difference too large");
@@ -184,7 +192,11 @@ fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
         b * b - c > 0.0 && -b > 0.0
     };
     let (words_per_vertex, masks) = SunSeries::pack(2, mesh.vertex_count(), |v, k| {
-        if v < plane_vertices { !hits_sphere(mesh.positions[v], suns[k]) } else { mesh.normals[v].dot(suns[k]) > 0.0 }
+        if v < plane_vertices {
+            !hits_sphere(mesh.positions[v], suns[k])
+        } else {
+            mesh.normals[v].dot(suns[k]) > 0.0
+        }
     });
     let steps = suns
         .iter()

@@ -425,11 +425,7 @@ mod tests {
             for j in 0..n {
                 let (x, z) = (i as f32, j as f32);
                 let y = ((i * 7 + j * 3) % 5) as f32 * 0.1;
-                tris.push(Triangle {
-                    v0: glam::vec3a(x, y, z),
-                    v1: glam::vec3a(x + 1.0, y, z),
-                    v2: glam::vec3a(x, y + 0.5, z + 1.0),
-                });
+                tris.push(Triangle { v0: glam::vec3a(x, y, z), v1: glam::vec3a(x + 1.0, y, z), v2: glam::vec3a(x, y + 0.5, z + 1.0) });
             }
         }
         tris

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use super::sampling::{hash_seed, sample_2d, DirectionPattern};
 use super::scene::Scene;
 use super::surfaces::Surfaces;
-use crate::mesh::{Mesh, MaterialRole};
+use crate::mesh::{MaterialRole, Mesh};
 
 const TAG_VIEW_POINT: u32 = 0x4355_4c01;
 const TAG_VIEW_RAY: u32 = 0x4355_4c02;
@@ -97,7 +97,13 @@ pub struct CullReport {
 }
 
 /// Flags every triangle some ray from `view_box` reaches first (or through windows).
-pub fn visible_triangles(mesh: &Mesh, scene: &Scene, surfaces: &Surfaces, view_box: &ViewBox, params: &CullParams) -> (Vec<bool>, CullReport) {
+pub fn visible_triangles(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    view_box: &ViewBox,
+    params: &CullParams,
+) -> (Vec<bool>, CullReport) {
     let see_through = |t: u32| {
         surfaces.window_transmittance[t as usize].is_some()
             || mesh.materials[mesh.tri_material[t as usize] as usize].role == MaterialRole::Window
@@ -108,11 +114,8 @@ pub fn visible_triangles(mesh: &Mesh, scene: &Scene, surfaces: &Surfaces, view_b
         .into_par_iter()
         .map(|p| {
             let box_seed = hash_seed(&[params.seed, TAG_VIEW_POINT]);
-            let u = Vec3::new(
-                sobol_burley::sample(p, 0, box_seed),
-                sobol_burley::sample(p, 1, box_seed),
-                sobol_burley::sample(p, 2, box_seed),
-            );
+            let u =
+                Vec3::new(sobol_burley::sample(p, 0, box_seed), sobol_burley::sample(p, 1, box_seed), sobol_burley::sample(p, 2, box_seed));
             let origin = view_box.min + extent * u;
             let ray_seed = hash_seed(&[params.seed, TAG_VIEW_RAY, p]);
             let mut seen = Vec::new();

@@ -3,9 +3,9 @@
 //! arrays and statistics.
 
 pub mod bvh8;
+pub mod cull;
 pub mod hugepages;
 pub mod leaf_blocks;
-pub mod cull;
 pub mod progress;
 pub mod sah;
 pub mod sampling;
@@ -126,11 +126,7 @@ impl BakeParams {
             return Err(BakeError::Params(format!("order {} is outside 1..={}", self.order, sh::MAX_ORDER)));
         }
         if self.rays == 0 || self.rays > sampling::MAX_RAYS_PER_POINT {
-            return Err(BakeError::Params(format!(
-                "rays per sample {} is outside 1..={}",
-                self.rays,
-                sampling::MAX_RAYS_PER_POINT
-            )));
+            return Err(BakeError::Params(format!("rays per sample {} is outside 1..={}", self.rays, sampling::MAX_RAYS_PER_POINT)));
         }
         if self.bounces > 16 {
             return Err(BakeError::Params(format!("{} bounces is more than 16", self.bounces)));

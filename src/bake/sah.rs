@@ -76,7 +76,8 @@ impl Input<'_> {
         let (left_span, right_span) = t.span.split_at_mut(mid);
         let left = Subtree { span: left_span, start: t.start, node: &mut left_node[0], below: left_below, below_base: t.below_base + 2 };
         let right_base = t.below_base + 2 + 2 * mid - 2;
-        let right = Subtree { span: right_span, start: t.start + mid, node: &mut right_node[0], below: right_below, below_base: right_base };
+        let right =
+            Subtree { span: right_span, start: t.start + mid, node: &mut right_node[0], below: right_below, below_base: right_base };
         let (l, r) = rayon::join(|| self.subtree(left, parallel_depth + 1), || self.subtree(right, parallel_depth + 1));
         1 + l.max(r)
     }
@@ -86,7 +87,7 @@ impl Input<'_> {
     fn subtree_iterative(&self, t: Subtree) -> usize {
         let base = t.below_base;
         let mut next_free = 0usize; // into t.below
-        // (node: None = the subtree root, else an index into t.below; span start, end relative to t.span; depth)
+                                    // (node: None = the subtree root, else an index into t.below; span start, end relative to t.span; depth)
         let mut stack: Vec<(Option<usize>, usize, usize, usize)> = vec![(None, 0, t.span.len(), 1)];
         let mut max_depth = 1;
         while let Some((node, start, end, depth)) = stack.pop() {
@@ -252,7 +253,9 @@ mod tests {
         let (one, two) = (build(1), build(2));
         check_tree(&boxes, &two);
         assert_eq!(one.primitive_indices, two.primitive_indices);
-        let key = |b: &Bvh2| b.nodes.iter().map(|n| (n.first_index, n.prim_count, n.aabb().min.to_array(), n.aabb().max.to_array())).collect::<Vec<_>>();
+        let key = |b: &Bvh2| {
+            b.nodes.iter().map(|n| (n.first_index, n.prim_count, n.aabb().min.to_array(), n.aabb().max.to_array())).collect::<Vec<_>>()
+        };
         assert_eq!(key(&one), key(&two));
     }
 }

@@ -15,7 +15,13 @@
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use obvhs::{bvh2::{builder::build_bvh2_from_tris, leaf_collapser::collapse}, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle, BvhBuildParams};
+use obvhs::{
+    bvh2::{builder::build_bvh2_from_tris, leaf_collapser::collapse},
+    ray::Ray,
+    rt_triangle::RtTriangle,
+    triangle::Triangle,
+    BvhBuildParams,
+};
 
 use super::bvh8::{self, Bvh8, LeafResult, Node8, NodeTest, RayBoxes, ScalarTest};
 use super::leaf_blocks::{LeafBlocks, LeafTest, ScalarLeaf};
@@ -98,10 +104,7 @@ impl Scene {
                 Triangle { v0: a.into(), v1: b.into(), v2: c.into() }
             })
             .collect();
-        let face_normals = triangles
-            .iter()
-            .map(|t| Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero())
-            .collect();
+        let face_normals = triangles.iter().map(|t| Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero()).collect();
         let (nodes, leaf_to_mesh, leaf_triangles) = if triangles.is_empty() {
             (Vec::new(), Vec::new(), LeafBlocks::new(&[], []))
         } else {
@@ -117,8 +120,7 @@ impl Scene {
             };
             collapse(&mut bvh2, LEAF_TRIANGLES, NODE_COST);
             let bvh8 = Bvh8::from_bvh2(&bvh2);
-            let in_leaf_order: Vec<RtTriangle> =
-                bvh8.primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
+            let in_leaf_order: Vec<RtTriangle> = bvh8.primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
             let blocks = LeafBlocks::new(&in_leaf_order, bvh8.leaves());
             // The two arrays every ray walks (nodes and blocks) sit on huge pages.
             (super::hugepages::copy_to_huge_pages(&bvh8.nodes), bvh8.primitive_order, blocks)

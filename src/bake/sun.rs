@@ -243,9 +243,8 @@ pub fn bake_sun_masks(
         })
         .sum();
 
-    let lit_vertices = (0..suns.len())
-        .map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64)
-        .collect();
+    let lit_vertices =
+        (0..suns.len()).map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64).collect();
     let seconds = started.elapsed().as_secs_f64();
     let stats = SunStats {
         triangles: mesh.triangle_count() as u64,

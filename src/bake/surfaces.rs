@@ -34,16 +34,10 @@ impl Surfaces {
         let matches = |name: &str| patterns.iter().any(|(p, _)| p.matches(name));
         // The transmittance the first matching pattern sets, if any.
         let tau_of = |name: &str| patterns.iter().find(|(p, _)| p.matches(name)).and_then(|(_, tau)| *tau);
-        let material_is_window: Vec<bool> =
-            mesh.materials.iter().map(|m| m.role == MaterialRole::Window || matches(&m.name)).collect();
+        let material_is_window: Vec<bool> = mesh.materials.iter().map(|m| m.role == MaterialRole::Window || matches(&m.name)).collect();
         let group_is_window: Vec<bool> = mesh.groups.iter().map(|g| matches(g)).collect();
-        let mut window_names: Vec<String> = mesh
-            .materials
-            .iter()
-            .zip(&material_is_window)
-            .filter(|(_, &w)| w)
-            .map(|(m, _)| format!("material {}", m.name))
-            .collect();
+        let mut window_names: Vec<String> =
+            mesh.materials.iter().zip(&material_is_window).filter(|(_, &w)| w).map(|(m, _)| format!("material {}", m.name)).collect();
         window_names.extend(mesh.groups.iter().zip(&group_is_window).filter(|(_, &w)| w).map(|(g, _)| format!("group {g}")));
         let triangle_count = mesh.triangle_count();
         let mut window_transmittance = Vec::with_capacity(triangle_count);
@@ -66,9 +60,11 @@ impl Surfaces {
 
     /// True when every opaque triangle's albedo is grey (one channel suffices).
     pub fn all_grey(&self) -> bool {
-        self.albedo.iter().zip(&self.window_transmittance).filter(|(_, w)| w.is_none()).all(|(a, _)| {
-            (a[0] - a[1]).abs() < 1e-6 && (a[1] - a[2]).abs() < 1e-6
-        })
+        self.albedo
+            .iter()
+            .zip(&self.window_transmittance)
+            .filter(|(_, w)| w.is_none())
+            .all(|(a, _)| (a[0] - a[1]).abs() < 1e-6 && (a[1] - a[2]).abs() < 1e-6)
     }
 }
 

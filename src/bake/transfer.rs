@@ -71,8 +71,14 @@ struct Point {
 /// The work items of a bake and how their points map to vertices.
 enum Items {
     /// Triangles with `counts[k]` samples each; `first_sample[k]` is the global index of the first.
-    Interior { triangles: Vec<u32>, counts: Vec<u32>, first_sample: Vec<u32> },
-    Vertex { vertices: Vec<u32> },
+    Interior {
+        triangles: Vec<u32>,
+        counts: Vec<u32>,
+        first_sample: Vec<u32>,
+    },
+    Vertex {
+        vertices: Vec<u32>,
+    },
 }
 
 impl Items {
@@ -170,12 +176,7 @@ struct TaskOutput {
 }
 
 /// Bakes transfer for every vertex. Runs on the current rayon pool.
-pub fn bake_transfer(
-    mesh: &Mesh,
-    scene: &Scene,
-    surfaces: &Surfaces,
-    params: &BakeParams,
-) -> Result<TransferResult, BakeError> {
+pub fn bake_transfer(mesh: &Mesh, scene: &Scene, surfaces: &Surfaces, params: &BakeParams) -> Result<TransferResult, BakeError> {
     bake_transfer_receivers(mesh, scene, surfaces, params, None)
 }
 
@@ -216,11 +217,8 @@ pub fn bake_transfer_receivers(
     };
 
     // Albedo at hit points, per channel count.
-    let bounce_albedo: Vec<[f32; 3]> = if channels == 1 {
-        surfaces.albedo.iter().map(|a| [(a[0] + a[1] + a[2]) / 3.0; 3]).collect()
-    } else {
-        surfaces.albedo.clone()
-    };
+    let bounce_albedo: Vec<[f32; 3]> =
+        if channels == 1 { surfaces.albedo.iter().map(|a| [(a[0] + a[1] + a[2]) / 3.0; 3]).collect() } else { surfaces.albedo.clone() };
     let mut rejected = vec![false; point_count as usize];
     let cache_bytes = point_count * params.rays as u64 * 8;
     let use_cache = params.bounces > 0 && cache_bytes <= HIT_CACHE_BUDGET_BYTES;
@@ -326,13 +324,7 @@ pub fn bake_transfer_receivers(
     for layer in &layers {
         total.iter_mut().zip(layer).for_each(|(t, l)| *t += l);
     }
-    Ok(TransferResult {
-        order,
-        channels,
-        total,
-        bounces: if params.store_bounces { layers } else { Vec::new() },
-        stats,
-    })
+    Ok(TransferResult { order, channels, total, bounces: if params.store_bounces { layers } else { Vec::new() }, stats })
 }
 
 /// Lists the work items: triangles that are neither windows nor degenerate
@@ -504,7 +496,8 @@ impl Pass<'_> {
                         if bounce > 0 && self.rejected[global as usize] {
                             continue;
                         }
-                        let b = triangle_sample(self.params.pattern, self.params.point_seed.unwrap_or(self.params.seed), t, s, counts[item]);
+                        let b =
+                            triangle_sample(self.params.pattern, self.params.point_seed.unwrap_or(self.params.seed), t, s, counts[item]);
                         let shading = (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal);
                         let point = Point {
                             position: pa * b[0] + pb * b[1] + pc * b[2],
@@ -513,7 +506,8 @@ impl Pass<'_> {
                             seed: hash_seed(&[self.params.seed, TAG_DIRECTION, t, s]),
                         };
                         point_result.fill(0.0);
-                        let (traced, inside) = self.trace_point(&point, global as u64, bounce, bounce == 0, &mut point_result, &mut basis, &mut out.hits);
+                        let (traced, inside) =
+                            self.trace_point(&point, global as u64, bounce, bounce == 0, &mut point_result, &mut basis, &mut out.hits);
                         out.rays += self.params.rays as u64;
                         out.traced += traced;
                         if inside {
@@ -683,8 +677,7 @@ impl Pass<'_> {
     /// surfaces, and in open mode only from their lit (front) side.
     #[inline]
     fn gathers_from(&self, hit: &super::Hit) -> bool {
-        self.surfaces.window_transmittance[hit.triangle as usize].is_none()
-            && (self.params.mode == Mode::Window || !hit.back_face)
+        self.surfaces.window_transmittance[hit.triangle as usize].is_none() && (self.params.mode == Mode::Window || !hit.back_face)
     }
 
     /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` for a hit at barycentrics (u, v) of `triangle`.

@@ -232,13 +232,12 @@ impl<'a> Container<'a> {
                     info.offset
                 )));
             }
-            let section_end = info.offset.checked_add(info.stored_len).filter(|&e| e <= declared_len).ok_or_else(|| {
-                BundleError::Truncated {
+            let section_end =
+                info.offset.checked_add(info.stored_len).filter(|&e| e <= declared_len).ok_or_else(|| BundleError::Truncated {
                     what: format!("section {tag} (offset {}, {} bytes)", info.offset, info.stored_len),
                     needed: info.offset.saturating_add(info.stored_len),
                     available: declared_len,
-                }
-            })?;
+                })?;
             check_zero_gap(bytes, end, info.offset, &format!("before section {tag}"))?;
             end = section_end;
             sections.push(info);

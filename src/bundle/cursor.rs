@@ -30,12 +30,7 @@ impl<'a> Cursor<'a> {
         let remaining = self.remaining();
         let n = match usize::try_from(n) {
             Ok(n) if n <= remaining => n,
-            _ => {
-                return Err(self.error(format!(
-                    "{what} needs {n} bytes at offset {} but only {remaining} remain",
-                    self.pos
-                )))
-            }
+            _ => return Err(self.error(format!("{what} needs {n} bytes at offset {} but only {remaining} remain", self.pos))),
         };
         let out = &self.bytes[self.pos..self.pos + n];
         self.pos += n;

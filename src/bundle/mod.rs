@@ -31,12 +31,14 @@ use std::path::Path;
 
 pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
 pub use error::{BundleError, Tag};
-pub use export_gltf::{export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX};
+pub use export_gltf::{
+    export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX,
+};
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
 pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
 
 use container::{write_container, Container};
-use sections::{ReadRules, MATL, META, MESH, SUND, SUNM, XFER};
+use sections::{ReadRules, MATL, MESH, META, SUND, SUNM, XFER};
 
 /// Encodes a bundle with the default options (zstd level 9 per section).
 ///
@@ -147,9 +149,7 @@ pub fn write_bundle(path: &Path, b: &Bundle) -> Result<(), BundleError> {
     let in_file = |source: BundleError| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) };
     let io = |source: std::io::Error| BundleError::Io { path: path.to_path_buf(), source };
     let bytes = encode_bundle(b).map_err(in_file)?;
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file path")))?;
+    let file_name = path.file_name().ok_or_else(|| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file path")))?;
     let mut tmp_name = file_name.to_os_string();
     tmp_name.push(format!(".tmp-{}", std::process::id()));
     let tmp = path.with_file_name(tmp_name);

@@ -51,7 +51,11 @@ pub fn tint_split(values: &[f32], channels: usize) -> (Vec<f32>, Vec<f32>) {
     let tints = (0..channels)
         .map(|c| {
             let k = if n > 0 && g[0] > 0.0 { values[c * n] / g[0] } else { 1.0 };
-            if k.is_finite() && k.abs() <= 65504.0 { k } else { 1.0 }
+            if k.is_finite() && k.abs() <= 65504.0 {
+                k
+            } else {
+                1.0
+            }
         })
         .collect();
     (tints, g)
@@ -124,7 +128,13 @@ pub(crate) fn layer_bytes(vertex_count: u64, stride: u64, channels: u64, q: Quan
 
 /// Reads one layer written by [`encode_layer`] and dequantizes it. Refuses
 /// non-finite values, negative or non-finite scales and the i16 code −32768.
-pub(crate) fn decode_layer(cur: &mut Cursor, vertex_count: u64, stride: u64, channels: u64, q: Quantization) -> Result<Vec<f32>, BundleError> {
+pub(crate) fn decode_layer(
+    cur: &mut Cursor,
+    vertex_count: u64,
+    stride: u64,
+    channels: u64,
+    q: Quantization,
+) -> Result<Vec<f32>, BundleError> {
     let values = vertex_count.checked_mul(stride).ok_or_else(|| cur.error("transfer size overflows"))?;
     let data = match q {
         Quantization::F16Tinted => {
@@ -142,9 +152,7 @@ pub(crate) fn decode_layer(cur: &mut Cursor, vertex_count: u64, stride: u64, cha
             out
         }
         Quantization::F32 => cur.f32s(values, "f32 transfer values")?,
-        Quantization::F16 => {
-            cur.u16s(values, "f16 transfer values")?.into_iter().map(|b| f16::from_bits(b).to_f32()).collect()
-        }
+        Quantization::F16 => cur.u16s(values, "f16 transfer values")?.into_iter().map(|b| f16::from_bits(b).to_f32()).collect(),
         Quantization::I16PerVertexScale => {
             let scales = cur.f32s(vertex_count, "i16 per-vertex scales")?;
             if let Some(v) = scales.iter().position(|s| !(s.is_finite() && *s >= 0.0)) {

@@ -118,11 +118,7 @@ pub(crate) fn decode_mesh(raw: &[u8], rules: ReadRules) -> Result<Mesh, BundleEr
     let positions = vec3s(cur.f32s(3 * v, "positions")?);
     let normals = vec3s(cur.f32s(3 * v, "normals")?);
     let uvs = if has_uvs { cur.f32s(2 * v, "uvs")?.chunks_exact(2).map(Vec2::from_slice).collect() } else { Vec::new() };
-    let colors = if has_colors {
-        cur.f32s(3 * v, "colors")?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
-    } else {
-        Vec::new()
-    };
+    let colors = if has_colors { cur.f32s(3 * v, "colors")?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect() } else { Vec::new() };
     let indices = cur.u32s(3 * t, "indices")?;
     let tri_material = cur.u16s(t, "triangle materials")?;
     cur.padding(4, "triangle materials")?;
@@ -298,11 +294,7 @@ pub(crate) fn encode_sun_masks(sun: &SunSeries, vertex_count: usize) -> Result<V
         return Err(invalid(format!("{} words per vertex for {steps} steps", sun.words_per_vertex)));
     }
     if Some(sun.masks.len()) != vertex_count.checked_mul(sun.words_per_vertex as usize) {
-        return Err(invalid(format!(
-            "{} mask words for {vertex_count} vertices × {} words",
-            sun.masks.len(),
-            sun.words_per_vertex
-        )));
+        return Err(invalid(format!("{} mask words for {vertex_count} vertices × {} words", sun.masks.len(), sun.words_per_vertex)));
     }
     if let Some(v) = first_vertex_with_padding_bits(&sun.masks, steps) {
         return Err(invalid(format!("sun mask of vertex {v} has bits set past step {steps}")));

@@ -472,7 +472,9 @@ fn forged_counts_are_refused_before_allocation() {
 fn resealed_random_mutations_never_panic() {
     // Bit flips die on CRCs; here the CRCs are recomputed so the section
     // decoders themselves see hostile bytes.
-    let bytes = encode_bundle_with(&random_bundle(8, 12, 10, Quantization::I16PerVertexScale), EncodeOptions { compression: Compression::None }).unwrap();
+    let bytes =
+        encode_bundle_with(&random_bundle(8, 12, 10, Quantization::I16PerVertexScale), EncodeOptions { compression: Compression::None })
+            .unwrap();
     let payload_start = HEADER_LEN + 6 * ENTRY_LEN;
     let mut rng = Rng(0xdead_beef);
     let mut accepted = 0;

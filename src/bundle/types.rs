@@ -193,10 +193,8 @@ pub struct SunStep {
 impl SunSeries {
     /// Whether `vertex` is sunlit at `step`. Out-of-range arguments give `false`.
     pub fn bit(&self, vertex: usize, step: usize) -> bool {
-        let word = vertex
-            .checked_mul(self.words_per_vertex as usize)
-            .and_then(|w| w.checked_add(step / 32))
-            .and_then(|w| self.masks.get(w));
+        let word =
+            vertex.checked_mul(self.words_per_vertex as usize).and_then(|w| w.checked_add(step / 32)).and_then(|w| self.masks.get(w));
         step < self.steps.len() && word.is_some_and(|w| (w >> (step % 32)) & 1 == 1)
     }
 

@@ -8,9 +8,9 @@ pub fn mark_fronts(rows: &mut [Row]) {
     let flags: Vec<bool> = (0..rows.len())
         .map(|i| {
             let r = &rows[i];
-            !rows.iter().any(|o| {
-                o.scene == r.scene && o.seconds <= r.seconds && o.error <= r.error && (o.seconds < r.seconds || o.error < r.error)
-            })
+            !rows
+                .iter()
+                .any(|o| o.scene == r.scene && o.seconds <= r.seconds && o.error <= r.error && (o.seconds < r.seconds || o.error < r.error))
         })
         .collect();
     rows.iter_mut().zip(flags).for_each(|(r, f)| r.pareto = f);
@@ -68,8 +68,7 @@ pub fn compare(rows: &[Row], scene: &str, a: &str, b: &str) -> Comparison {
             capped += 1;
         }
     }
-    let geometric_mean_ratio =
-        (!ratios.is_empty()).then(|| (ratios.iter().map(|r| r.ln()).sum::<f64>() / ratios.len() as f64).exp());
+    let geometric_mean_ratio = (!ratios.is_empty()).then(|| (ratios.iter().map(|r| r.ln()).sum::<f64>() / ratios.len() as f64).exp());
     Comparison { scene: scene.into(), a: a.into(), b: b.into(), seconds, capped, ratios, geometric_mean_ratio }
 }
 

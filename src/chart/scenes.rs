@@ -225,13 +225,7 @@ pub const CHART_CABIN_DETAIL: f32 = 12.0;
 
 /// The reference bake's parameters for the cabin.
 fn cabin_reference_params(size: Size) -> BakeParams {
-    BakeParams {
-        order: 3,
-        rays: if size == Size::Quick { 256 } else { 2048 },
-        bounces: 3,
-        mode: Mode::Window,
-        ..BakeParams::default()
-    }
+    BakeParams { order: 3, rays: if size == Size::Quick { 256 } else { 2048 }, bounces: 3, mode: Mode::Window, ..BakeParams::default() }
 }
 
 /// The demo cabin (cleaned as `demo` does) and its reference, read from
@@ -241,7 +235,8 @@ fn cabin(size: Size, cache: &Path) -> anyhow::Result<Scene> {
     let (raw, _) = crate::fixtures::cabin::generate_cabin(detail);
     let (mesh, _) = crate::clean::clean_mesh(&raw, &crate::clean::CleanParams::cad())?;
     let params = cabin_reference_params(size);
-    let key = serde_json::json!({ "detail": detail, "params": params, "vertices": mesh.vertex_count(), "triangles": mesh.triangle_count() });
+    let key =
+        serde_json::json!({ "detail": detail, "params": params, "vertices": mesh.vertex_count(), "triangles": mesh.triangle_count() });
     let cached = crate::bundle::read_bundle(cache).ok().filter(|b| b.meta.get("chart_reference") == Some(&key) && b.mesh == mesh);
     let (order, channels, total) = match cached.and_then(|b| b.transfer) {
         Some(t) => (t.order as usize, t.channels as usize, t.layers.into_iter().next().map(|l| l.data).unwrap_or_default()),

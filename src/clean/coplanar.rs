@@ -75,8 +75,7 @@ impl Frame {
 pub(crate) fn remove_covered_coplanar(work: &mut Work, plane_tol: f32, keep_two_sided: bool, remove: bool) -> CoplanarOutcome {
     let n = work.tris.len();
     let corners: Vec<[DVec3; 3]> = (0..n).map(|t| work.tri_positions(t).map(|p| p.as_dvec3())).collect();
-    let frames: Vec<Option<Frame>> =
-        (0..n).map(|t| if work.tri_alive[t] { Frame::of(corners[t]) } else { None }).collect();
+    let frames: Vec<Option<Frame>> = (0..n).map(|t| if work.tri_alive[t] { Frame::of(corners[t]) } else { None }).collect();
     let pairs = find_overlapping_pairs(work, &corners, &frames, plane_tol as f64, keep_two_sided);
 
     // Adjacency in CSR form: for each triangle, its overlapping partners and areas.

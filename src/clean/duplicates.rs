@@ -80,10 +80,8 @@ fn canonical(p: [u32; 3]) -> ([u32; 3], bool) {
 
 /// The bit patterns of an input triangle's corner positions, sorted.
 fn input_corner_bits(input: &Mesh, t: usize) -> Vec<[u32; 3]> {
-    let mut bits: Vec<[u32; 3]> = input.indices[3 * t..3 * t + 3]
-        .iter()
-        .map(|&v| input.positions[v as usize].to_array().map(f32::to_bits))
-        .collect();
+    let mut bits: Vec<[u32; 3]> =
+        input.indices[3 * t..3 * t + 3].iter().map(|&v| input.positions[v as usize].to_array().map(f32::to_bits)).collect();
     bits.sort_unstable();
     bits
 }

@@ -221,12 +221,7 @@ pub fn fixture_near_duplicate() -> Fixture {
     for t in [5, 10, 20] {
         b.copy_tri(t, false, |k| dirs[k].normalize() * jitter);
     }
-    let expected = Expected {
-        duplicates_removed: 3,
-        near_duplicates_removed: 3,
-        welded_vertices: Some(9),
-        ..plane_expected()
-    };
+    let expected = Expected { duplicates_removed: 3, near_duplicates_removed: 3, welded_vertices: Some(9), ..plane_expected() };
     Fixture { name: "near_duplicate", mesh: b.mesh, params: CleanParams::default(), expected }
 }
 

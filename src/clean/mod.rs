@@ -323,13 +323,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32]) -> Round {
 }
 
 /// Steps 2 and 3; adds to the report's counts and returns the area removed.
-fn remove_degenerate_and_duplicates(
-    work: &mut Work,
-    input: &Mesh,
-    weld_tol: f32,
-    params: &CleanParams,
-    r: &mut CleanReport,
-) -> f64 {
+fn remove_degenerate_and_duplicates(work: &mut Work, input: &Mesh, weld_tol: f32, params: &CleanParams, r: &mut CleanReport) -> f64 {
     let (degenerate, degenerate_area) = degenerate::remove_degenerate(work, weld_tol);
     r.degenerate_removed += degenerate;
     let dup = duplicates::remove_duplicates(work, input, params.keep_two_sided);
@@ -350,11 +344,8 @@ fn remove_covered(work: &mut Work, plane_tol: f32, params: &CleanParams, r: &mut
 
 /// Refuses non-finite attributes (naming the vertex) and broken invariants.
 fn check_input(mesh: &Mesh) -> Result<(), CleanError> {
-    let non_finite = |vertex: usize, attribute: &'static str, value: String| CleanError::NonFinite {
-        vertex: vertex as u32,
-        attribute,
-        value,
-    };
+    let non_finite =
+        |vertex: usize, attribute: &'static str, value: String| CleanError::NonFinite { vertex: vertex as u32, attribute, value };
     if let Some(v) = mesh.positions.iter().position(|p| !p.is_finite()) {
         return Err(non_finite(v, "position", format!("{:?}", mesh.positions[v])));
     }

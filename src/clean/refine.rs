@@ -107,9 +107,7 @@ fn subdivide(work: &mut Work, t: usize, mids: [Option<u32>; 3]) {
 
 /// Number of live triangles whose smallest angle is below `min_angle_rad`.
 pub(crate) fn count_slivers(work: &Work, min_angle_rad: f64) -> usize {
-    (0..work.tris.len())
-        .filter(|&t| work.tri_alive[t] && min_angle(work.tri_positions(t).map(|p| p.as_dvec3())) < min_angle_rad)
-        .count()
+    (0..work.tris.len()).filter(|&t| work.tri_alive[t] && min_angle(work.tri_positions(t).map(|p| p.as_dvec3())) < min_angle_rad).count()
 }
 
 /// Users of an undirected point edge: two triangle ids, `u32::MAX` where absent;

@@ -84,9 +84,7 @@ impl AabbTree {
             });
             let axis = (cb.max - cb.min).max_position();
             let mid = slice.len() / 2;
-            slice.select_nth_unstable_by(mid, |&a, &b| {
-                centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis]).then(a.cmp(&b))
-            });
+            slice.select_nth_unstable_by(mid, |&a, &b| centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis]).then(a.cmp(&b)));
             let left = tree.nodes.len();
             tree.nodes.push(Node { bounds: Aabb::EMPTY, first: 0, count: 0 });
             tree.nodes.push(Node { bounds: Aabb::EMPTY, first: 0, count: 0 });

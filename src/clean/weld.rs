@@ -91,14 +91,9 @@ fn attributes_agree(work: &Work, a: u32, b: u32, cos_hard_edge: f32) -> bool {
     let (a, b) = (a as usize, b as usize);
     let (na, nb) = (work.normals[a], work.normals[b]);
     let (la, lb) = (na.length(), nb.length());
-    let normals_agree = if la == 0.0 || lb == 0.0 {
-        la == lb
-    } else {
-        na.dot(nb) >= cos_hard_edge * la * lb
-    };
+    let normals_agree = if la == 0.0 || lb == 0.0 { la == lb } else { na.dot(nb) >= cos_hard_edge * la * lb };
     let uvs_agree = work.uvs.is_empty() || work.uvs[a].abs_diff_eq(work.uvs[b], UV_WELD_TOLERANCE);
-    let colors_agree = work.colors.is_empty()
-        || (0..3).all(|i| (work.colors[a][i] - work.colors[b][i]).abs() <= COLOR_WELD_TOLERANCE);
+    let colors_agree = work.colors.is_empty() || (0..3).all(|i| (work.colors[a][i] - work.colors[b][i]).abs() <= COLOR_WELD_TOLERANCE);
     normals_agree && uvs_agree && colors_agree
 }
 

@@ -113,10 +113,8 @@ fn split_tjunctions(work: &mut Work, tol: f32) -> usize {
     if boundary.is_empty() {
         return 0;
     }
-    let boxes: Vec<Aabb> = boundary
-        .iter()
-        .map(|e| Aabb::of_points(&[work.points[e.lo as usize], work.points[e.hi as usize]], tol))
-        .collect();
+    let boxes: Vec<Aabb> =
+        boundary.iter().map(|e| Aabb::of_points(&[work.points[e.lo as usize], work.points[e.hi as usize]], tol)).collect();
     let tree = AabbTree::build(boxes);
     let mut points: Vec<u32> = boundary.iter().flat_map(|e| [e.lo, e.hi]).collect();
     points.sort_unstable();

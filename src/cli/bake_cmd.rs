@@ -120,8 +120,7 @@ pub struct BakeReport {
 
 /// Bakes `mesh` and writes the bundle named in `config`; `extra_meta` is merged into the metadata.
 pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value) -> anyhow::Result<BakeReport> {
-    let (result, surfaces, build_seconds, cull) =
-        super::with_threads(config.threads, || bake_maybe_culled(mesh, config))??;
+    let (result, surfaces, build_seconds, cull) = super::with_threads(config.threads, || bake_maybe_culled(mesh, config))??;
     if config.params.mode == bake::Mode::Window && surfaces.window_triangle_count() == 0 {
         anyhow::bail!(
             "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
@@ -138,7 +137,12 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
             if !config.params.quiet {
                 eprintln!(
                     "view-box culling: {} of {} triangles removed ({} kept), {} of {} vertices kept, {} rays",
-                    report.triangles_removed, report.triangles_before, report.triangles_kept, report.vertices_kept, report.vertices_before, report.rays
+                    report.triangles_removed,
+                    report.triangles_before,
+                    report.triangles_kept,
+                    report.vertices_kept,
+                    report.vertices_before,
+                    report.rays
                 );
             }
             extra_meta["cull"] = serde_json::to_value(report)?;
@@ -316,7 +320,11 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             s.storage.channels,
             s.storage.quantization.name(),
             s.bytes_per_vertex,
-            budget::bytes_per_vertex(&budget::Storage { order: report.result.order, channels: report.result.channels, quantization: Quantization::F32 }),
+            budget::bytes_per_vertex(&budget::Storage {
+                order: report.result.order,
+                channels: report.result.channels,
+                quantization: Quantization::F32
+            }),
             s.shaded_error,
             c.budget.map(|b| format!(" (budget {b:.3e})")).unwrap_or_default()
         );

@@ -30,7 +30,8 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
     let started = std::time::Instant::now();
     let rows = super::with_threads(threads, || chart::scenes::sweep(size, dir))??;
     let csv_path = dir.join("speed-accuracy.csv");
-    crate::util::write_atomic(&csv_path, chart::to_csv(&rows).as_bytes()).with_context(|| format!("cannot write {}", csv_path.display()))?;
+    crate::util::write_atomic(&csv_path, chart::to_csv(&rows).as_bytes())
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
     let svg = chart::plot::render_svg(&rows).map_err(anyhow::Error::msg).context("cannot draw the chart")?;
     let svg_path = dir.join("speed-accuracy.svg");
     crate::util::write_atomic(&svg_path, svg.as_bytes()).with_context(|| format!("cannot write {}", svg_path.display()))?;
@@ -56,7 +57,12 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
             if let Some(r) = c.geometric_mean_ratio {
                 println!(
                     "  {:<19} at equal time, error({}) / error({}) = {:.3} (geometric mean over {} times, {} past b's slowest point)",
-                    c.scene, c.a, c.b, r, c.ratios.len(), c.capped
+                    c.scene,
+                    c.a,
+                    c.b,
+                    r,
+                    c.ratios.len(),
+                    c.capped
                 );
             }
         }

@@ -11,14 +11,18 @@ use crate::bundle::{self, LayerKind};
 pub fn parse_layer(text: &str) -> anyhow::Result<Option<LayerKind>> {
     match text {
         "total" => Ok(None),
-        n => n.parse::<u32>().map(|b| Some(LayerKind::Bounce(b))).map_err(|_| anyhow::anyhow!("--layer {text:?}: expected total or a bounce index")),
+        n => n
+            .parse::<u32>()
+            .map(|b| Some(LayerKind::Bounce(b)))
+            .map_err(|_| anyhow::anyhow!("--layer {text:?}: expected total or a bounce index")),
     }
 }
 
 /// Exports the bundle at `input` to the GLB `output`.
 pub fn run(input: &Path, output: &Path, layer: Option<LayerKind>, as_json: bool) -> anyhow::Result<()> {
     let b = bundle::read_bundle(input).with_context(|| format!("cannot export {}", input.display()))?;
-    let report = bundle::export_glb(output, &b, layer).with_context(|| format!("cannot export {} to {}", input.display(), output.display()))?;
+    let report =
+        bundle::export_glb(output, &b, layer).with_context(|| format!("cannot export {} to {}", input.display(), output.display()))?;
     if as_json {
         return super::print_json(&serde_json::json!({ "output": output, "report": report }));
     }

@@ -17,12 +17,8 @@ pub fn run_colonnade(output: &Path, detail: &str) -> anyhow::Result<()> {
     };
     let mesh = colonnade(&params);
     let is_obj = output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-    if is_obj {
-        crate::mesh::write_obj(output, &mesh)
-    } else {
-        crate::mesh::write_glb(output, &mesh)
-    }
-    .with_context(|| format!("cannot write {}", output.display()))?;
+    if is_obj { crate::mesh::write_obj(output, &mesh) } else { crate::mesh::write_glb(output, &mesh) }
+        .with_context(|| format!("cannot write {}", output.display()))?;
     println!("wrote {}: {} vertices, {} triangles", output.display(), mesh.vertex_count(), mesh.triangle_count());
     Ok(())
 }

@@ -84,15 +84,17 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
             anyhow::bail!("{}: the bundle has no time lapse (sun masks), so --sky, --time and --step do not apply", path.display())
         }
         (None, _, _) => None,
-        (Some(sun), Some(k), _) if k >= sun.step_count() => anyhow::bail!("--step {k}: the bundle has {} steps (0..{})", sun.step_count(), sun.step_count()),
-        (Some(_), Some(k), _) => Some(k),
-        (Some(sun), None, Some(time)) => {
-            view::lighting::step_nearest_time(sun, crate::sky::time::parse_hhmm(time)?, tz_minutes)
+        (Some(sun), Some(k), _) if k >= sun.step_count() => {
+            anyhow::bail!("--step {k}: the bundle has {} steps (0..{})", sun.step_count(), sun.step_count())
         }
+        (Some(_), Some(k), _) => Some(k),
+        (Some(sun), None, Some(time)) => view::lighting::step_nearest_time(sun, crate::sky::time::parse_hhmm(time)?, tz_minutes),
         (Some(sun), None, None) => (sun.step_count() > 0).then_some(sun.step_count() / 2),
     };
     let source = match &config.env {
-        Some(env) => LightingSource::Sh(view::lighting::env_map_sh(env, order).with_context(|| format!("cannot use {} as lighting", env.display()))?),
+        Some(env) => {
+            LightingSource::Sh(view::lighting::env_map_sh(env, order).with_context(|| format!("cannot use {} as lighting", env.display()))?)
+        }
         None if bundle.sun.is_some() => LightingSource::StepSky,
         None => LightingSource::Sh(view::lighting::default_sky_sh(order)),
     };

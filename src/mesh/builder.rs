@@ -132,12 +132,7 @@ impl MeshBuilder {
         if bad_uvs > 0 {
             warnings.push(format!("{bad_uvs} non-finite texture coordinates were set to (0, 0)"));
         }
-        let bad_colors = mesh
-            .colors
-            .iter_mut()
-            .filter(|c| !c.iter().all(|x| x.is_finite()))
-            .map(|c| *c = DEFAULT_COLOR)
-            .count();
+        let bad_colors = mesh.colors.iter_mut().filter(|c| !c.iter().all(|x| x.is_finite())).map(|c| *c = DEFAULT_COLOR).count();
         if bad_colors > 0 {
             warnings.push(format!("{bad_colors} non-finite vertex colours were set to white"));
         }

@@ -49,10 +49,14 @@ fn every_bad_and_edge_input_loads_or_fails_cleanly() {
         let relative = file.strip_prefix(corpus).unwrap().to_string_lossy().into_owned();
         let outcome = load_mesh(file, &LoadOptions::default());
         let line = match &outcome {
-            Ok(loaded) => format!("OK  {:>7} tris  {relative}{}", loaded.mesh.triangle_count(), match loaded.warnings.len() {
-                0 => String::new(),
-                n => format!("  ({n} warnings: {})", loaded.warnings.join(" | ")),
-            }),
+            Ok(loaded) => format!(
+                "OK  {:>7} tris  {relative}{}",
+                loaded.mesh.triangle_count(),
+                match loaded.warnings.len() {
+                    0 => String::new(),
+                    n => format!("  ({n} warnings: {})", loaded.warnings.join(" | ")),
+                }
+            ),
             Err(e) => format!("ERR               {relative}: {}", e.to_string().replace(&format!("{CORPUS}/"), "")),
         };
         eprintln!("{line}");
@@ -83,7 +87,8 @@ fn every_bad_and_edge_input_loads_or_fails_cleanly() {
     let utf16 = error_of("OBJ/box_UTF16BE.obj");
     assert!(utf16.contains("UTF-16"), "{utf16}");
     // Files the raw crates read fine keep their triangle counts.
-    let triangles_of = |name: &str| outcomes.iter().find(|(r, _)| r == name).and_then(|(_, o)| o.as_ref().ok()).map(|l| l.mesh.triangle_count());
+    let triangles_of =
+        |name: &str| outcomes.iter().find(|(r, _)| r == name).and_then(|(_, o)| o.as_ref().ok()).map(|l| l.mesh.triangle_count());
     assert_eq!(triangles_of("OBJ/box.obj"), Some(12));
     let colored = outcomes.iter().find(|(r, _)| r == "OBJ/cube_with_vertexcolors.obj").and_then(|(_, o)| o.as_ref().ok()).unwrap();
     assert_eq!(colored.mesh.colors.len(), colored.mesh.vertex_count());
@@ -159,7 +164,8 @@ fn ferrari_loads_with_its_triangles_materials_and_glass() {
     assert_eq!(back.materials, mesh.materials);
     assert_eq!(back.groups, mesh.groups);
     assert_eq!(back.bounds(), mesh.bounds());
-    let per_material = |m: &Mesh| (0..m.materials.len()).map(|k| m.tri_material.iter().filter(|&&x| x as usize == k).count()).collect::<Vec<_>>();
+    let per_material =
+        |m: &Mesh| (0..m.materials.len()).map(|k| m.tri_material.iter().filter(|&&x| x as usize == k).count()).collect::<Vec<_>>();
     assert_eq!(per_material(&back), per_material(mesh));
 
     let draco = Path::new(FERRARI_DIR).join("ferrari.glb");

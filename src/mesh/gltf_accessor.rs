@@ -63,19 +63,35 @@ fn component_as_f32(bytes: &[u8], layout: &Layout) -> Option<f32> {
         ComponentType::F32 => f32::from_le_bytes(bytes.try_into().ok()?),
         ComponentType::I8 => {
             let c = i8::from_le_bytes(bytes.try_into().ok()?) as f32;
-            if norm { (c / 127.0).max(-1.0) } else { c }
+            if norm {
+                (c / 127.0).max(-1.0)
+            } else {
+                c
+            }
         }
         ComponentType::U8 => {
             let c = u8::from_le_bytes(bytes.try_into().ok()?) as f32;
-            if norm { c / 255.0 } else { c }
+            if norm {
+                c / 255.0
+            } else {
+                c
+            }
         }
         ComponentType::I16 => {
             let c = i16::from_le_bytes(bytes.try_into().ok()?) as f32;
-            if norm { (c / 32767.0).max(-1.0) } else { c }
+            if norm {
+                (c / 32767.0).max(-1.0)
+            } else {
+                c
+            }
         }
         ComponentType::U16 => {
             let c = u16::from_le_bytes(bytes.try_into().ok()?) as f32;
-            if norm { c / 65535.0 } else { c }
+            if norm {
+                c / 65535.0
+            } else {
+                c
+            }
         }
         ComponentType::U32 => u32::from_le_bytes(bytes.try_into().ok()?) as f32,
     })
@@ -130,10 +146,7 @@ fn decode_strided<T>(
     if stride < element_size {
         return Err(format!("{what}: byteStride {stride} is smaller than its element size {element_size}"));
     }
-    let needed = stride
-        .checked_mul(count - 1)
-        .and_then(|n| n.checked_add(element_size))
-        .and_then(|n| n.checked_add(offset));
+    let needed = stride.checked_mul(count - 1).and_then(|n| n.checked_add(element_size)).and_then(|n| n.checked_add(offset));
     match needed {
         Some(needed) if needed <= bytes.len() => {}
         _ => {
@@ -184,7 +197,8 @@ fn read_accessor<T: Copy + Default>(
         let Checked::Valid(index_type) = sparse.indices.component_type else {
             return Err(format!("{sparse_what}: invalid index componentType"));
         };
-        let index_layout = Layout { component_type: index_type.0, component_size: component_size(index_type.0), components: 1, normalized: false };
+        let index_layout =
+            Layout { component_type: index_type.0, component_size: component_size(index_type.0), components: 1, normalized: false };
         let (index_bytes, _) = view_bytes(root, sparse.indices.buffer_view.value(), buffers)?;
         let index_offset = to_usize(sparse.indices.byte_offset.0, "sparse indices byteOffset")?;
         let targets = decode_strided(
@@ -198,8 +212,15 @@ fn read_accessor<T: Copy + Default>(
         )?;
         let (value_bytes, _) = view_bytes(root, sparse.values.buffer_view.value(), buffers)?;
         let value_offset = to_usize(sparse.values.byte_offset.0, "sparse values byteOffset")?;
-        let replacements =
-            decode_strided(&format!("{sparse_what} values"), value_bytes, value_offset, layout.element_size(), sparse_count, &layout, &decode)?;
+        let replacements = decode_strided(
+            &format!("{sparse_what} values"),
+            value_bytes,
+            value_offset,
+            layout.element_size(),
+            sparse_count,
+            &layout,
+            &decode,
+        )?;
         for (&target, replacement) in targets.iter().zip(replacements.chunks_exact(layout.components)) {
             let start = target as usize * layout.components;
             let slot = values
@@ -264,9 +285,7 @@ mod tests {
 
     #[test]
     fn refuses_ranges_past_the_view_and_views_past_the_buffer() {
-        let r = root(&format!(
-            r#"{{{VIEW_12_BYTES},"accessors":[{{"bufferView":0,"componentType":5126,"count":2,"type":"VEC3"}}]}}"#
-        ));
+        let r = root(&format!(r#"{{{VIEW_12_BYTES},"accessors":[{{"bufferView":0,"componentType":5126,"count":2,"type":"VEC3"}}]}}"#));
         let buffers = [Cow::Owned(vec![0; 12])];
         assert!(read_floats(&r, 0, &buffers, &[3]).unwrap_err().contains("need more than the 12 bytes"));
         let short = [Cow::Owned(vec![0; 8])];

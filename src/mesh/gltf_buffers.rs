@@ -66,10 +66,7 @@ pub(crate) fn split_glb(bytes: &[u8]) -> Result<GlbChunks<'_>, String> {
         };
         let start = at + CHUNK_HEADER_LEN;
         let Some(data) = start.checked_add(length as usize).and_then(|end| body.get(start..end)) else {
-            return Err(format!(
-                "GLB chunk at byte {at} declares {length} bytes, only {} remain",
-                body.len().saturating_sub(start)
-            ));
+            return Err(format!("GLB chunk at byte {at} declares {length} bytes, only {} remain", body.len().saturating_sub(start)));
         };
         chunks.push((kind, data));
         at = start + data.len();
@@ -100,9 +97,7 @@ pub(crate) fn load_buffers<'a>(
         let mut data: Cow<'a, [u8]> = match buffer.source() {
             gltf::buffer::Source::Bin => match glb_bin {
                 Some(bin) => Cow::Borrowed(bin),
-                None => {
-                    return Err(MeshError::gltf(path, format!("buffer {index} has no uri and the file has no GLB binary chunk")))
-                }
+                None => return Err(MeshError::gltf(path, format!("buffer {index} has no uri and the file has no GLB binary chunk"))),
             },
             gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
                 Cow::Owned(decode_data_uri(uri).map_err(|e| MeshError::gltf(path, format!("buffer {index}: {e}")))?)

@@ -67,7 +67,14 @@ pub(crate) fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -
     let root = document.as_json();
 
     let instances = collect_mesh_instances(root, path, warnings)?;
-    let mut loader = PrimitiveLoader { root, buffers: &buffers, path, builder: MeshBuilder::new(materials), default_material: None, skipped_modes: BTreeMap::new() };
+    let mut loader = PrimitiveLoader {
+        root,
+        buffers: &buffers,
+        path,
+        builder: MeshBuilder::new(materials),
+        default_material: None,
+        skipped_modes: BTreeMap::new(),
+    };
     for instance in &instances {
         loader.emit_instance(instance, warnings)?;
     }
@@ -101,7 +108,10 @@ fn validate(root: &Root, path: &Path) -> Result<(), MeshError> {
                 if accessor.value() >= root.accessors.len() {
                     return Err(MeshError::gltf(
                         path,
-                        format!("meshes[{m}].primitives[{p}] attribute {semantic:?} refers to accessor {}, which does not exist", accessor.value()),
+                        format!(
+                            "meshes[{m}].primitives[{p}] attribute {semantic:?} refers to accessor {}, which does not exist",
+                            accessor.value()
+                        ),
                     ));
                 }
             }
@@ -110,8 +120,8 @@ fn validate(root: &Root, path: &Path) -> Result<(), MeshError> {
     let mut errors = Vec::new();
     root.validate(root, json::Path::new, &mut |where_, error| {
         let where_ = where_().to_string();
-        let bounds_rule = error == json::validation::Error::Missing
-            && (where_.ends_with("[\"POSITION\"].min") || where_.ends_with("[\"POSITION\"].max"));
+        let bounds_rule =
+            error == json::validation::Error::Missing && (where_.ends_with("[\"POSITION\"].min") || where_.ends_with("[\"POSITION\"].max"));
         // Required extensions were judged by check_required_extensions.
         let extension_rule = where_.starts_with("extensionsRequired");
         if !bounds_rule && !extension_rule {
@@ -170,8 +180,7 @@ fn convert_materials(document: &gltf::Document, base_color_given: &[bool]) -> Ve
             let rgb = [factor[0], factor[1], factor[2]];
             let albedo = if given && rgb.iter().all(|c| c.is_finite()) { rgb } else { [DEFAULT_ALBEDO; 3] };
             let transmission = material.transmission().map(|t| t.transmission_factor()).filter(|t| t.is_finite());
-            let extras: PrtbakeExtras =
-                material.extras().as_ref().and_then(|raw| serde_json::from_str(raw.get()).ok()).unwrap_or_default();
+            let extras: PrtbakeExtras = material.extras().as_ref().and_then(|raw| serde_json::from_str(raw.get()).ok()).unwrap_or_default();
             let role = match (extras.prtbake_role, transmission) {
                 (Some(role), _) => role,
                 (None, Some(t)) if t > 0.0 => MaterialRole::Window,
@@ -213,7 +222,10 @@ impl PrimitiveLoader<'_> {
     fn emit_instance(&mut self, instance: &MeshInstance, warnings: &mut Vec<String>) -> Result<(), MeshError> {
         let root = self.root;
         let Some(mesh) = root.meshes.get(instance.mesh) else {
-            return Err(MeshError::gltf(self.path, format!("node {} refers to mesh {}, which does not exist", instance.node, instance.mesh)));
+            return Err(MeshError::gltf(
+                self.path,
+                format!("node {} refers to mesh {}, which does not exist", instance.node, instance.mesh),
+            ));
         };
         let mesh_label = format!("'{}' ({})", mesh.name.as_deref().unwrap_or(""), instance.mesh);
         let group_name = mesh.name.clone().unwrap_or_else(|| format!("mesh{}", instance.mesh));
@@ -237,12 +249,8 @@ impl PrimitiveLoader<'_> {
             let Some(position_accessor) = attribute(Semantic::Positions) else {
                 return Err(MeshError::gltf(self.path, format!("mesh {mesh_label} primitive {p} has no POSITION")));
             };
-            let key: VertexKey = [
-                Some(position_accessor),
-                attribute(Semantic::Normals),
-                attribute(Semantic::TexCoords(0)),
-                attribute(Semantic::Colors(0)),
-            ];
+            let key: VertexKey =
+                [Some(position_accessor), attribute(Semantic::Normals), attribute(Semantic::TexCoords(0)), attribute(Semantic::Colors(0))];
             let local = self.read_vertices(&key, &mesh_label, p, warnings)?;
             let vertex_count = local.positions.len();
 
@@ -264,7 +272,8 @@ impl PrimitiveLoader<'_> {
             }
             let (triangles, leftover) = triangulate(mode, &local_indices);
             if leftover > 0 {
-                warnings.push(format!("mesh {mesh_label} primitive {p}: {leftover} trailing indices do not form a triangle and were ignored"));
+                warnings
+                    .push(format!("mesh {mesh_label} primitive {p}: {leftover} trailing indices do not form a triangle and were ignored"));
             }
             if triangles.is_empty() {
                 continue;
@@ -294,7 +303,8 @@ impl PrimitiveLoader<'_> {
     fn read_vertices(&self, key: &VertexKey, mesh_label: &str, p: usize, warnings: &mut Vec<String>) -> Result<LocalVertices, MeshError> {
         let context = |what: &str, e: String| MeshError::gltf(self.path, format!("mesh {mesh_label} primitive {p} {what}: {e}"));
         let [position_accessor, normal_accessor, uv_accessor, color_accessor] = *key;
-        let (flat, _) = read_floats(self.root, position_accessor.unwrap_or(usize::MAX), self.buffers, &[3]).map_err(|e| context("POSITION", e))?;
+        let (flat, _) =
+            read_floats(self.root, position_accessor.unwrap_or(usize::MAX), self.buffers, &[3]).map_err(|e| context("POSITION", e))?;
         let positions: Vec<Vec3> = flat.chunks_exact(3).map(Vec3::from_slice).collect();
         if let Some((v, p_bad)) = positions.iter().enumerate().find(|(_, q)| !q.is_finite()) {
             return Err(MeshError::NonFinitePosition {
@@ -308,7 +318,10 @@ impl PrimitiveLoader<'_> {
             let Some(accessor) = accessor else { return Ok(None) };
             let (values, components) = read_floats(self.root, accessor, self.buffers, allowed).map_err(|e| context(name, e))?;
             if values.len() != n * components {
-                warnings.push(format!("mesh {mesh_label} primitive {p}: {name} has {} elements for {n} vertices; ignored", values.len() / components));
+                warnings.push(format!(
+                    "mesh {mesh_label} primitive {p}: {name} has {} elements for {n} vertices; ignored",
+                    values.len() / components
+                ));
                 return Ok(None);
             }
             Ok(Some((values, components)))

@@ -163,10 +163,7 @@ mod tests {
     #[test]
     fn sceneless_files_walk_root_nodes_and_still_find_cycles() {
         let cyclic = root(r#"{"asset":{"version":"2.0"},"nodes":[{"children":[1]},{"children":[0]}]}"#);
-        assert!(matches!(
-            collect_mesh_instances(&cyclic, Path::new("c.gltf"), &mut Vec::new()),
-            Err(MeshError::NodeCycle { node: 0, .. })
-        ));
+        assert!(matches!(collect_mesh_instances(&cyclic, Path::new("c.gltf"), &mut Vec::new()), Err(MeshError::NodeCycle { node: 0, .. })));
         let forest = root(r#"{"asset":{"version":"2.0"},"nodes":[{"mesh":0},{"children":[0]},{"mesh":1}],"meshes":[]}"#);
         let mut warnings = Vec::new();
         let instances = collect_mesh_instances(&forest, Path::new("f.gltf"), &mut warnings).unwrap();
@@ -177,7 +174,9 @@ mod tests {
 
     #[test]
     fn a_node_with_two_parents_is_placed_once_with_a_warning() {
-        let r = root(r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{"mesh":0}],"meshes":[]}"#);
+        let r = root(
+            r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[0,1]}],"nodes":[{"children":[2]},{"children":[2]},{"mesh":0}],"meshes":[]}"#,
+        );
         let mut warnings = Vec::new();
         let instances = collect_mesh_instances(&r, Path::new("d.gltf"), &mut warnings).unwrap();
         assert_eq!(instances.len(), 1);

@@ -151,7 +151,13 @@ fn gltf_doc(positions: &[[f32; 3]], indices: &[u32], nodes: Value) -> Value {
     let index_offset = bytes.len();
     bytes.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
     let n = positions.len();
-    let children: Vec<u64> = nodes.as_array().unwrap().iter().flat_map(|n| n["children"].as_array().cloned().unwrap_or_default()).filter_map(|c| c.as_u64()).collect();
+    let children: Vec<u64> = nodes
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|n| n["children"].as_array().cloned().unwrap_or_default())
+        .filter_map(|c| c.as_u64())
+        .collect();
     let roots: Vec<usize> = (0..nodes.as_array().unwrap().len()).filter(|i| !children.contains(&(*i as u64))).collect();
     json!({
         "asset": {"version": "2.0"},
@@ -188,7 +194,8 @@ fn gltf_trs_node_with_two_instances_places_both_copies() {
     assert_eq!(mesh.groups, vec!["tri"]);
     assert_eq!(mesh.tri_group, vec![0, 0]);
     let first = Mat4::from_translation(Vec3::new(10., 0., 0.));
-    let second = Mat4::from_translation(Vec3::new(0., 5., 0.)) * Mat4::from_scale_rotation_translation(Vec3::splat(2.), rotation, Vec3::ZERO);
+    let second =
+        Mat4::from_translation(Vec3::new(0., 5., 0.)) * Mat4::from_scale_rotation_translation(Vec3::splat(2.), rotation, Vec3::ZERO);
     for (t, world) in [first, second].iter().enumerate() {
         let expected = TRIANGLE.map(|p| world.transform_point3(Vec3::from(p)));
         let got = mesh.triangle_positions(t);
@@ -201,7 +208,10 @@ fn gltf_trs_node_with_two_instances_places_both_copies() {
     }
     // Material: transmission > 0 makes a window.
     let glass = &mesh.materials[0];
-    assert_eq!((glass.name.as_str(), glass.role, glass.transmittance, glass.albedo), ("Glass", MaterialRole::Window, 0.75, [0.1, 0.2, 0.3]));
+    assert_eq!(
+        (glass.name.as_str(), glass.role, glass.transmittance, glass.albedo),
+        ("Glass", MaterialRole::Window, 0.75, [0.1, 0.2, 0.3])
+    );
 }
 
 #[test]
@@ -366,14 +376,25 @@ fn round_trips_of_unsorted_meshes_keep_the_triangle_set() {
     mesh.tri_material = order.iter().map(|&t| mesh.tri_material[t]).collect();
     let key = |m: &Mesh| {
         let mut triangles: Vec<String> = (0..m.triangle_count())
-            .map(|t| format!("{:?} {} {}", m.triangle_positions(t), m.groups[m.tri_group[t] as usize], m.materials[m.tri_material[t] as usize].name))
+            .map(|t| {
+                format!(
+                    "{:?} {} {}",
+                    m.triangle_positions(t),
+                    m.groups[m.tri_group[t] as usize],
+                    m.materials[m.tri_material[t] as usize].name
+                )
+            })
             .collect();
         triangles.sort();
         triangles
     };
     for name in ["u.glb", "u.obj"] {
         let path = dir.path().join(name);
-        if name.ends_with("glb") { write_glb(&path, &mesh).unwrap() } else { write_obj(&path, &mesh).unwrap() }
+        if name.ends_with("glb") {
+            write_glb(&path, &mesh).unwrap()
+        } else {
+            write_obj(&path, &mesh).unwrap()
+        }
         assert_eq!(key(&load(&path).unwrap().mesh), key(&mesh), "{name}");
     }
 }

@@ -27,9 +27,7 @@ pub fn compute_vertex_normals(positions: &[Vec3], indices: &[u32]) -> Vec<Vec3> 
     let mut sums = vec![Vec3::ZERO; positions.len()];
     for triangle in indices.chunks_exact(3) {
         let corners = [triangle[0] as usize, triangle[1] as usize, triangle[2] as usize];
-        let (Some(&a), Some(&b), Some(&c)) =
-            (positions.get(corners[0]), positions.get(corners[1]), positions.get(corners[2]))
-        else {
+        let (Some(&a), Some(&b), Some(&c)) = (positions.get(corners[0]), positions.get(corners[1]), positions.get(corners[2])) else {
             continue;
         };
         // Length is twice the area: the area weight.

@@ -38,7 +38,9 @@ pub(crate) fn load_obj(path: &Path, bytes: &[u8], up: UpAxis, warnings: &mut Vec
     let (models, tobj_materials) = tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &options, |mtl_path| {
         let result = load_mtl(&base_dir.join(mtl_path)).and_then(|parsed| parsed.map_err(|e| e.to_string()));
         if let Err(e) = &result {
-            mtl_warnings.borrow_mut().push(format!("material library {} could not be loaded ({e}); its parts use a default grey material", mtl_path.display()));
+            mtl_warnings
+                .borrow_mut()
+                .push(format!("material library {} could not be loaded ({e}); its parts use a default grey material", mtl_path.display()));
         }
         result.map_err(|_| tobj::LoadError::GenericFailure)
     })
@@ -49,7 +51,10 @@ pub(crate) fn load_obj(path: &Path, bytes: &[u8], up: UpAxis, warnings: &mut Vec
 
     let materials: Vec<Material> = tobj_materials.iter().map(convert_material).collect();
     if u16::try_from(materials.len()).is_err() {
-        return Err(MeshError::TooLarge { path: path.to_path_buf(), message: format!("{} materials exceed the u16 limit", materials.len()) });
+        return Err(MeshError::TooLarge {
+            path: path.to_path_buf(),
+            message: format!("{} materials exceed the u16 limit", materials.len()),
+        });
     }
     let material_count = materials.len();
     let mut builder = MeshBuilder::new(materials);
@@ -69,9 +74,8 @@ pub(crate) fn load_obj(path: &Path, bytes: &[u8], up: UpAxis, warnings: &mut Vec
                 match default_material {
                     Some(index) => index,
                     None => {
-                        let index = builder.push_material(Material::opaque("default", DEFAULT_ALBEDO)).ok_or_else(|| MeshError::TooLarge {
-                            path: path.to_path_buf(),
-                            message: "too many materials for u16 material indices".into(),
+                        let index = builder.push_material(Material::opaque("default", DEFAULT_ALBEDO)).ok_or_else(|| {
+                            MeshError::TooLarge { path: path.to_path_buf(), message: "too many materials for u16 material indices".into() }
                         })?;
                         default_material = Some(index);
                         index

@@ -40,7 +40,11 @@ fn check_writable(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
 /// A name safe for one OBJ/MTL line (no line breaks, not empty; tobj trims the ends).
 fn obj_name(name: &str) -> String {
     let cleaned: String = name.trim().chars().map(|c| if c.is_control() { '_' } else { c }).collect();
-    if cleaned.is_empty() { "unnamed".to_string() } else { cleaned }
+    if cleaned.is_empty() {
+        "unnamed".to_string()
+    } else {
+        cleaned
+    }
 }
 
 /// Writes `mesh` as Wavefront OBJ at `path`, with its materials in `<stem>.mtl`
@@ -293,7 +297,8 @@ pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute
         let mut attributes = json!({"POSITION": position, "NORMAL": normal});
         if !mesh.uvs.is_empty() {
             let data: Vec<u8> = used.iter().flat_map(|&v| mesh.uvs[v as usize].to_array()).flat_map(f32::to_le_bytes).collect();
-            attributes["TEXCOORD_0"] = json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": used.len(), "type": "VEC2"})));
+            attributes["TEXCOORD_0"] =
+                json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": used.len(), "type": "VEC2"})));
         }
         if !mesh.colors.is_empty() {
             attributes["COLOR_0"] = json!(bin.push_vec3s(used.iter().map(|&v| mesh.colors[v as usize]), false));
@@ -304,12 +309,13 @@ pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute
         let primitives: Vec<Value> = runs
             .iter()
             .map(|(&material, triangles)| {
-                let data: Vec<u8> = triangles
-                    .iter()
-                    .flat_map(|&t| mesh.triangle(t))
-                    .flat_map(|v| local_index[v as usize].to_le_bytes())
-                    .collect();
-                let indices = bin.push(&data, ELEMENT_ARRAY_BUFFER, json!({"componentType": UNSIGNED_INT, "count": 3 * triangles.len(), "type": "SCALAR"}));
+                let data: Vec<u8> =
+                    triangles.iter().flat_map(|&t| mesh.triangle(t)).flat_map(|v| local_index[v as usize].to_le_bytes()).collect();
+                let indices = bin.push(
+                    &data,
+                    ELEMENT_ARRAY_BUFFER,
+                    json!({"componentType": UNSIGNED_INT, "count": 3 * triangles.len(), "type": "SCALAR"}),
+                );
                 json!({"attributes": attributes.clone(), "indices": indices, "material": material, "mode": 4})
             })
             .collect();

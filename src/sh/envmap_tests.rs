@@ -86,9 +86,8 @@ fn constant_map_projects_to_dc_only() {
 #[test]
 fn projection_is_deterministic_across_thread_counts() {
     let image = image_from_fn(128, 64, |d| [(3.0 * d.x).exp() as f32, d.y as f32, 1.0]);
-    let run = |threads| {
-        rayon::ThreadPoolBuilder::new().num_threads(threads).build().map(|pool| pool.install(|| project_equirect(&image, 6)))
-    };
+    let run =
+        |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().map(|pool| pool.install(|| project_equirect(&image, 6)));
     let (one, two) = (run(1), run(2));
     assert!(one.is_ok());
     assert_eq!(one.ok(), two.ok());
@@ -167,7 +166,9 @@ fn exr_errors_are_typed_and_name_the_file() {
     }
     // NaN pixel.
     let nan_path = temp_path("nan.exr");
-    assert!(write_rgb_file(&nan_path, 4, 4, |x, y| if (x, y) == (2, 1) { (f32::NAN, 0.0, 0.0) } else { (1.0_f32, 1.0_f32, 1.0_f32) }).is_ok());
+    assert!(
+        write_rgb_file(&nan_path, 4, 4, |x, y| if (x, y) == (2, 1) { (f32::NAN, 0.0, 0.0) } else { (1.0_f32, 1.0_f32, 1.0_f32) }).is_ok()
+    );
     let result = load_equirect(&nan_path);
     let _ = std::fs::remove_file(&nan_path);
     assert!(matches!(result, Err(EnvMapError::NonFinite { col: 2, row: 1, .. })), "{result:?}");

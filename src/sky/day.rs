@@ -87,11 +87,7 @@ fn lit_step(direction: Vec3, frame: &SkyFrame) -> SunStep {
     // Written as !(x > 0) so a NaN direction counts as night.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     let night = !(direction.dot(frame.up.normalize_or(Vec3::Y)) > 0.0);
-    let sky = if night {
-        SunSky::night(frame.sky_order)
-    } else {
-        preetham_sky(direction, frame.up, frame.turbidity, frame.sky_order)
-    };
+    let sky = if night { SunSky::night(frame.sky_order) } else { preetham_sky(direction, frame.up, frame.turbidity, frame.sky_order) };
     SunStep {
         unix_time_utc: 0.0,
         direction: direction.to_array(),

@@ -34,12 +34,9 @@ pub mod timeline;
 pub use day::{day_directions, day_steps, elevation_azimuth, parse_directions, steps_from_directions, DirectionsError, SkyFrame};
 pub use preetham::{PreethamSky, DEFAULT_TURBIDITY};
 pub use sky_sh::{preetham_sky, SunSky};
-pub use solar::{
-    default_north, solar_position, sun_direction, Site, SolarPosition, DEFAULT_DELTA_T_S,
-};
+pub use solar::{default_north, solar_position, sun_direction, Site, SolarPosition, DEFAULT_DELTA_T_S};
 pub use time::{
-    athens_utc_offset_minutes, default_date, default_tz_minutes, julian_day, parse_date,
-    parse_hhmm, parse_tz, unix_time, LocalDate,
+    athens_utc_offset_minutes, default_date, default_tz_minutes, julian_day, parse_date, parse_hhmm, parse_tz, unix_time, LocalDate,
 };
 pub use timeline::{default_timeline, timeline, StepSpec, Timeline, MAX_STEPS};
 
@@ -64,9 +61,5 @@ pub enum SkyError {
     BadStepLength { minutes: f64 },
     /// A span whose bounds are not finite, out of range, or reversed.
     #[error("time line: span {from_min}..{to_min} minutes: {reason}")]
-    BadSpan {
-        from_min: f64,
-        to_min: f64,
-        reason: &'static str,
-    },
+    BadSpan { from_min: f64, to_min: f64, reason: &'static str },
 }

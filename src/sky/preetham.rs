@@ -44,52 +44,18 @@ fn zenith_chromaticity(matrix: &[[f64; 4]; 3], sun_zenith_rad: f64, turbidity: f
     let s = sun_zenith_rad;
     let theta_powers = [s * s * s, s * s, s, 1.0];
     let t_powers = [turbidity * turbidity, turbidity, 1.0];
-    matrix
-        .iter()
-        .zip(t_powers)
-        .map(|(row, tp)| {
-            tp * row
-                .iter()
-                .zip(theta_powers)
-                .map(|(m, th)| m * th)
-                .sum::<f64>()
-        })
-        .sum()
+    matrix.iter().zip(t_powers).map(|(row, tp)| tp * row.iter().zip(theta_powers).map(|(m, th)| m * th).sum::<f64>()).sum()
 }
 
-const ZENITH_X: [[f64; 4]; 3] = [
-    [0.00166, -0.00375, 0.00209, 0.0],
-    [-0.02903, 0.06377, -0.03202, 0.00394],
-    [0.11693, -0.21196, 0.06052, 0.25886],
-];
-const ZENITH_Y: [[f64; 4]; 3] = [
-    [0.00275, -0.00610, 0.00317, 0.0],
-    [-0.04214, 0.08970, -0.04153, 0.00516],
-    [0.15346, -0.26756, 0.06670, 0.26688],
-];
+const ZENITH_X: [[f64; 4]; 3] =
+    [[0.00166, -0.00375, 0.00209, 0.0], [-0.02903, 0.06377, -0.03202, 0.00394], [0.11693, -0.21196, 0.06052, 0.25886]];
+const ZENITH_Y: [[f64; 4]; 3] =
+    [[0.00275, -0.00610, 0.00317, 0.0], [-0.04214, 0.08970, -0.04153, 0.00516], [0.15346, -0.26756, 0.06670, 0.26688]];
 
 /// Perez coefficients A..E as `[slope, intercept]` in T (App. A.2).
-const PEREZ_LUMINANCE: [[f64; 2]; 5] = [
-    [0.1787, -1.4630],
-    [-0.3554, 0.4275],
-    [-0.0227, 5.3251],
-    [0.1206, -2.5771],
-    [-0.0670, 0.3703],
-];
-const PEREZ_X: [[f64; 2]; 5] = [
-    [-0.0193, -0.2592],
-    [-0.0665, 0.0008],
-    [-0.0004, 0.2125],
-    [-0.0641, -0.8989],
-    [-0.0033, 0.0452],
-];
-const PEREZ_Y: [[f64; 2]; 5] = [
-    [-0.0167, -0.2608],
-    [-0.0950, 0.0092],
-    [-0.0079, 0.2102],
-    [-0.0441, -1.6537],
-    [-0.0109, 0.0529],
-];
+const PEREZ_LUMINANCE: [[f64; 2]; 5] = [[0.1787, -1.4630], [-0.3554, 0.4275], [-0.0227, 5.3251], [0.1206, -2.5771], [-0.0670, 0.3703]];
+const PEREZ_X: [[f64; 2]; 5] = [[-0.0193, -0.2592], [-0.0665, 0.0008], [-0.0004, 0.2125], [-0.0641, -0.8989], [-0.0033, 0.0452]];
+const PEREZ_Y: [[f64; 2]; 5] = [[-0.0167, -0.2608], [-0.0950, 0.0092], [-0.0079, 0.2102], [-0.0441, -1.6537], [-0.0109, 0.0529]];
 
 /// One Perez distribution, pre-divided by its value at the zenith.
 #[derive(Debug, Clone, Copy)]
@@ -102,10 +68,7 @@ struct Perez {
 impl Perez {
     fn new(table: &[[f64; 2]; 5], turbidity: f64, zenith_value: f64, sun_zenith_rad: f64) -> Perez {
         let coefficients = table.map(|[slope, intercept]| slope * turbidity + intercept);
-        let mut perez = Perez {
-            coefficients,
-            scale: 1.0,
-        };
+        let mut perez = Perez { coefficients, scale: 1.0 };
         perez.scale = zenith_value / perez.distribution(1.0, sun_zenith_rad, sun_zenith_rad.cos());
         perez
     }
@@ -113,8 +76,7 @@ impl Perez {
     /// F(θ, γ) from cos θ (> 0), γ and cos γ.
     fn distribution(&self, cos_theta: f64, gamma: f64, cos_gamma: f64) -> f64 {
         let [a, b, c, d, e] = self.coefficients;
-        (1.0 + a * (b / cos_theta).exp())
-            * (1.0 + c * (d * gamma).exp() + e * cos_gamma * cos_gamma)
+        (1.0 + a * (b / cos_theta).exp()) * (1.0 + c * (d * gamma).exp() + e * cos_gamma * cos_gamma)
     }
 
     fn value(&self, cos_theta: f64, gamma: f64, cos_gamma: f64) -> f64 {
@@ -150,24 +112,9 @@ impl PreethamSky {
         Some(PreethamSky {
             up,
             sun,
-            luminance: Perez::new(
-                &PEREZ_LUMINANCE,
-                t,
-                zenith_luminance_kcd(theta_s, t) * 1000.0,
-                theta_s,
-            ),
-            chroma_x: Perez::new(
-                &PEREZ_X,
-                t,
-                zenith_chromaticity(&ZENITH_X, theta_s, t),
-                theta_s,
-            ),
-            chroma_y: Perez::new(
-                &PEREZ_Y,
-                t,
-                zenith_chromaticity(&ZENITH_Y, theta_s, t),
-                theta_s,
-            ),
+            luminance: Perez::new(&PEREZ_LUMINANCE, t, zenith_luminance_kcd(theta_s, t) * 1000.0, theta_s),
+            chroma_x: Perez::new(&PEREZ_X, t, zenith_chromaticity(&ZENITH_X, theta_s, t), theta_s),
+            chroma_y: Perez::new(&PEREZ_Y, t, zenith_chromaticity(&ZENITH_Y, theta_s, t), theta_s),
         })
     }
 
@@ -197,11 +144,7 @@ impl PreethamSky {
         if y.is_nan() || luminance.is_nan() || y <= 0.0 || luminance <= 0.0 {
             return [0.0; 3];
         }
-        let xyz = [
-            x / y * luminance,
-            luminance,
-            (1.0 - x - y).max(0.0) / y * luminance,
-        ];
+        let xyz = [x / y * luminance, luminance, (1.0 - x - y).max(0.0) / y * luminance];
         xyz_to_linear_srgb(xyz).map(|c| c.max(0.0))
     }
 }
@@ -216,16 +159,8 @@ mod tests {
     #[test]
     fn zenith_luminance_follows_the_paper_and_grows_with_turbidity() {
         let theta = 30f64.to_radians();
-        for (t, expected) in [
-            (2.0, 5.886_743),
-            (3.0, 10.413_087),
-            (6.0, 22.066_708),
-            (10.0, 33.739_740),
-        ] {
-            assert!(
-                (zenith_luminance_kcd(theta, t) - expected).abs() < 1e-5,
-                "T={t}"
-            );
+        for (t, expected) in [(2.0, 5.886_743), (3.0, 10.413_087), (6.0, 22.066_708), (10.0, 33.739_740)] {
+            assert!((zenith_luminance_kcd(theta, t) - expected).abs() < 1e-5, "T={t}");
         }
         let mut previous = f64::NEG_INFINITY;
         for step in 0..=16 {
@@ -236,10 +171,7 @@ mod tests {
         // At the zenith the Perez ratio is 1: the model returns Y_z itself.
         let sky = PreethamSky::new(DVec3::new(0.5, 3f64.sqrt() / 2.0, 0.0), DVec3::Y, 3.0);
         let zenith = sky.and_then(|s| s.luminance_xy(DVec3::Y)).map(|v| v[0]);
-        assert!(
-            zenith.is_some_and(|y| (y - 10_413.087).abs() < 0.01),
-            "{zenith:?}"
-        );
+        assert!(zenith.is_some_and(|y| (y - 10_413.087).abs() < 0.01), "{zenith:?}");
     }
 
     /// Zenith chromaticity at T = 3, θ_s = 30° is near the daylight locus
@@ -249,10 +181,7 @@ mod tests {
         let theta = 30f64.to_radians();
         let x = zenith_chromaticity(&ZENITH_X, theta, 3.0);
         let y = zenith_chromaticity(&ZENITH_Y, theta, 3.0);
-        assert!(
-            (0.24..0.31).contains(&x) && (0.25..0.33).contains(&y),
-            "{x} {y}"
-        );
+        assert!((0.24..0.31).contains(&x) && (0.25..0.33).contains(&y), "{x} {y}");
         assert!(x < 0.3127, "bluer than D65 white");
     }
 
@@ -260,26 +189,13 @@ mod tests {
     fn radiance_is_zero_below_the_horizon_and_positive_above() {
         let sun = DVec3::new(0.3, 0.5, -0.8);
         let sky = PreethamSky::new(sun, DVec3::Y, 3.0);
-        let Some(sky) = sky else {
-            panic!("sun above horizon gave no sky")
-        };
-        for dir in [
-            DVec3::NEG_Y,
-            DVec3::new(1.0, -0.01, 0.0).normalize(),
-            DVec3::X,
-        ] {
+        let Some(sky) = sky else { panic!("sun above horizon gave no sky") };
+        for dir in [DVec3::NEG_Y, DVec3::new(1.0, -0.01, 0.0).normalize(), DVec3::X] {
             assert_eq!(sky.radiance_rgb(dir), [0.0; 3], "{dir}");
         }
-        for dir in [
-            DVec3::Y,
-            DVec3::new(1.0, 0.01, 0.0).normalize(),
-            sun.normalize(),
-        ] {
+        for dir in [DVec3::Y, DVec3::new(1.0, 0.01, 0.0).normalize(), sun.normalize()] {
             let rgb = sky.radiance_rgb(dir);
-            assert!(
-                rgb.iter().all(|&c| c > 0.0 && c.is_finite()),
-                "{dir}: {rgb:?}"
-            );
+            assert!(rgb.iter().all(|&c| c > 0.0 && c.is_finite()), "{dir}: {rgb:?}");
         }
         // Brighter near the sun than opposite it, at equal height.
         let toward = sky.radiance_rgb(DVec3::new(0.3, 0.5, -0.8).normalize())[1];

@@ -30,11 +30,7 @@ pub struct SunSky {
 impl SunSky {
     /// Night lighting: everything zero, `night = true`.
     pub fn night(order: usize) -> SunSky {
-        SunSky {
-            sun_rgb_irradiance: [0.0; 3],
-            sky_sh: vec![[0.0; 3]; coeff_count(order)],
-            night: true,
-        }
+        SunSky { sun_rgb_irradiance: [0.0; 3], sky_sh: vec![[0.0; 3]; coeff_count(order)], night: true }
     }
 }
 
@@ -52,18 +48,11 @@ pub fn preetham_sky(sun_dir_world: Vec3, up: Vec3, turbidity: f64, order: usize)
     let Some(sky) = PreethamSky::new(sun_dir_world.as_dvec3(), up.as_dvec3(), turbidity) else {
         return SunSky::night(order);
     };
-    let cos_zenith = sun_dir_world
-        .as_dvec3()
-        .normalize()
-        .dot(up.as_dvec3().normalize());
+    let cos_zenith = sun_dir_world.as_dvec3().normalize().dot(up.as_dvec3().normalize());
     let zenith_deg = cos_zenith.clamp(-1.0, 1.0).acos().to_degrees();
     let sun = sun_illuminance_rgb(zenith_deg, super::preetham::clamp_turbidity(turbidity));
     let sky_sh = project_function(order, SKY_SAMPLES_PER_AXIS, |dir| sky.radiance_rgb(dir));
-    SunSky {
-        sun_rgb_irradiance: sun.map(|c| c as f32),
-        sky_sh,
-        night: false,
-    }
+    SunSky { sun_rgb_irradiance: sun.map(|c| c as f32), sky_sh, night: false }
 }
 
 #[cfg(test)]
@@ -82,18 +71,8 @@ mod tests {
     fn horizontal_illuminance(sh: &[[f32; 3]], channel: usize) -> f64 {
         let mut basis = [0.0f32; 9];
         crate::sh::eval_basis(3, Vec3::Y, &mut basis);
-        let kernel = [
-            std::f64::consts::PI,
-            2.0 * std::f64::consts::PI / 3.0,
-            std::f64::consts::PI / 4.0,
-        ];
-        sh.iter()
-            .zip(basis)
-            .enumerate()
-            .map(|(i, (c, y))| {
-                kernel[(i as f64).sqrt() as usize] * f64::from(c[channel]) * f64::from(y)
-            })
-            .sum()
+        let kernel = [std::f64::consts::PI, 2.0 * std::f64::consts::PI / 3.0, std::f64::consts::PI / 4.0];
+        sh.iter().zip(basis).enumerate().map(|(i, (c, y))| kernel[(i as f64).sqrt() as usize] * f64::from(c[channel]) * f64::from(y)).sum()
     }
 
     #[test]
@@ -101,11 +80,7 @@ mod tests {
         let day = preetham_sky(sun_at_elevation(40.0), Vec3::Y, 3.0, 3);
         assert!(!day.night);
         assert_eq!(day.sky_sh.len(), 9);
-        assert!(
-            day.sky_sh[0].iter().all(|&c| c > 0.0),
-            "{:?}",
-            day.sky_sh[0]
-        );
+        assert!(day.sky_sh[0].iter().all(|&c| c > 0.0), "{:?}", day.sky_sh[0]);
         // Blue sky: more blue than red in the DC term.
         assert!(day.sky_sh[0][2] > day.sky_sh[0][0]);
         // Light comes from above: the band-1 coefficient along up (y_1,-1 ∝ y) is positive.
@@ -129,20 +104,12 @@ mod tests {
         };
         let reference = dc(0.0);
         for azimuth in [0.7f32, 2.0, 4.0] {
-            assert!(
-                (dc(azimuth) - reference).abs() / reference < 5e-3,
-                "{azimuth}"
-            );
+            assert!((dc(azimuth) - reference).abs() / reference < 5e-3, "{azimuth}");
         }
         let sky = PreethamSky::new(glam::DVec3::new(0.866, 0.5, 0.0), glam::DVec3::Y, 3.0);
-        let Some(sky) = sky else {
-            panic!("no sky by day")
-        };
+        let Some(sky) = sky else { panic!("no sky by day") };
         let coarse = project_function(1, 128, |d| sky.radiance_rgb(d))[0][1];
-        assert!(
-            (coarse - reference).abs() / reference < 5e-3,
-            "{coarse} vs {reference}"
-        );
+        assert!((coarse - reference).abs() / reference < 5e-3, "{coarse} vs {reference}");
     }
 
     /// Measured numbers, printed for the report; asserted only as broad
@@ -153,10 +120,7 @@ mod tests {
         for elevation in [10.0f32, 30.0, 60.0] {
             let s = preetham_sky(sun_at_elevation(elevation), Vec3::Y, 3.0, 3);
             let e_h = horizontal_illuminance(&s.sky_sh, 1);
-            eprintln!(
-                "elevation {elevation}°: sky E_h (G channel) {e_h:.0} lux, sun {:?}",
-                s.sun_rgb_irradiance
-            );
+            eprintln!("elevation {elevation}°: sky E_h (G channel) {e_h:.0} lux, sun {:?}", s.sun_rgb_irradiance);
             assert!((2_000.0..60_000.0).contains(&e_h), "{elevation}: {e_h}");
         }
     }
@@ -183,11 +147,7 @@ mod tests {
         let s = preetham_sky(dir, Vec3::Y, 3.0, 3);
         assert!(s.night);
         // And local noon is day.
-        let noon = solar_position(
-            &Site::acropolis(),
-            unix_time(default_date(), 720.0, 120),
-            DEFAULT_DELTA_T_S,
-        );
+        let noon = solar_position(&Site::acropolis(), unix_time(default_date(), 720.0, 120), DEFAULT_DELTA_T_S);
         let s = preetham_sky(sun_direction(&noon, Vec3::NEG_Z, Vec3::Y), Vec3::Y, 3.0, 3);
         assert!(!s.night && s.sun_rgb_irradiance[1] > 50_000.0, "{s:?}");
     }

@@ -9,8 +9,7 @@
 use glam::{DVec3, Vec3};
 
 use super::spa_tables::{
-    EARTH_LATITUDE_TERMS, EARTH_LONGITUDE_TERMS, EARTH_RADIUS_TERMS, NUTATION_ARGUMENT_MULTIPLIERS,
-    NUTATION_COEFFICIENTS,
+    EARTH_LATITUDE_TERMS, EARTH_LONGITUDE_TERMS, EARTH_RADIUS_TERMS, NUTATION_ARGUMENT_MULTIPLIERS, NUTATION_COEFFICIENTS,
 };
 use super::time::julian_day;
 
@@ -42,13 +41,7 @@ impl Site {
     /// A site at sea-level-referenced `elevation_m`, with the standard
     /// atmosphere's pressure `1013.25·(1 − 2.25577e-5·h)^5.25588` mbar and 20 °C.
     pub fn new(latitude_deg: f64, longitude_deg: f64, elevation_m: f64) -> Site {
-        Site {
-            latitude_deg,
-            longitude_deg,
-            elevation_m,
-            pressure_mbar: standard_pressure_mbar(elevation_m),
-            temperature_c: 20.0,
-        }
+        Site { latitude_deg, longitude_deg, elevation_m, pressure_mbar: standard_pressure_mbar(elevation_m), temperature_c: 20.0 }
     }
 
     /// The Parthenon, Athens: 37.9715° N, 23.7267° E, 150 m.
@@ -108,9 +101,7 @@ pub fn solar_position(site: &Site, unix_time_utc: f64, delta_t_s: f64) -> SolarP
     let jme = jce / 10.0;
 
     // 3.2 Earth heliocentric longitude, latitude (degrees) and radius (AU).
-    let earth_longitude = earth_periodic_sum(&EARTH_LONGITUDE_TERMS, jme)
-        .to_degrees()
-        .rem_euclid(360.0);
+    let earth_longitude = earth_periodic_sum(&EARTH_LONGITUDE_TERMS, jme).to_degrees().rem_euclid(360.0);
     let earth_latitude = earth_periodic_sum(&EARTH_LATITUDE_TERMS, jme).to_degrees();
     let earth_radius = earth_periodic_sum(&EARTH_RADIUS_TERMS, jme);
 
@@ -128,15 +119,8 @@ pub fn solar_position(site: &Site, unix_time_utc: f64, delta_t_s: f64) -> SolarP
     ];
     let mut delta_psi = 0.0;
     let mut delta_epsilon = 0.0;
-    for (multipliers, [a, b, c, d]) in NUTATION_ARGUMENT_MULTIPLIERS
-        .iter()
-        .zip(NUTATION_COEFFICIENTS.iter())
-    {
-        let argument: f64 = multipliers
-            .iter()
-            .zip(x.iter())
-            .map(|(&y, &xj)| f64::from(y) * xj)
-            .sum();
+    for (multipliers, [a, b, c, d]) in NUTATION_ARGUMENT_MULTIPLIERS.iter().zip(NUTATION_COEFFICIENTS.iter()) {
+        let argument: f64 = multipliers.iter().zip(x.iter()).map(|(&y, &xj)| f64::from(y) * xj).sum();
         let argument = argument.to_radians();
         delta_psi += (a + b * jce) * argument.sin();
         delta_epsilon += (c + d * jce) * argument.cos();
@@ -146,34 +130,24 @@ pub fn solar_position(site: &Site, unix_time_utc: f64, delta_t_s: f64) -> SolarP
 
     // 3.5 True obliquity of the ecliptic (eq. 24, arcseconds; U = JME/10).
     let u = jme / 10.0;
-    const OBLIQUITY: [f64; 11] = [
-        84_381.448, -4_680.93, -1.55, 1_999.25, -51.38, -249.67, -39.05, 7.12, 27.87, 5.79, 2.45,
-    ];
+    const OBLIQUITY: [f64; 11] = [84_381.448, -4_680.93, -1.55, 1_999.25, -51.38, -249.67, -39.05, 7.12, 27.87, 5.79, 2.45];
     let epsilon0 = OBLIQUITY.iter().rev().fold(0.0, |acc, &k| acc * u + k);
     let epsilon = epsilon0 / 3600.0 + delta_epsilon;
 
     // 3.6–3.8 Aberration, apparent sun longitude, sidereal time at Greenwich.
     let delta_tau = -20.4898 / (3600.0 * earth_radius);
     let lambda = theta + delta_psi + delta_tau;
-    let nu0 = (280.460_618_37 + 360.985_647_366_29 * (jd - 2_451_545.0) + 0.000_387_933 * jc * jc
-        - jc * jc * jc / 38_710_000.0)
+    let nu0 = (280.460_618_37 + 360.985_647_366_29 * (jd - 2_451_545.0) + 0.000_387_933 * jc * jc - jc * jc * jc / 38_710_000.0)
         .rem_euclid(360.0);
     let nu = nu0 + delta_psi * epsilon.to_radians().cos();
 
     // 3.9–3.10 Geocentric right ascension and declination.
-    let (lambda_r, epsilon_r, beta_r) =
-        (lambda.to_radians(), epsilon.to_radians(), beta.to_radians());
-    let alpha = (lambda_r.sin() * epsilon_r.cos() - beta_r.tan() * epsilon_r.sin())
-        .atan2(lambda_r.cos())
-        .to_degrees()
-        .rem_euclid(360.0);
-    let delta =
-        (beta_r.sin() * epsilon_r.cos() + beta_r.cos() * epsilon_r.sin() * lambda_r.sin()).asin();
+    let (lambda_r, epsilon_r, beta_r) = (lambda.to_radians(), epsilon.to_radians(), beta.to_radians());
+    let alpha = (lambda_r.sin() * epsilon_r.cos() - beta_r.tan() * epsilon_r.sin()).atan2(lambda_r.cos()).to_degrees().rem_euclid(360.0);
+    let delta = (beta_r.sin() * epsilon_r.cos() + beta_r.cos() * epsilon_r.sin() * lambda_r.sin()).asin();
 
     // 3.11 Observer local hour angle.
-    let hour_angle = (nu + site.longitude_deg - alpha)
-        .rem_euclid(360.0)
-        .to_radians();
+    let hour_angle = (nu + site.longitude_deg - alpha).rem_euclid(360.0).to_radians();
 
     // 3.12 Topocentric right ascension parallax and declination.
     let xi = (8.794 / (3600.0 * earth_radius)).to_radians();
@@ -181,18 +155,13 @@ pub fn solar_position(site: &Site, unix_time_utc: f64, delta_t_s: f64) -> SolarP
     let u_lat = (0.996_647_19 * phi.tan()).atan();
     let x_term = u_lat.cos() + site.elevation_m / 6_378_140.0 * phi.cos();
     let y_term = 0.996_647_19 * u_lat.sin() + site.elevation_m / 6_378_140.0 * phi.sin();
-    let delta_alpha = (-x_term * xi.sin() * hour_angle.sin())
-        .atan2(delta.cos() - x_term * xi.sin() * hour_angle.cos());
-    let delta_prime = ((delta.sin() - y_term * xi.sin()) * delta_alpha.cos())
-        .atan2(delta.cos() - x_term * xi.sin() * hour_angle.cos());
+    let delta_alpha = (-x_term * xi.sin() * hour_angle.sin()).atan2(delta.cos() - x_term * xi.sin() * hour_angle.cos());
+    let delta_prime = ((delta.sin() - y_term * xi.sin()) * delta_alpha.cos()).atan2(delta.cos() - x_term * xi.sin() * hour_angle.cos());
     // 3.13 Topocentric local hour angle.
     let hour_angle_prime = hour_angle - delta_alpha;
 
     // 3.14 Topocentric elevation without, then with, refraction.
-    let e0 = (phi.sin() * delta_prime.sin()
-        + phi.cos() * delta_prime.cos() * hour_angle_prime.cos())
-    .asin()
-    .to_degrees();
+    let e0 = (phi.sin() * delta_prime.sin() + phi.cos() * delta_prime.cos() * hour_angle_prime.cos()).asin().to_degrees();
     let refraction = if e0 >= -(SUN_RADIUS_DEG + REFRACTION_AT_HORIZON_DEG) {
         (site.pressure_mbar / 1010.0) * (283.0 / (273.0 + site.temperature_c)) * 1.02
             / (60.0 * (e0 + 10.3 / (e0 + 5.11)).to_radians().tan())
@@ -202,17 +171,10 @@ pub fn solar_position(site: &Site, unix_time_utc: f64, delta_t_s: f64) -> SolarP
     let elevation = e0 + refraction;
 
     // 3.15 Topocentric azimuth, measured from north eastward.
-    let gamma = hour_angle_prime
-        .sin()
-        .atan2(hour_angle_prime.cos() * phi.sin() - delta_prime.tan() * phi.cos())
-        .to_degrees();
+    let gamma = hour_angle_prime.sin().atan2(hour_angle_prime.cos() * phi.sin() - delta_prime.tan() * phi.cos()).to_degrees();
     let azimuth = (gamma + 180.0).rem_euclid(360.0);
 
-    SolarPosition {
-        zenith_deg: 90.0 - elevation,
-        azimuth_deg: azimuth,
-        elevation_deg: elevation,
-    }
+    SolarPosition { zenith_deg: 90.0 - elevation, azimuth_deg: azimuth, elevation_deg: elevation }
 }
 
 /// The default scene direction of north for an up axis: −Z when up is +Y
@@ -220,11 +182,7 @@ pub fn solar_position(site: &Site, unix_time_utc: f64, delta_t_s: f64) -> SolarP
 /// derived from −Z (or +Y when up is ±Z).
 pub fn default_north(up: Vec3) -> Vec3 {
     let up = up.normalize_or(Vec3::Y);
-    let candidate = if up.dot(Vec3::Z).abs() > 0.9 {
-        Vec3::Y
-    } else {
-        Vec3::NEG_Z
-    };
+    let candidate = if up.dot(Vec3::Z).abs() > 0.9 { Vec3::Y } else { Vec3::NEG_Z };
     (candidate - up * candidate.dot(up)).normalize_or(Vec3::NEG_Z)
 }
 
@@ -235,9 +193,7 @@ pub fn default_north(up: Vec3) -> Vec3 {
 fn horizon_basis(north: Vec3, up: Vec3) -> (DVec3, DVec3, DVec3) {
     let up = up.as_dvec3().try_normalize().unwrap_or(DVec3::Y);
     let north = north.as_dvec3();
-    let north_h = (north - up * north.dot(up))
-        .try_normalize()
-        .unwrap_or_else(|| up.any_orthonormal_vector());
+    let north_h = (north - up * north.dot(up)).try_normalize().unwrap_or_else(|| up.any_orthonormal_vector());
     (north_h, north_h.cross(up), up)
 }
 
@@ -271,30 +227,13 @@ mod tests {
     /// azimuth 194.34024°.
     #[test]
     fn spa_matches_reda_andreas_worked_example() {
-        let site = Site {
-            latitude_deg: 39.742476,
-            longitude_deg: -105.1786,
-            elevation_m: 1830.14,
-            pressure_mbar: 820.0,
-            temperature_c: 11.0,
-        };
-        let date = LocalDate {
-            year: 2003,
-            month: 10,
-            day: 17,
-        };
+        let site =
+            Site { latitude_deg: 39.742476, longitude_deg: -105.1786, elevation_m: 1830.14, pressure_mbar: 820.0, temperature_c: 11.0 };
+        let date = LocalDate { year: 2003, month: 10, day: 17 };
         let t = unix_time(date, 12.0 * 60.0 + 30.0 + 30.0 / 60.0, -7 * 60);
         let pos = solar_position(&site, t, 67.0);
-        assert!(
-            (pos.zenith_deg - 50.11162).abs() < SPA_EXAMPLE_TOL_DEG,
-            "zenith {}",
-            pos.zenith_deg
-        );
-        assert!(
-            (pos.azimuth_deg - 194.34024).abs() < SPA_EXAMPLE_TOL_DEG,
-            "azimuth {}",
-            pos.azimuth_deg
-        );
+        assert!((pos.zenith_deg - 50.11162).abs() < SPA_EXAMPLE_TOL_DEG, "zenith {}", pos.zenith_deg);
+        assert!((pos.azimuth_deg - 194.34024).abs() < SPA_EXAMPLE_TOL_DEG, "azimuth {}", pos.azimuth_deg);
         assert!((pos.elevation_deg + pos.zenith_deg - 90.0).abs() < 1e-12);
     }
 
@@ -318,55 +257,27 @@ mod tests {
             (1054.0, 78.440297, 260.891727), // 17:34
         ];
         let site = Site::acropolis();
-        let date = LocalDate {
-            year: 2026,
-            month: 3,
-            day: 20,
-        };
+        let date = LocalDate { year: 2026, month: 3, day: 20 };
         for (minutes, zenith, azimuth) in reference {
             let pos = solar_position(&site, unix_time(date, minutes, 120), DEFAULT_DELTA_T_S);
-            assert!(
-                (pos.zenith_deg - zenith).abs() < PVLIB_TOL_DEG,
-                "{minutes}: zenith {} vs {zenith}",
-                pos.zenith_deg
-            );
-            assert!(
-                (pos.azimuth_deg - azimuth).abs() < PVLIB_TOL_DEG,
-                "{minutes}: azimuth {} vs {azimuth}",
-                pos.azimuth_deg
-            );
+            assert!((pos.zenith_deg - zenith).abs() < PVLIB_TOL_DEG, "{minutes}: zenith {} vs {zenith}", pos.zenith_deg);
+            assert!((pos.azimuth_deg - azimuth).abs() < PVLIB_TOL_DEG, "{minutes}: azimuth {} vs {azimuth}", pos.azimuth_deg);
         }
     }
 
     #[test]
     fn sun_direction_points_up_at_zenith_and_east_at_azimuth_90() {
-        let overhead = SolarPosition {
-            zenith_deg: 0.0,
-            azimuth_deg: 123.0,
-            elevation_deg: 90.0,
-        };
+        let overhead = SolarPosition { zenith_deg: 0.0, azimuth_deg: 123.0, elevation_deg: 90.0 };
         let d = sun_direction(&overhead, Vec3::NEG_Z, Vec3::Y);
         assert!((d - Vec3::Y).length() < 1e-6, "{d}");
-        let east = SolarPosition {
-            zenith_deg: 90.0,
-            azimuth_deg: 90.0,
-            elevation_deg: 0.0,
-        };
+        let east = SolarPosition { zenith_deg: 90.0, azimuth_deg: 90.0, elevation_deg: 0.0 };
         assert!((sun_direction(&east, Vec3::NEG_Z, Vec3::Y) - Vec3::X).length() < 1e-6);
         // Z-up with north = +Y: east is still +X, south is −Y.
         assert!((sun_direction(&east, Vec3::Y, Vec3::Z) - Vec3::X).length() < 1e-6);
-        let south = SolarPosition {
-            zenith_deg: 90.0,
-            azimuth_deg: 180.0,
-            elevation_deg: 0.0,
-        };
+        let south = SolarPosition { zenith_deg: 90.0, azimuth_deg: 180.0, elevation_deg: 0.0 };
         assert!((sun_direction(&south, Vec3::Y, Vec3::Z) + Vec3::Y).length() < 1e-6);
         // A tilted north is projected onto the horizon; 30° elevation.
-        let tilted = SolarPosition {
-            zenith_deg: 60.0,
-            azimuth_deg: 0.0,
-            elevation_deg: 30.0,
-        };
+        let tilted = SolarPosition { zenith_deg: 60.0, azimuth_deg: 0.0, elevation_deg: 30.0 };
         let d = sun_direction(&tilted, Vec3::new(0.0, 0.5, -1.0), Vec3::Y);
         let expected = Vec3::new(0.0, 0.5, -(0.75f32).sqrt());
         assert!((d - expected).length() < 1e-6, "{d}");

@@ -104,9 +104,7 @@ pub fn sun_illuminance_xyz(air_mass: f64, turbidity: f64) -> [f64; 3] {
     let mut xyz = [0.0; 3];
     for [lambda_nm, e0, k_ozone, xbar, ybar, zbar] in SPECTRUM {
         let lambda_um = lambda_nm / 1000.0;
-        let optical_depth = 0.008735 * lambda_um.powf(-4.08)
-            + beta * lambda_um.powf(-ANGSTROM_ALPHA)
-            + k_ozone * OZONE_ATM_CM;
+        let optical_depth = 0.008735 * lambda_um.powf(-4.08) + beta * lambda_um.powf(-ANGSTROM_ALPHA) + k_ozone * OZONE_ATM_CM;
         let e = e0 * (-optical_depth * air_mass).exp() * STEP_NM * LUMENS_PER_WATT;
         xyz[0] += e * xbar;
         xyz[1] += e * ybar;
@@ -129,10 +127,7 @@ pub fn xyz_to_linear_srgb([x, y, z]: [f64; 3]) -> [f64; 3] {
 /// channels are clamped to 0. Below the horizon the caller should not ask:
 /// zenith angles are clamped to 90° (air mass ≈ 38).
 pub fn sun_illuminance_rgb(zenith_deg: f64, turbidity: f64) -> [f64; 3] {
-    let rgb = xyz_to_linear_srgb(sun_illuminance_xyz(
-        kasten_young_air_mass(zenith_deg),
-        turbidity,
-    ));
+    let rgb = xyz_to_linear_srgb(sun_illuminance_xyz(kasten_young_air_mass(zenith_deg), turbidity));
     rgb.map(|c| c.max(0.0))
 }
 

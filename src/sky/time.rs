@@ -30,11 +30,7 @@ const SECONDS_PER_DAY: f64 = 86_400.0;
 /// in daylight, the first one with the sun about 5° high. (The 2006 demo's
 /// captured sky saw the sun from 06:52 to 17:44; its date is not published.)
 pub fn default_date() -> LocalDate {
-    LocalDate {
-        year: 2026,
-        month: 3,
-        day: 20,
-    }
+    LocalDate { year: 2026, month: 3, day: 20 }
 }
 
 /// UTC offset of [`default_date`] in Athens: +120 minutes (EET).
@@ -107,14 +103,9 @@ fn parse_digits(text: &str, len: usize) -> Option<u32> {
 
 /// Parses `YYYY-MM-DD` (four-digit year 1000..=9999, real day of month).
 pub fn parse_date(text: &str) -> Result<LocalDate, SkyError> {
-    let bad = |reason| SkyError::BadDate {
-        text: text.to_owned(),
-        reason,
-    };
+    let bad = |reason| SkyError::BadDate { text: text.to_owned(), reason };
     let mut parts = text.trim().split('-');
-    let (Some(y), Some(m), Some(d), None) =
-        (parts.next(), parts.next(), parts.next(), parts.next())
-    else {
+    let (Some(y), Some(m), Some(d), None) = (parts.next(), parts.next(), parts.next(), parts.next()) else {
         return Err(bad("not three fields separated by '-'"));
     };
     let year = parse_digits(y, 4).ok_or_else(|| bad("year is not four digits"))?;
@@ -144,10 +135,7 @@ fn split_hh_mm(text: &str) -> Option<(u32, u32)> {
 /// minutes east of Greenwich, e.g. `"+02:00"` → 120, `"-05:30"` → −330.
 /// Offsets beyond ±14:00 are refused.
 pub fn parse_tz(text: &str) -> Result<i32, SkyError> {
-    let bad = |reason| SkyError::BadTimeZone {
-        text: text.to_owned(),
-        reason,
-    };
+    let bad = |reason| SkyError::BadTimeZone { text: text.to_owned(), reason };
     let t = text.trim();
     if t == "Z" || t == "z" {
         return Ok(0);
@@ -173,10 +161,7 @@ pub fn parse_tz(text: &str) -> Result<i32, SkyError> {
 /// Parses a local time of day `HH:MM` into minutes after midnight,
 /// e.g. `"06:57"` → 417. `24:00` is accepted (end of day).
 pub fn parse_hhmm(text: &str) -> Result<u32, SkyError> {
-    let bad = |reason| SkyError::BadTime {
-        text: text.to_owned(),
-        reason,
-    };
+    let bad = |reason| SkyError::BadTime { text: text.to_owned(), reason };
     let (h, m) = split_hh_mm(text.trim()).ok_or_else(|| bad("not HH:MM"))?;
     if m >= 60 {
         return Err(bad("minutes outside 00..59"));
@@ -210,51 +195,25 @@ mod tests {
     /// Exact reference: the Unix epoch, J2000.0 and a date before 1970.
     #[test]
     fn unix_time_and_julian_day_match_known_epochs() {
-        let epoch = LocalDate {
-            year: 1970,
-            month: 1,
-            day: 1,
-        };
+        let epoch = LocalDate { year: 1970, month: 1, day: 1 };
         assert_eq!(unix_time(epoch, 0.0, 0), 0.0);
         // J2000.0 = 2000-01-01T12:00 TT; as UT here, JD 2451545.0 exactly.
-        let j2000 = LocalDate {
-            year: 2000,
-            month: 1,
-            day: 1,
-        };
+        let j2000 = LocalDate { year: 2000, month: 1, day: 1 };
         assert_eq!(julian_day(unix_time(j2000, 720.0, 0)), 2_451_545.0);
         // 2000-03-01 is day 11017 (Hinnant's worked numbers: 1970..2000 = 10957
         // days, + 31 (Jan) + 29 (Feb, leap)).
-        let march = LocalDate {
-            year: 2000,
-            month: 3,
-            day: 1,
-        };
+        let march = LocalDate { year: 2000, month: 3, day: 1 };
         assert_eq!(unix_time(march, 0.0, 0), 11_017.0 * 86_400.0);
-        let before = LocalDate {
-            year: 1969,
-            month: 12,
-            day: 31,
-        };
+        let before = LocalDate { year: 1969, month: 12, day: 31 };
         assert_eq!(unix_time(before, 0.0, 0), -86_400.0);
         // Local noon at +02:00 is 10:00 UTC.
         let d = default_date();
-        assert_eq!(
-            unix_time(d, 720.0, 120) - unix_time(d, 0.0, 0),
-            10.0 * 3600.0
-        );
+        assert_eq!(unix_time(d, 720.0, 120) - unix_time(d, 0.0, 0), 10.0 * 3600.0);
     }
 
     #[test]
     fn parse_date_accepts_real_days_and_refuses_the_rest() {
-        assert_eq!(
-            parse_date("2026-03-20"),
-            Ok(LocalDate {
-                year: 2026,
-                month: 3,
-                day: 20
-            })
-        );
+        assert_eq!(parse_date("2026-03-20"), Ok(LocalDate { year: 2026, month: 3, day: 20 }));
         assert_eq!(parse_date("2024-02-29").map(|d| d.day), Ok(29));
         for bad in [
             "2026-02-29",
@@ -278,9 +237,7 @@ mod tests {
         assert_eq!(parse_tz("+02:00"), Ok(120));
         assert_eq!(parse_tz("-05:30"), Ok(-330));
         assert_eq!(parse_tz("Z"), Ok(0));
-        for bad in [
-            "02:00", "+2:00", "+02:60", "+15:00", "+02", "", "+", "±02:00",
-        ] {
+        for bad in ["02:00", "+2:00", "+02:60", "+15:00", "+02", "", "+", "±02:00"] {
             assert!(parse_tz(bad).is_err(), "{bad:?} accepted");
         }
         assert_eq!(parse_hhmm("06:57"), Ok(417));
@@ -295,11 +252,7 @@ mod tests {
     /// (both Sundays), from the published EU calendar.
     #[test]
     fn athens_offset_follows_eu_summer_time() {
-        let d = |month, day| LocalDate {
-            year: 2026,
-            month,
-            day,
-        };
+        let d = |month, day| LocalDate { year: 2026, month, day };
         assert_eq!(weekday(2026, 3, 29), 0);
         assert_eq!(weekday(2026, 10, 25), 0);
         assert_eq!(athens_utc_offset_minutes(d(3, 28)), 120);

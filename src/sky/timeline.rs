@@ -49,25 +49,13 @@ pub struct Timeline {
 /// 0..=2880 (the span may run into the next day), `to_min ≥ from_min`, and a
 /// non-empty span when more than one step is asked for; step count in
 /// `1..=MAX_STEPS`; a step length positive and finite.
-pub fn timeline(
-    date: LocalDate,
-    tz_offset_minutes: i32,
-    from_min: f64,
-    to_min: f64,
-    spec: StepSpec,
-) -> Result<Timeline, SkyError> {
-    let bad_span = |reason| SkyError::BadSpan {
-        from_min,
-        to_min,
-        reason,
-    };
+pub fn timeline(date: LocalDate, tz_offset_minutes: i32, from_min: f64, to_min: f64, spec: StepSpec) -> Result<Timeline, SkyError> {
+    let bad_span = |reason| SkyError::BadSpan { from_min, to_min, reason };
     if !from_min.is_finite() || !to_min.is_finite() {
         return Err(bad_span("bounds must be finite"));
     }
     if from_min < 0.0 || to_min > MAX_LOCAL_MINUTES {
-        return Err(bad_span(
-            "bounds must lie within 0..=2880 minutes of the date",
-        ));
+        return Err(bad_span("bounds must lie within 0..=2880 minutes of the date"));
     }
     if to_min < from_min {
         return Err(bad_span("end before start"));
@@ -77,19 +65,12 @@ pub fn timeline(
         StepSpec::Count(n) => {
             let count = n as usize;
             if count == 0 || count > MAX_STEPS {
-                return Err(SkyError::BadStepCount {
-                    count: u64::from(n),
-                    max: MAX_STEPS,
-                });
+                return Err(SkyError::BadStepCount { count: u64::from(n), max: MAX_STEPS });
             }
             if count > 1 && span == 0.0 {
                 return Err(bad_span("several steps asked for an empty span"));
             }
-            let stride = if count > 1 {
-                span / (count - 1) as f64
-            } else {
-                0.0
-            };
+            let stride = if count > 1 { span / (count - 1) as f64 } else { 0.0 };
             (0..count).map(|k| from_min + stride * k as f64).collect()
         }
         StepSpec::Step(minutes) => {
@@ -99,34 +80,21 @@ pub fn timeline(
             // Count steps without building a huge list first.
             let whole = ((span + STEP_END_TOLERANCE_MIN) / minutes).floor();
             if whole >= MAX_STEPS as f64 {
-                return Err(SkyError::BadStepCount {
-                    count: whole as u64 + 1,
-                    max: MAX_STEPS,
-                });
+                return Err(SkyError::BadStepCount { count: whole as u64 + 1, max: MAX_STEPS });
             }
             let count = whole as usize + 1;
             (0..count).map(|k| from_min + minutes * k as f64).collect()
         }
     };
-    let steps = local_minutes
-        .into_iter()
-        .map(|m| unix_time(date, m, tz_offset_minutes))
-        .collect();
+    let steps = local_minutes.into_iter().map(|m| unix_time(date, m, tz_offset_minutes)).collect();
     Ok(Timeline { steps })
 }
 
 /// The Parthenon demo's time line: 92 steps, 06:57..17:34 every 7 minutes,
 /// on [`default_date`] at [`default_tz_minutes`] (Athens, UTC+2).
 pub fn default_timeline() -> Timeline {
-    let steps = (0..PARTHENON_STEPS)
-        .map(|k| {
-            unix_time(
-                default_date(),
-                PARTHENON_FROM_MIN + 7.0 * f64::from(k),
-                default_tz_minutes(),
-            )
-        })
-        .collect();
+    let steps =
+        (0..PARTHENON_STEPS).map(|k| unix_time(default_date(), PARTHENON_FROM_MIN + 7.0 * f64::from(k), default_tz_minutes())).collect();
     Timeline { steps }
 }
 
@@ -149,20 +117,8 @@ mod tests {
         assert!(tl.steps.windows(2).all(|w| w[1] - w[0] == 420.0));
         // Same result through the general builder, both ways of asking.
         let (d, tz) = (default_date(), default_tz_minutes());
-        let by_count = timeline(
-            d,
-            tz,
-            PARTHENON_FROM_MIN,
-            PARTHENON_TO_MIN,
-            StepSpec::Count(92),
-        );
-        let by_step = timeline(
-            d,
-            tz,
-            PARTHENON_FROM_MIN,
-            PARTHENON_TO_MIN,
-            StepSpec::Step(7.0),
-        );
+        let by_count = timeline(d, tz, PARTHENON_FROM_MIN, PARTHENON_TO_MIN, StepSpec::Count(92));
+        let by_step = timeline(d, tz, PARTHENON_FROM_MIN, PARTHENON_TO_MIN, StepSpec::Step(7.0));
         assert_eq!(by_count.as_ref(), Ok(&tl));
         assert_eq!(by_step.as_ref(), Ok(&tl));
     }
@@ -176,17 +132,11 @@ mod tests {
         assert_eq!(many, Ok(1024));
         for n in [0, 1025] {
             let r = timeline(d, tz, 0.0, 1023.0, StepSpec::Count(n));
-            assert!(
-                matches!(r, Err(SkyError::BadStepCount { .. })),
-                "{n}: {r:?}"
-            );
+            assert!(matches!(r, Err(SkyError::BadStepCount { .. })), "{n}: {r:?}");
         }
         // A 1-minute step over 1024 minutes would need 1025 steps.
         assert!(timeline(d, tz, 0.0, 1023.0, StepSpec::Step(1.0)).is_ok());
-        assert!(matches!(
-            timeline(d, tz, 0.0, 1024.0, StepSpec::Step(1.0)),
-            Err(SkyError::BadStepCount { .. })
-        ));
+        assert!(matches!(timeline(d, tz, 0.0, 1024.0, StepSpec::Step(1.0)), Err(SkyError::BadStepCount { .. })));
     }
 
     #[test]
@@ -195,10 +145,7 @@ mod tests {
         let refused = |from: f64, to: f64, spec| timeline(d, tz, from, to, spec).is_err();
         assert!(refused(700.0, 600.0, StepSpec::Count(10)), "to < from");
         assert!(refused(700.0, 600.0, StepSpec::Step(7.0)), "to < from");
-        assert!(
-            refused(600.0, 600.0, StepSpec::Count(2)),
-            "empty span, 2 steps"
-        );
+        assert!(refused(600.0, 600.0, StepSpec::Count(2)), "empty span, 2 steps");
         assert!(refused(f64::NAN, 600.0, StepSpec::Count(2)));
         assert!(refused(-1.0, 600.0, StepSpec::Count(2)));
         assert!(refused(0.0, 3000.0, StepSpec::Count(2)));

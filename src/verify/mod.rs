@@ -59,9 +59,7 @@ impl Default for VerifyParams {
 /// Runs every check.
 pub fn verify_all(v: VerifyParams) -> Result<Vec<Check>, BakeError> {
     let mut checks = vec![unoccluded_sphere(4, v)?, plane_under_sphere(4, v)?];
-    for (mode, f_height, albedo) in
-        [(Mode::Window, 0.8, 0.5), (Mode::Window, 0.5, 0.8), (Mode::Open, 0.8, 0.8), (Mode::Open, 0.5, 0.5)]
-    {
+    for (mode, f_height, albedo) in [(Mode::Window, 0.8, 0.5), (Mode::Window, 0.5, 0.8), (Mode::Open, 0.8, 0.8), (Mode::Open, 0.5, 0.5)] {
         checks.push(integrating_sphere(mode, f_height, albedo, v)?);
     }
     Ok(checks)
@@ -135,8 +133,7 @@ pub fn plane_point_reference(order: usize, x: DVec3, c: DVec3, r: f64) -> Vec<f6
     let n = DVec3::Y;
     let pi = std::f64::consts::PI;
     let y_n = basis_f64(order, n);
-    let mut t: Vec<f64> =
-        (0..y_n.len()).map(|k| sh::clamped_cosine_kernel((k as f64).sqrt() as usize) / pi * y_n[k]).collect();
+    let mut t: Vec<f64> = (0..y_n.len()).map(|k| sh::clamped_cosine_kernel((k as f64).sqrt() as usize) / pi * y_n[k]).collect();
     let axis = (c - x).normalize();
     let sin_alpha = r / (c - x).length();
     let cos_alpha = (1.0 - sin_alpha * sin_alpha).sqrt();
@@ -222,15 +219,7 @@ pub fn integrating_sphere(mode: Mode, cap_height: f32, albedo: f32, v: VerifyPar
     let opening = if mode == Mode::Window { shapes::Opening::Window } else { shapes::Opening::Hole };
     let (mesh, f) = shapes::integrating_sphere(4, albedo, cap_height, opening);
     let bounces = 4;
-    let params = BakeParams {
-        order: 1,
-        rays: v.rays,
-        seed: v.seed,
-        mode,
-        bounces,
-        store_bounces: true,
-        ..BakeParams::default()
-    };
+    let params = BakeParams { order: 1, rays: v.rays, seed: v.seed, mode, bounces, store_bounces: true, ..BakeParams::default() };
     let (result, surfaces, _) = bake_mesh(&mesh, &params, &[])?;
     // Wall vertices only: a vertex on the opening's rim is shared with window triangles.
     let mut on_wall = vec![true; mesh.vertex_count()];
@@ -281,7 +270,10 @@ pub fn format_table(checks: &[Check]) -> String {
             c.detail
         );
         if !c.bands.is_empty() {
-            s += &format!("  {:>4} {:>11} {:>11}   (tolerance max {:.1e}, rms {:.1e})\n", "band", "max", "rms", c.max_tolerance, c.rms_tolerance);
+            s += &format!(
+                "  {:>4} {:>11} {:>11}   (tolerance max {:.1e}, rms {:.1e})\n",
+                "band", "max", "rms", c.max_tolerance, c.rms_tolerance
+            );
             for b in &c.bands {
                 s += &format!("  {:>4} {:>11.3e} {:>11.3e}\n", b.band, b.max, b.rms);
             }

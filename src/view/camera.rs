@@ -63,7 +63,11 @@ impl Camera {
     /// An up vector not parallel to the view direction.
     fn safe_up(&self) -> Vec3 {
         let forward = (self.target - self.eye).normalize_or(Vec3::NEG_Z);
-        if forward.cross(self.up).length_squared() < 1e-8 { Vec3::Z } else { self.up }
+        if forward.cross(self.up).length_squared() < 1e-8 {
+            Vec3::Z
+        } else {
+            self.up
+        }
     }
 
     /// World → clip transform for an image of `aspect` = width / height.

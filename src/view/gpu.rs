@@ -151,7 +151,13 @@ impl Renderer {
     ///
     /// Errors when a buffer exceeds the device's limits (the message says
     /// which), when the device runs out of memory, or on a validation error.
-    pub fn new(gpu: &Gpu, scene: &PreparedScene, output_format: wgpu::TextureFormat, width: u32, height: u32) -> Result<Renderer, ViewError> {
+    pub fn new(
+        gpu: &Gpu,
+        scene: &PreparedScene,
+        output_format: wgpu::TextureFormat,
+        width: u32,
+        height: u32,
+    ) -> Result<Renderer, ViewError> {
         // Capture errors instead of letting wgpu's default handler panic.
         let out_of_memory = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -194,7 +200,12 @@ impl Renderer {
             mapped_at_creation: false,
         });
         let small = |label: &str, usage: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: 48, usage: usage | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false })
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 48,
+                usage: usage | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
         };
         let adapt_state = small("adaptation", wgpu::BufferUsages::STORAGE);
         let adapt_params = small("adaptation parameters", wgpu::BufferUsages::UNIFORM);
@@ -326,7 +337,8 @@ impl Renderer {
             cache: None,
         });
 
-        let targets = Self::create_targets(device, &luminance_layout, &tonemap_layout, &adapt_state, &adapt_params, &tone_buffer, width, height);
+        let targets =
+            Self::create_targets(device, &luminance_layout, &tonemap_layout, &adapt_state, &adapt_params, &tone_buffer, width, height);
         Ok(Renderer {
             scene_pipeline,
             luminance_pipeline,

@@ -10,7 +10,13 @@ use crate::bundle::SunSeries;
 /// `lighting` is truncated or zero-padded to the transfer order. `sun` is the
 /// series and the step, when the sun term is on. The cosine is `max(n·s, 0)`,
 /// or `|n·s|` when `scene.two_sided_sun`.
-pub fn vertex_light(scene: &PreparedScene, lighting: &[[f32; 3]], sun: Option<(&SunSeries, usize)>, v: usize, normal: [f32; 3]) -> [f32; 3] {
+pub fn vertex_light(
+    scene: &PreparedScene,
+    lighting: &[[f32; 3]],
+    sun: Option<(&SunSeries, usize)>,
+    v: usize,
+    normal: [f32; 3],
+) -> [f32; 3] {
     let n2 = (scene.order * scene.order) as usize;
     let channels = scene.channels as usize;
     let base = v * channels * n2;

@@ -53,7 +53,9 @@ impl LayerSelection {
             _ => {
                 let list = text
                     .split(',')
-                    .map(|s| s.trim().parse::<u32>().map_err(|_| format!("layers {text:?}: expected total, direct, indirect or a list like 0,1")))
+                    .map(|s| {
+                        s.trim().parse::<u32>().map_err(|_| format!("layers {text:?}: expected total, direct, indirect or a list like 0,1"))
+                    })
                     .collect::<Result<Vec<u32>, String>>()?;
                 match list.iter().find(|b| !stored.contains(b)) {
                     Some(b) => Err(format!("layers {text:?}: bounce {b} is not stored (stored: {stored:?})")),

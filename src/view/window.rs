@@ -93,12 +93,17 @@ pub fn run_window(bundle: Bundle, scene: PreparedScene, state: ViewState, camera
 
 impl App {
     fn open(&mut self, event_loop: &ActiveEventLoop) -> Result<Surface, ViewError> {
-        let attributes = Window::default_attributes().with_title("prtbake view").with_inner_size(winit::dpi::LogicalSize::new(1280.0, 720.0));
+        let attributes =
+            Window::default_attributes().with_title("prtbake view").with_inner_size(winit::dpi::LogicalSize::new(1280.0, 720.0));
         let window = Arc::new(event_loop.create_window(attributes).map_err(|e| ViewError::Window(e.to_string()))?);
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
         let surface = instance.create_surface(window.clone()).map_err(|e| ViewError::Window(e.to_string()))?;
-        let options =
-            wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, force_fallback_adapter: false, compatible_surface: Some(&surface), ..Default::default() };
+        let options = wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: Some(&surface),
+            ..Default::default()
+        };
         let adapter = pollster::block_on(instance.request_adapter(&options)).map_err(|_| ViewError::NoAdapter)?;
         let gpu = Gpu::with_adapter(instance, adapter)?;
         eprintln!("adapter: {}", gpu.adapter_name());
@@ -127,7 +132,11 @@ impl App {
             LayerSelection::Bounces(mut list) => {
                 list.sort_unstable();
                 list.dedup();
-                if list == stored { LayerSelection::Total } else { LayerSelection::Bounces(list) }
+                if list == stored {
+                    LayerSelection::Total
+                } else {
+                    LayerSelection::Bounces(list)
+                }
             }
             total => total,
         };
@@ -262,7 +271,8 @@ impl App {
             self.state.rotation_deg[0] = (self.state.rotation_deg[0] + TURN_DEG_PER_S * dt) % 360.0;
         }
         let axis = |plus: KeyCode, minus: KeyCode| self.keys.contains(&plus) as i32 as f32 - self.keys.contains(&minus) as i32 as f32;
-        let (forward, right, up) = (axis(KeyCode::KeyW, KeyCode::KeyS), axis(KeyCode::KeyD, KeyCode::KeyA), axis(KeyCode::KeyE, KeyCode::KeyQ));
+        let (forward, right, up) =
+            (axis(KeyCode::KeyW, KeyCode::KeyS), axis(KeyCode::KeyD, KeyCode::KeyA), axis(KeyCode::KeyE, KeyCode::KeyQ));
         if forward != 0.0 || right != 0.0 || up != 0.0 {
             self.control.fly(forward, right, up, dt);
         }
