@@ -3,8 +3,10 @@
 //! sphere), and optionally exports the exact rays for `benches/embree_compare.py`.
 //!
 //! cargo run --release --example trace_rate -- [MESH|cabin] [--rays-per-point N] [--points N]
-//!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable] [--share G]
+//!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable] [--share G] [--sort]
 //!
+//! `--share G` and `--sort` reorder the workload to measure coherence
+//! (docs/performance.md); the baker does neither.
 //! Prints min / median / max Mrays/s over R runs for occlusion and closest hit.
 
 use std::io::Write;
@@ -47,6 +49,7 @@ fn main() {
     // `--share G`: G consecutive points use one direction set (the first
     // point's) and their rays go direction-major, a measure of what sharing
     // directions between neighbours would buy (1: every point its own set).
+    // `--sort`: each set in Morton order of its Sobol pairs.
     let share: u32 = arg(&args, "--share", 1).max(1);
     let sort = args.iter().any(|a| a == "--sort");
     let step = (mesh.triangle_count() as u32 / points).max(1);
@@ -63,16 +66,7 @@ fn main() {
         let mut pairs: Vec<(f32, f32)> =
             (0..rays_per_point).map(|k| sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, group)).collect();
         if sort {
-            // Morton order of the (u1, u2) square: neighbouring rays leave in neighbouring directions.
-            let spread = |x: f32| {
-                let mut v = (x * 65535.0) as u64;
-                v = (v | v << 16) & 0x0000_ffff_0000_ffff;
-                v = (v | v << 8) & 0x00ff_00ff_00ff_00ff;
-                v = (v | v << 4) & 0x0f0f_0f0f_0f0f_0f0f;
-                v = (v | v << 2) & 0x3333_3333_3333_3333;
-                (v | v << 1) & 0x5555_5555_5555_5555
-            };
-            pairs.sort_by_key(|&(u1, u2)| spread(u1) << 1 | spread(u2));
+            pairs.sort_by_key(|&(u1, u2)| morton_key(u1, u2));
         }
         for &(u1, u2) in &pairs {
             for &(centroid, n) in &members {
@@ -126,6 +120,20 @@ fn main() {
         }
         println!("exported {} triangles and {} rays to {}", mesh.triangle_count(), rays.len(), dir.display());
     }
+}
+
+/// Morton (Z-order) key of a point of the unit square, 16 bits per axis:
+/// neighbouring keys are neighbouring pairs, so neighbouring directions.
+fn morton_key(u1: f32, u2: f32) -> u64 {
+    let spread = |x: f32| {
+        let mut v = (x * 65535.0) as u64;
+        v = (v | v << 16) & 0x0000_ffff_0000_ffff;
+        v = (v | v << 8) & 0x00ff_00ff_00ff_00ff;
+        v = (v | v << 4) & 0x0f0f_0f0f_0f0f_0f0f;
+        v = (v | v << 2) & 0x3333_3333_3333_3333;
+        (v | v << 1) & 0x5555_5555_5555_5555
+    };
+    spread(u1) << 1 | spread(u2)
 }
 
 fn bytemuck_vec3(v: Vec3) -> Vec<u8> {

@@ -132,9 +132,7 @@ impl Bvh8 {
         }
         out
     }
-}
 
-impl Bvh8 {
     /// Every leaf as `(first, count)`.
     pub fn leaves(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
         self.nodes.iter().flat_map(|node| node.children).filter(|&c| c != EMPTY && is_leaf(c)).map(leaf_range)

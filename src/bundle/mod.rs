@@ -26,7 +26,6 @@ mod types;
 mod tests;
 
 use std::fs;
-use std::io::Write;
 use std::path::Path;
 
 pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
@@ -142,40 +141,11 @@ pub fn list_sections(bytes: &[u8]) -> Result<Vec<SectionInfo>, BundleError> {
     Container::parse(bytes).map(|c| c.sections)
 }
 
-/// Encodes `b` and writes it atomically: to `<path>.tmp-<pid>` in the same
-/// directory, fsync, then rename over `path` (then a best-effort fsync of the directory).
-/// On failure the temporary file is removed and `path` is untouched.
+/// Encodes `b` and writes it atomically ([`crate::util::write_atomic`]): on
+/// failure `path` is untouched.
 pub fn write_bundle(path: &Path, b: &Bundle) -> Result<(), BundleError> {
-    let in_file = |source: BundleError| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) };
-    let io = |source: std::io::Error| BundleError::Io { path: path.to_path_buf(), source };
-    let bytes = encode_bundle(b).map_err(in_file)?;
-    let file_name = path.file_name().ok_or_else(|| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file path")))?;
-    let mut tmp_name = file_name.to_os_string();
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-
-    let written = (|| {
-        let mut file = fs::File::create(&tmp)?;
-        file.write_all(&bytes)?;
-        file.sync_all()?;
-        fs::rename(&tmp, path)
-    })();
-    if let Err(e) = written {
-        let _ = fs::remove_file(&tmp);
-        return Err(io(e));
-    }
-    // Make the rename itself durable; not every platform can open a directory.
-    #[cfg(unix)]
-    {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        if let Ok(d) = fs::File::open(dir) {
-            let _ = d.sync_all();
-        }
-    }
-    Ok(())
+    let bytes = encode_bundle(b).map_err(|source| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) })?;
+    crate::util::write_atomic(path, &bytes).map_err(|source| BundleError::Io { path: path.to_path_buf(), source })
 }
 
 /// Reads and decodes a bundle file; errors carry the path.

@@ -160,7 +160,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
     };
     let choice = config.storage.choose(&result);
     let bundle = make_bundle_stored(&stored_mesh, &result, &config.params, extra_meta, choice.as_ref());
-    bundle::write_bundle(&config.output, &bundle).with_context(|| format!("cannot write {}", config.output.display()))?;
+    bundle::write_bundle(&config.output, &bundle).context("cannot write the bundle")?;
     let bundle_bytes = std::fs::metadata(&config.output).map(|m| m.len()).unwrap_or(0);
     Ok(BakeReport {
         output: config.output.clone(),

@@ -178,7 +178,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
                 "conventions": super::conventions(),
             });
             let b = Bundle { meta, mesh, transfer: None, sun: Some(series) };
-            bundle::write_bundle(output, &b).with_context(|| format!("cannot write {}", output.display()))?;
+            bundle::write_bundle(output, &b).context("cannot write the bundle")?;
         }
     }
     let bundle_bytes = std::fs::metadata(output).map(|m| m.len()).unwrap_or(0);

@@ -9,28 +9,16 @@
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde_json::{json, Value};
 
 use super::obj::{MTL_ROLE_KEY, MTL_TRANSMITTANCE_KEY};
 use super::{Material, MaterialRole, Mesh, MeshError};
 
-/// Writes `path` by writing `<dir>/.<name>.<pid>.tmp` first and renaming it.
+/// Writes `path` atomically ([`crate::util::write_atomic_with`]).
 fn write_atomically(path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
-    let error = |source| MeshError::Write { path: path.to_path_buf(), source };
-    let file_name = path.file_name().ok_or_else(|| error(std::io::Error::other("path has no file name")))?;
-    let temp_path: PathBuf = path.with_file_name(format!(".{}.{}.tmp", file_name.to_string_lossy(), std::process::id()));
-    let result = (|| {
-        let mut writer = BufWriter::new(File::create(&temp_path)?);
-        fill(&mut writer)?;
-        writer.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-        std::fs::rename(&temp_path, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temp_path);
-    }
-    result.map_err(error)
+    crate::util::write_atomic_with(path, fill).map_err(|source| MeshError::Write { path: path.to_path_buf(), source })
 }
 
 fn check_writable(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
