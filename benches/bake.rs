@@ -9,7 +9,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, sampling, BakeParams, BuildQuality, Mode, Scene, Traversal};
+use prtbake::bake::{bake_mesh, sampling, BakeParams, BatchMode, Batching, BuildQuality, Mode, RayQuery, Scene, Traversal};
 use prtbake::fixtures::cabin::generate_cabin;
 use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
 use rayon::prelude::*;
@@ -21,7 +21,7 @@ const RAYS_PER_POINT: u32 = 64;
 
 /// Ray origins and directions like the baker's: centroids of a deterministic
 /// spread of triangles, cosine-distributed directions over the sphere.
-fn workload(mesh: &Mesh, scene: &Scene) -> Vec<(Vec3, Vec3)> {
+fn workload(mesh: &Mesh, scene: &Scene) -> Vec<RayQuery> {
     let step = (mesh.triangle_count() as u32 / POINTS).max(1);
     let mut rays = Vec::with_capacity((POINTS * RAYS_PER_POINT) as usize);
     for p in 0..POINTS {
@@ -34,7 +34,7 @@ fn workload(mesh: &Mesh, scene: &Scene) -> Vec<(Vec3, Vec3)> {
         for k in 0..RAYS_PER_POINT {
             let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, p);
             let d = sampling::cosine_sphere(n, u1, u2);
-            rays.push((scene.offset_origin((a + b + c) / 3.0, n, d), d));
+            rays.push(RayQuery { origin: scene.offset_origin((a + b + c) / 3.0, n, d), direction: d, t_max: f32::INFINITY });
         }
     }
     rays
@@ -56,15 +56,26 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     let mut group = c.benchmark_group(format!("trace/{name}"));
     group.sample_size(10);
     group.throughput(Throughput::Elements(rays.len() as u64));
+    // A point's rays per call, as the baker traces them, run the way the scene chose.
     let occlusion = |scene: &Scene, pool: &rayon::ThreadPool| {
         pool.install(|| {
-            rays.par_chunks(4096).map(|chunk| chunk.iter().filter(|(o, d)| scene.occluded(*o, *d, f32::INFINITY)).count()).sum::<usize>()
+            rays.par_chunks(RAYS_PER_POINT as usize)
+                .map(|point| {
+                    let mut out = [false; RAYS_PER_POINT as usize];
+                    scene.occluded_each(point, &mut out[..point.len()]);
+                    out.iter().filter(|&&o| o).count()
+                })
+                .sum::<usize>()
         })
     };
     let closest = |scene: &Scene, pool: &rayon::ThreadPool| {
         pool.install(|| {
-            rays.par_chunks(4096)
-                .map(|chunk| chunk.iter().filter(|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some()).count())
+            rays.par_chunks(RAYS_PER_POINT as usize)
+                .map(|point| {
+                    let mut out = [None; RAYS_PER_POINT as usize];
+                    scene.closest_hits(point, &mut out[..point.len()]);
+                    out.iter().filter(|h| h.is_some()).count()
+                })
                 .sum::<usize>()
         })
     };
@@ -73,8 +84,16 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
         group.bench_function(format!("occlusion/{threads}t"), |b| b.iter(|| occlusion(&scene, &pool)));
         group.bench_function(format!("closest_hit/{threads}t"), |b| b.iter(|| closest(&scene, &pool)));
     }
-    // The alternatives, on one thread: the portable walk and the PLOC tree.
+    // The alternatives, on one thread: each way of running a batch, the
+    // portable walk and the PLOC tree.
     let pool = pool(1);
+    for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
+        let mut forced = Scene::build(mesh, BuildQuality::Sah);
+        forced.set_batching(Batching { closest_hit: mode, occlusion: mode });
+        let mode = format!("{mode:?}").to_lowercase();
+        group.bench_function(format!("occlusion_{mode}/1t"), |b| b.iter(|| occlusion(&forced, &pool)));
+        group.bench_function(format!("closest_hit_{mode}/1t"), |b| b.iter(|| closest(&forced, &pool)));
+    }
     let mut portable = Scene::build(mesh, BuildQuality::Sah);
     portable.set_traversal(Traversal::Portable);
     group.bench_function("occlusion_portable/1t", |b| b.iter(|| occlusion(&portable, &pool)));

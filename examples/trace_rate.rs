@@ -4,17 +4,20 @@
 //!
 //! cargo run --release --example trace_rate -- [MESH|cabin] [--rays-per-point N] [--points N]
 //!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable] [--share G] [--sort]
+//!     [--compare-batching]
 //!
 //! `--share G` and `--sort` reorder the workload to measure coherence
 //! (docs/performance.md); the baker does neither.
-//! Prints min / median / max Mrays/s over R runs for occlusion and closest hit.
+//! Prints min / median / max Mrays/s over R runs for occlusion and closest
+//! hit, each traced a point's rays per call, run the way the scene chose
+//! when it was built (one by one or interleaved; `--compare-batching` times both).
 
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::Vec3;
-use prtbake::bake::{sampling, BuildQuality, Scene};
+use prtbake::bake::{sampling, BatchMode, Batching, BuildQuality, RayQuery, Scene};
 use prtbake::fixtures::cabin::generate_cabin;
 use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
 use rayon::prelude::*;
@@ -75,12 +78,16 @@ fn main() {
             }
         }
     }
+    let queries: Vec<RayQuery> = rays.iter().map(|&(origin, direction)| RayQuery { origin, direction, t_max: f32::INFINITY }).collect();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-    let measure = |name: &str, f: &(dyn Fn(&(Vec3, Vec3)) -> bool + Sync)| {
+    // Each batch is one point's rays, as the baker traces them.
+    let batch = rays_per_point as usize;
+    let measure = |name: &str, f: &(dyn Fn(&[RayQuery]) -> usize + Sync)| {
         let mut rates: Vec<f64> = (0..runs)
             .map(|_| {
                 let t = Instant::now();
-                let hits: usize = pool.install(|| rays.par_chunks(4096).map(|c| c.iter().filter(|r| f(r)).count()).sum());
+                let hits: usize =
+                    pool.install(|| queries.par_chunks(batch * (4096 / batch).max(1)).map(|c| c.chunks(batch).map(f).sum::<usize>()).sum());
                 std::hint::black_box(hits);
                 rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6
             })
@@ -94,16 +101,37 @@ fn main() {
         );
     };
     println!(
-        "{source}: {} triangles, {quality:?} BVH build {:.3}s, {:?} traversal, {} rays ({} points x {})",
+        "{source}: {} triangles, {quality:?} BVH build {:.3}s, {:?} traversal, {:?}, {} rays ({} points x {})",
         mesh.triangle_count(),
         build,
         scene.traversal(),
+        scene.batching(),
         rays.len(),
         rays.len() as u32 / rays_per_point,
         rays_per_point
     );
-    measure("occlusion", &|(o, d)| scene.occluded(*o, *d, f32::INFINITY));
-    measure("closest_hit", &|(o, d)| scene.closest_hit(*o, *d, f32::INFINITY).is_some());
+    let occlusion = |scene: &Scene, q: &[RayQuery]| {
+        let mut out = vec![false; q.len()];
+        scene.occluded_each(q, &mut out);
+        out.iter().filter(|&&o| o).count()
+    };
+    let closest = |scene: &Scene, q: &[RayQuery]| {
+        let mut out = vec![None; q.len()];
+        scene.closest_hits(q, &mut out);
+        out.iter().filter(|h| h.is_some()).count()
+    };
+    measure("occlusion", &|q| occlusion(&scene, q));
+    measure("closest_hit", &|q| closest(&scene, q));
+    // `--compare-batching`: both ways of running a batch, whichever the scene chose.
+    if args.iter().any(|a| a == "--compare-batching") {
+        for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
+            let mut forced = Scene::build(&mesh, quality);
+            forced.set_traversal(scene.traversal());
+            forced.set_batching(Batching { closest_hit: mode, occlusion: mode });
+            measure(&format!("occlusion {mode:?}"), &|q| occlusion(&forced, q));
+            measure(&format!("closest_hit {mode:?}"), &|q| closest(&forced, q));
+        }
+    }
 
     if let Some(dir) = export {
         std::fs::create_dir_all(&dir).unwrap();

@@ -2,7 +2,7 @@
 //! side-blind window mode.
 
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, scene, BakeParams, BuildQuality, Mode, Sampling, Scene, Traversal};
+use prtbake::bake::{bake_mesh, scene, BakeParams, BatchMode, Batching, BuildQuality, Hit, Mode, RayQuery, Sampling, Scene, Traversal};
 use prtbake::mesh::{MaterialRole, Mesh};
 use prtbake::verify::shapes;
 
@@ -53,6 +53,7 @@ fn bvh_queries_match_brute_force() {
         };
         let mut hits = 0;
         let mut hint = u32::MAX;
+        let mut queries = Vec::new();
         for i in 0..4000 {
             let origin = Vec3::new(next() * 6.0 - 3.0, next() * 3.0 - 0.5, next() * 6.0 - 3.0);
             let mut direction = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
@@ -72,8 +73,36 @@ fn bvh_queries_match_brute_force() {
             let reach = next() * 3.0;
             let brute_short = scene::brute_force_closest(&mesh, origin, direction, reach);
             assert_eq!(scene.occluded(origin, direction, reach), brute_short.is_some(), "{path:?} reach {reach}");
+            queries.push(RayQuery { origin, direction, t_max: if i % 2 == 0 { f32::INFINITY } else { reach } });
         }
         assert!(hits > 500, "only {hits} hits: the test scene is too sparse");
+        batches_match_single_queries(&mut scene, &queries);
+    }
+}
+
+/// Batched queries, one by one and interleaved, in batches of every size
+/// from empty to past the interleaving width: the same answers, bit for
+/// bit, as one query at a time.
+fn batches_match_single_queries(scene: &mut Scene, queries: &[RayQuery]) {
+    let single: Vec<Option<Hit>> = queries.iter().map(|q| scene.closest_hit(q.origin, q.direction, q.t_max)).collect();
+    let single_occluded: Vec<bool> = queries.iter().map(|q| scene.occluded(q.origin, q.direction, q.t_max)).collect();
+    let bits = |h: &Option<Hit>| h.map(|h| (h.triangle, h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.back_face));
+    for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
+        scene.set_batching(Batching { closest_hit: mode, occlusion: mode });
+        let (mut start, mut size) = (0, 0);
+        while start < queries.len() {
+            let end = (start + size).min(queries.len());
+            let mut hits = vec![None; end - start];
+            scene.closest_hits(&queries[start..end], &mut hits);
+            let mut occluded = vec![false; end - start];
+            scene.occluded_each(&queries[start..end], &mut occluded);
+            for (k, (hit, blocked)) in hits.iter().zip(&occluded).enumerate() {
+                assert_eq!(bits(hit), bits(&single[start + k]), "{mode:?}: query {}", start + k);
+                assert_eq!(*blocked, single_occluded[start + k], "{mode:?}: query {}", start + k);
+            }
+            start = end;
+            size = (size + 7) % 150;
+        }
     }
 }
 
@@ -91,6 +120,7 @@ fn bvh_rays_from_walls_match_brute_force() {
             continue;
         }
         let mut checked = 0;
+        let mut queries = Vec::new();
         for t in (0..box_mesh.triangle_count()).step_by(7) {
             let n = scene.face_normal(t as u32);
             let [a, b, c] = box_mesh.triangle_positions(t);
@@ -102,10 +132,12 @@ fn bvh_rays_from_walls_match_brute_force() {
                 let brute = scene::brute_force_closest(&box_mesh, origin, d, f32::INFINITY).map(|b| b.0);
                 assert_eq!(bvh, brute, "{path:?}: ray {origin} {d}");
                 assert_eq!(scene.occluded(origin, d, f32::INFINITY), brute.is_some());
+                queries.push(RayQuery { origin, direction: d, t_max: f32::INFINITY });
                 checked += 1;
             }
         }
         assert!(checked > 500);
+        batches_match_single_queries(&mut scene, &queries);
     }
 }
 

@@ -261,6 +261,11 @@ impl Stack {
         }
     }
     #[inline(always)]
+    fn clear(&mut self) {
+        self.len = 0;
+        self.spill.clear();
+    }
+    #[inline(always)]
     fn pop(&mut self) -> Option<(u32, f32)> {
         if let Some(e) = self.spill.pop() {
             return Some(e);
@@ -273,44 +278,69 @@ impl Stack {
     }
 }
 
-/// Walks the tree: with `NEAREST_FIRST` (closest hit) children hit by the
-/// ray are visited nearest first, and a stacked child whose entry lies
-/// beyond the current maximum distance is skipped. Without it (occlusion)
-/// they are visited in slot order, largest box first: measured 17% faster
-/// on the Ferrari than nearest-first (its nearest boxes hold the ray's own
-/// surface and its twin) and 5% slower on the cabin (docs/performance.md).
-/// `leaf(first, count, t_max)` tests a leaf's triangles;
-/// `prefetch_leaf(first, count)` asks for their cache lines. The walk order
-/// depends only on the ray, never on threads.
-#[inline(always)]
-pub fn walk<T: NodeTest, const NEAREST_FIRST: bool>(
-    nodes: &[Node8],
-    prefetch_leaf: impl Fn(u32, u32),
-    ray: &RayBoxes,
-    t_min: f32,
-    mut t_max: f32,
-    mut leaf: impl FnMut(u32, u32, f32) -> LeafResult,
-) {
-    if nodes.is_empty() {
-        return;
+/// A walk in progress through the tree: the node or leaf it visits next,
+/// the current maximum distance and the children stacked for later.
+///
+/// With `NEAREST_FIRST` (closest hit) children hit by the ray are visited
+/// nearest first, and a stacked child whose entry lies beyond the current
+/// maximum distance is skipped. Without it (occlusion) they are visited in
+/// slot order, largest box first: measured 17% faster on the Ferrari than
+/// nearest-first (its nearest boxes hold the ray's own surface and its
+/// twin) and 5% slower on the cabin (docs/performance.md). The walk order
+/// depends only on the ray, never on threads or on which other walks run
+/// beside it.
+pub struct Walk {
+    stack: Stack,
+    next: u32,
+    t_max: f32,
+    /// Entry distances of the last node's children.
+    entry: [f32; WIDTH],
+}
+
+impl Walk {
+    /// A walk from the root. The tree must have a root.
+    #[inline(always)]
+    pub fn new(t_max: f32) -> Walk {
+        Walk { stack: Stack::new(), next: 0, t_max, entry: [0.0; WIDTH] }
     }
-    let mut stack = Stack::new();
-    let mut next: u32 = 0;
-    let mut entry = [0.0f32; WIDTH];
-    loop {
-        if is_leaf(next) {
-            let (first, count) = leaf_range(next);
-            match leaf(first, count, t_max) {
-                LeafResult::Continue(t) => t_max = t,
-                LeafResult::Stop => return,
+
+    /// Starts again from the root, reusing the stack's memory.
+    #[inline(always)]
+    pub fn restart(&mut self, t_max: f32) {
+        self.stack.clear();
+        self.next = 0;
+        self.t_max = t_max;
+    }
+
+    /// Visits the next node or leaf, then picks the one after it, and
+    /// returns false once the walk has ended. Every child the ray enters is
+    /// prefetched when its parent is tested, so a step rarely waits on memory
+    /// when other walks' steps run between two of this one's
+    /// ([`super::scene`] interleaves them).
+    #[inline(always)]
+    pub fn step<T: NodeTest, L: Leaves, const NEAREST_FIRST: bool, const INTERLEAVED: bool>(
+        &mut self,
+        nodes: &[Node8],
+        ray: &RayBoxes,
+        t_min: f32,
+        leaves: &mut L,
+    ) -> bool {
+        if is_leaf(self.next) {
+            let (first, count) = leaf_range(self.next);
+            match leaves.visit(first, count, self.t_max) {
+                LeafResult::Continue(t) => self.t_max = t,
+                LeafResult::Stop => return false,
             }
         } else {
-            let node = &nodes[next as usize];
-            let mut mask = T::test(node, ray, t_min, t_max, &mut entry);
+            let node = &nodes[self.next as usize];
+            let entry = &mut self.entry;
+            let mut mask = T::test(node, ray, t_min, self.t_max, entry);
             if mask != 0 {
-                if mask & (mask - 1) == 0 {
-                    next = node.children[mask.trailing_zeros() as usize];
-                    continue;
+                let rest = mask & (mask - 1);
+                if rest == 0 && !INTERLEAVED {
+                    // One child: one walk alone gains nothing from a prefetch.
+                    self.next = node.children[mask.trailing_zeros() as usize];
+                    return true;
                 }
                 // Fetch every hit child now, in parallel, rather than one
                 // dependent miss at a time when the walk reaches it.
@@ -324,18 +354,21 @@ pub fn walk<T: NodeTest, const NEAREST_FIRST: bool>(
                         }
                     } else {
                         let (first, count) = leaf_range(child);
-                        prefetch_leaf(first, count);
+                        leaves.prefetch(first, count);
                     }
                 }
-                let rest = mask & (mask - 1);
+                if rest == 0 {
+                    self.next = node.children[mask.trailing_zeros() as usize];
+                    return true;
+                }
                 if rest & (rest - 1) == 0 {
                     // Two children, the commonest case: one compare, no sort.
                     // Same order as the keys below (distance, then slot).
                     let (a, b) = (mask.trailing_zeros() as usize, rest.trailing_zeros() as usize);
                     let (near, far) = if NEAREST_FIRST && entry[b] < entry[a] { (b, a) } else { (a, b) };
-                    stack.push((node.children[far], entry[far]));
-                    next = node.children[near];
-                    continue;
+                    self.stack.push((node.children[far], entry[far]));
+                    self.next = node.children[near];
+                    return true;
                 }
                 // Keys: entry distance, then slot (so equal distances order
                 // the same way every time).
@@ -360,24 +393,34 @@ pub fn walk<T: NodeTest, const NEAREST_FIRST: bool>(
                     keys[j] = k;
                 }
                 for &k in keys[1..].iter().rev() {
-                    stack.push((node.children[(k & 0xff) as usize], f32::from_bits((k >> 32) as u32)));
+                    self.stack.push((node.children[(k & 0xff) as usize], f32::from_bits((k >> 32) as u32)));
                 }
-                next = node.children[(keys[0] & 0xff) as usize];
-                continue;
+                self.next = node.children[(keys[0] & 0xff) as usize];
+                return true;
             }
         }
         // Nothing to descend into: take the nearest stacked child still in range.
         loop {
-            match stack.pop() {
-                None => return,
-                Some((child, t)) if t <= t_max => {
-                    next = child;
-                    break;
+            match self.stack.pop() {
+                None => return false,
+                Some((child, t)) if t <= self.t_max => {
+                    self.next = child;
+                    return true;
                 }
                 Some(_) => {}
             }
         }
     }
+}
+
+/// What a walk does at its leaves. Implementations mark both methods
+/// `#[inline(always)]`: the walk runs inside AVX2 functions, and a leaf test
+/// left out of line there loses its SIMD (measured 4× slower).
+pub trait Leaves {
+    /// Asks for the cache lines of leaf `(first, count)`.
+    fn prefetch(&self, first: u32, count: u32);
+    /// Tests the leaf's triangles within `t_max`.
+    fn visit(&mut self, first: u32, count: u32, t_max: f32) -> LeafResult;
 }
 
 /// Asks for the cache lines of `bytes` bytes from `start` on (a hint; no

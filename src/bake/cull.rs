@@ -15,7 +15,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::sampling::{hash_seed, sample_2d, DirectionPattern};
-use super::scene::Scene;
+use super::scene::{RayQuery, Scene};
 use super::surfaces::Surfaces;
 use crate::mesh::{MaterialRole, Mesh};
 
@@ -118,23 +118,30 @@ pub fn visible_triangles(
                 Vec3::new(sobol_burley::sample(p, 0, box_seed), sobol_burley::sample(p, 1, box_seed), sobol_burley::sample(p, 2, box_seed));
             let origin = view_box.min + extent * u;
             let ray_seed = hash_seed(&[params.seed, TAG_VIEW_RAY, p]);
+            let queries: Vec<RayQuery> = (0..rays)
+                .map(|k| {
+                    let (u1, u2) = sample_2d(DirectionPattern::Sobol, k, 0, ray_seed);
+                    let z = 1.0 - 2.0 * u1;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let phi = std::f32::consts::TAU * u2;
+                    RayQuery { origin, direction: Vec3::new(r * phi.cos(), r * phi.sin(), z), t_max: f32::INFINITY }
+                })
+                .collect();
+            // The point's rays in one batch; the few that go on through a window, one at a time.
+            let mut first_hits = vec![None; queries.len()];
+            scene.closest_hits(&queries, &mut first_hits);
             let mut seen = Vec::new();
             let mut escaped = 0u64;
-            for k in 0..rays {
-                let (u1, u2) = sample_2d(DirectionPattern::Sobol, k, 0, ray_seed);
-                let z = 1.0 - 2.0 * u1;
-                let r = (1.0 - z * z).max(0.0).sqrt();
-                let phi = std::f32::consts::TAU * u2;
-                let direction = Vec3::new(r * phi.cos(), r * phi.sin(), z);
-                let mut from = origin;
-                let mut layers = 0;
+            for (query, first_hit) in queries.iter().zip(first_hits) {
+                let (mut from, mut hit, mut layers) = (origin, first_hit, 0);
                 loop {
-                    match scene.closest_hit(from, direction, f32::INFINITY) {
-                        Some(hit) => {
-                            seen.push(hit.triangle);
-                            if layers < params.window_layers && see_through(hit.triangle) {
+                    match hit {
+                        Some(h) => {
+                            seen.push(h.triangle);
+                            if layers < params.window_layers && see_through(h.triangle) {
                                 layers += 1;
-                                from = from + direction * (hit.t + 2.0 * scene.origin_offset);
+                                from = from + query.direction * (h.t + 2.0 * scene.origin_offset);
+                                hit = scene.closest_hit(from, query.direction, f32::INFINITY);
                                 continue;
                             }
                         }

@@ -7,6 +7,7 @@ pub mod cull;
 pub mod hugepages;
 pub mod leaf_blocks;
 pub mod progress;
+pub mod queries;
 pub mod sah;
 pub mod sampling;
 pub mod scene;
@@ -15,7 +16,7 @@ pub mod surfaces;
 pub mod transfer;
 
 pub use sampling::DirectionPattern;
-pub use scene::{BuildQuality, Hit, Scene, Traversal};
+pub use scene::{BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, Traversal};
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
 pub use transfer::{bake_transfer, bake_transfer_receivers};
@@ -185,6 +186,8 @@ pub struct BakeStats {
     pub rays_traced: u64,
     pub seconds: f64,
     pub rays_per_second: f64,
+    /// How the scene ran its batches of rays (measured when it was built).
+    pub batching: Batching,
 }
 
 /// A baked transfer: per vertex `[channel][coeff]`, vertex-major.

@@ -23,8 +23,10 @@ use obvhs::{
     BvhBuildParams,
 };
 
-use super::bvh8::{self, Bvh8, LeafResult, Node8, NodeTest, RayBoxes, ScalarTest};
+use super::bvh8::{self, Bvh8, Node8, NodeTest, ScalarTest};
 use super::leaf_blocks::{LeafBlocks, LeafTest, ScalarLeaf};
+use super::queries::{self, ClosestWalk, OcclusionWalk, QueryWalk};
+use super::sampling;
 
 use crate::mesh::Mesh;
 
@@ -62,6 +64,41 @@ pub enum Traversal {
     Portable,
 }
 
+/// How a batch of queries runs its rays ([`super::queries`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BatchMode {
+    #[default]
+    /// One ray after another.
+    OneByOne,
+    /// Several rays at once, a step of each in turn.
+    Interleaved,
+}
+
+impl std::fmt::Display for BatchMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            BatchMode::OneByOne => "one by one",
+            BatchMode::Interleaved => "interleaved",
+        })
+    }
+}
+
+/// How each kind of batched query runs: chosen per scene by measuring
+/// both on probe rays when the scene is built (answers are the same either way).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Batching {
+    pub closest_hit: BatchMode,
+    pub occlusion: BatchMode,
+}
+
+/// Trees smaller than this (nodes and leaf blocks) stay in the 4 MiB L2
+/// and are never measured for interleaving.
+const INTERLEAVE_MIN_TREE_BYTES: usize = 4 << 20;
+/// Interleaving is kept only when its best probe time is below this
+/// fraction of one-by-one's: a near tie keeps the simpler way.
+const INTERLEAVE_MIN_GAIN: f64 = 0.95;
+
 /// Triangles per BVH leaf at most; the SAH leaf collapse picks smaller
 /// leaves where they pay. A leaf of up to eight is one AVX test
 /// ([`super::leaf_blocks`]), so 8 measured best on the Ferrari and the
@@ -73,12 +110,13 @@ const NODE_COST: f32 = 6.0;
 
 /// A built acceleration structure over a mesh.
 pub struct Scene {
-    nodes: Vec<Node8>,
+    pub(super) nodes: Vec<Node8>,
     traversal: Traversal,
+    batching: Batching,
     /// Triangles in BVH leaf order, one SoA block per leaf.
-    leaf_triangles: LeafBlocks,
+    pub(super) leaf_triangles: LeafBlocks,
     /// Leaf order → mesh triangle index.
-    leaf_to_mesh: Vec<u32>,
+    pub(super) leaf_to_mesh: Vec<u32>,
     /// Unit geometric normals per mesh triangle (zero for degenerate ones).
     face_normals: Vec<Vec3>,
     /// Bounding-box diagonal of the mesh: every epsilon is relative to it.
@@ -132,9 +170,10 @@ impl Scene {
         // at the largest coordinate (64 ulps), so 1e-3 m and 1e4 m scenes behave alike.
         let ulp_floor = max_coordinate * f32::EPSILON * 64.0;
         let origin_offset = (diagonal * 1e-6).max(ulp_floor);
-        Scene {
+        let mut scene = Scene {
             nodes,
             traversal: if bvh8::avx2_available() { Traversal::Avx2 } else { Traversal::Portable },
+            batching: Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne },
             leaf_triangles,
             leaf_to_mesh,
             face_normals,
@@ -142,8 +181,11 @@ impl Scene {
             max_coordinate,
             tie_distance: origin_offset,
             origin_offset,
-            build_time: start.elapsed(),
-        }
+            build_time: Duration::ZERO,
+        };
+        scene.batching = scene.measure_batching(mesh);
+        scene.build_time = start.elapsed();
+        scene
     }
 
     /// Unit geometric normal of mesh triangle `t` (counter-clockwise front).
@@ -173,108 +215,145 @@ impl Scene {
         self.traversal
     }
 
+    /// How [`Scene::closest_hits`] and [`Scene::occluded_each`] run their rays
+    /// (measured when the scene was built).
+    pub fn batching(&self) -> Batching {
+        self.batching
+    }
+
+    /// Chooses how batches run (tests and benchmarks compare both; the
+    /// answers are the same).
+    pub fn set_batching(&mut self, batching: Batching) {
+        self.batching = batching;
+    }
+
     /// Closest hit along a unit `direction` from `origin` within `(0, t_max]`.
     pub fn closest_hit(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        #[cfg(target_arch = "x86_64")]
-        if self.traversal == Traversal::Avx2 {
-            // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
-            return unsafe { self.closest_hit_avx2(origin, direction, t_max) };
-        }
-        self.closest_hit_with::<ScalarTest, ScalarLeaf>(origin, direction, t_max)
+        let mut answer = [None];
+        self.run::<ClosestWalk>(&[RayQuery { origin, direction, t_max }], &mut answer, BatchMode::OneByOne);
+        answer[0]
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn closest_hit_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        self.closest_hit_with::<bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(origin, direction, t_max)
-    }
-
-    #[inline(always)]
-    fn closest_hit_with<T: NodeTest, Lf: LeafTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
-        let mut reach = t_max;
-        let mut best_t = f32::INFINITY;
-        let mut best_leaf = u32::MAX;
-        let mut best_back = false;
-        let mut best_mesh = u32::MAX;
-        let tie = self.tie_distance;
-        let blocks = &self.leaf_triangles;
-        let prefetch = |first, count| blocks.prefetch(first, count);
-        bvh8::walk::<T, true>(&self.nodes, prefetch, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, walk_t_max| {
-            reach = walk_t_max;
-            let hits = Lf::test_leaf(blocks, first, count, &ray, reach);
-            let mut lanes = hits.mask;
-            // Lanes in leaf order, each against the reach left by the ones before.
-            while lanes != 0 {
-                let lane = lanes.trailing_zeros();
-                lanes &= lanes - 1;
-                let t = hits.t[lane as usize];
-                // `ng` of RtTriangle points against the winding normal.
-                let back = hits.back >> lane & 1 == 1;
-                let leaf = first + lane;
-                let mesh_index = self.leaf_to_mesh[leaf as usize];
-                let better = if t < best_t - tie {
-                    true
-                } else if t <= best_t + tie {
-                    // Same surface: prefer the face that looks at the ray, then the lower index.
-                    (best_back && !back) || (best_back == back && mesh_index < best_mesh)
-                } else {
-                    false
-                };
-                if better {
-                    best_t = t;
-                    best_leaf = leaf;
-                    best_back = back;
-                    best_mesh = mesh_index;
-                    reach = (t + tie).min(t_max);
-                }
-            }
-            LeafResult::Continue(reach)
-        });
-        if best_leaf == u32::MAX {
-            return None;
-        }
-        let (u, v) = barycentrics(&self.leaf_triangles.triangle(best_leaf), origin + direction * best_t);
-        Some(Hit { triangle: best_mesh, t: best_t, u, v, back_face: best_back })
+    /// [`Scene::closest_hit`] of every query, into `out` (same length), run
+    /// the scene's way ([`Scene::batching`]). Same answers, bit for bit.
+    pub fn closest_hits(&self, queries: &[RayQuery], out: &mut [Option<Hit>]) {
+        assert_eq!(queries.len(), out.len(), "one answer per query");
+        self.run::<ClosestWalk>(queries, out, self.batching.closest_hit);
     }
 
     /// True when anything lies along `direction` from `origin` within `(0, t_max]`.
     pub fn occluded(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
-        self.occluder(origin, direction, t_max).is_some()
+        self.occluder(&RayQuery { origin, direction, t_max }).is_some()
+    }
+
+    /// [`Scene::occluded`] of every query, into `out` (same length), run the
+    /// scene's way ([`Scene::batching`]).
+    pub fn occluded_each(&self, queries: &[RayQuery], out: &mut [bool]) {
+        assert_eq!(queries.len(), out.len(), "one answer per query");
+        let mut blockers = [None; 64];
+        for (queries, out) in queries.chunks(64).zip(out.chunks_mut(64)) {
+            let blockers = &mut blockers[..queries.len()];
+            self.run::<OcclusionWalk>(queries, blockers, self.batching.occlusion);
+            out.iter_mut().zip(blockers.iter()).for_each(|(o, b)| *o = b.is_some());
+        }
     }
 
     /// Leaf index of some triangle blocking the ray (not necessarily the nearest).
     #[inline]
-    fn occluder(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
+    fn occluder(&self, query: &RayQuery) -> Option<u32> {
+        let mut answer = [None];
+        self.run::<OcclusionWalk>(std::slice::from_ref(query), &mut answer, BatchMode::OneByOne);
+        answer[0]
+    }
+
+    /// Answers `queries` with walk `W`, in `mode`, on the fastest node and leaf tests this CPU has.
+    #[inline]
+    fn run<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        if self.nodes.is_empty() {
+            out.iter_mut().for_each(|o| *o = W::Answer::default());
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if self.traversal == Traversal::Avx2 {
             // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
-            return unsafe { self.occluder_avx2(origin, direction, t_max) };
+            return unsafe { self.run_avx2::<W>(queries, out, mode) };
         }
-        self.occluder_with::<ScalarTest, ScalarLeaf>(origin, direction, t_max)
+        self.run_with::<W, ScalarTest, ScalarLeaf>(queries, out, mode)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn occluder_avx2(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
-        self.occluder_with::<bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(origin, direction, t_max)
+    unsafe fn run_avx2<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        self.run_with::<W, bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(queries, out, mode)
     }
 
     #[inline(always)]
-    fn occluder_with<T: NodeTest, Lf: LeafTest>(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<u32> {
-        let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
-        let mut found = None;
-        let blocks = &self.leaf_triangles;
-        let prefetch = |first, count| blocks.prefetch(first, count);
-        bvh8::walk::<T, false>(&self.nodes, prefetch, &RayBoxes::from_ray(&ray), 0.0, t_max, |first, count, _| {
-            let hits = Lf::test_leaf(blocks, first, count, &ray, t_max);
-            if hits.mask != 0 {
-                found = Some(first + hits.mask.trailing_zeros());
-                return LeafResult::Stop;
+    fn run_with<W: QueryWalk, T: NodeTest, Lf: LeafTest>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        match mode {
+            BatchMode::OneByOne => queries::one_by_one::<W, T, Lf>(self, queries, out),
+            BatchMode::Interleaved => queries::interleaved::<W, T, Lf>(self, queries, out),
+        }
+    }
+
+    /// Times both ways of running a batch on probe rays like the bake's (a
+    /// point's 64 rays over the sphere from triangles spread over the mesh),
+    /// the best of four alternating rounds each, and keeps interleaving only
+    /// where it is clearly faster. Trees that fit in L2 stay one by one:
+    /// nothing there waits on memory.
+    fn measure_batching(&self, mesh: &Mesh) -> Batching {
+        let tree_bytes = std::mem::size_of_val(self.nodes.as_slice()) + self.leaf_triangles.len() * 4 * super::leaf_blocks::ROWS;
+        let serial = Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne };
+        if tree_bytes < INTERLEAVE_MIN_TREE_BYTES {
+            return serial;
+        }
+        const POINTS: u32 = 64;
+        const RAYS: u32 = 64;
+        let count = self.face_normals.len() as u32;
+        let mut queries = Vec::new();
+        for p in 0..POINTS {
+            let t = (u64::from(p) * u64::from(count) / u64::from(POINTS)) as u32;
+            let normal = self.face_normal(t);
+            if normal == Vec3::ZERO {
+                continue;
             }
-            LeafResult::Continue(t_max)
+            let [a, b, c] = mesh.triangle_positions(t as usize);
+            let centroid = (a + b + c) / 3.0;
+            for k in 0..RAYS {
+                let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, p);
+                let direction = sampling::cosine_sphere(normal, u1, u2);
+                queries.push(RayQuery { origin: self.offset_origin(centroid, normal, direction), direction, t_max: f32::INFINITY });
+            }
+        }
+        let faster = |time: &dyn Fn(BatchMode)| {
+            let mut best = [f64::INFINITY; 2];
+            for round in 0..4 {
+                for which in [round % 2, 1 - round % 2] {
+                    let start = Instant::now();
+                    time([BatchMode::OneByOne, BatchMode::Interleaved][which]);
+                    best[which] = best[which].min(start.elapsed().as_secs_f64());
+                }
+            }
+            if best[1] < INTERLEAVE_MIN_GAIN * best[0] {
+                BatchMode::Interleaved
+            } else {
+                BatchMode::OneByOne
+            }
+        };
+        let closest_hit = faster(&|mode| {
+            let mut out = [None; RAYS as usize];
+            for chunk in queries.chunks(RAYS as usize) {
+                self.run::<ClosestWalk>(chunk, &mut out[..chunk.len()], mode);
+            }
+            std::hint::black_box(&out);
         });
-        found
+        let occlusion = faster(&|mode| {
+            let mut out = [None; RAYS as usize];
+            for chunk in queries.chunks(RAYS as usize) {
+                self.run::<OcclusionWalk>(chunk, &mut out[..chunk.len()], mode);
+            }
+            std::hint::black_box(&out);
+        });
+        Batching { closest_hit, occlusion }
     }
 
     /// [`Scene::occluded`] with a shadow cache for coherent rays (Haines &
@@ -292,7 +371,7 @@ impl Scene {
                 return true;
             }
         }
-        match self.occluder(origin, direction, t_max) {
+        match self.occluder(&RayQuery { origin, direction, t_max }) {
             Some(leaf) => {
                 *hint = leaf;
                 true
@@ -307,21 +386,12 @@ impl Scene {
     }
 }
 
-/// Barycentric weights (of vertices 1 and 2) of `p`, which lies on `tri`'s plane.
-fn barycentrics(tri: &RtTriangle, p: Vec3) -> (f32, f32) {
-    // RtTriangle stores v0, e1 = v0 − v1, e2 = v2 − v0.
-    let a = Vec3::from(-tri.e1);
-    let b = Vec3::from(tri.e2);
-    let d = p - Vec3::from(tri.v0);
-    let (aa, ab, bb) = (a.dot(a), a.dot(b), b.dot(b));
-    let (da, db) = (d.dot(a), d.dot(b));
-    let det = aa * bb - ab * ab;
-    if det <= 0.0 || !det.is_finite() {
-        return (1.0 / 3.0, 1.0 / 3.0);
-    }
-    let u = ((bb * da - ab * db) / det).clamp(0.0, 1.0);
-    let v = ((aa * db - ab * da) / det).clamp(0.0, 1.0 - u);
-    (u, v)
+/// One ray of a batched query: a unit `direction` from `origin`, hits within `(0, t_max]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayQuery {
+    pub origin: Vec3,
+    pub direction: Vec3,
+    pub t_max: f32,
 }
 
 /// Brute-force closest hit and occlusion over every triangle: the oracle the

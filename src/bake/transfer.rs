@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use super::progress::Progress;
 use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
-use super::scene::Scene;
+use super::scene::{Batching, RayQuery, Scene};
 use super::surfaces::Surfaces;
 use super::{BakeError, BakeParams, BakeStats, Mode, Sampling, TransferResult};
 use crate::mesh::Mesh;
@@ -54,6 +54,19 @@ fn encode_hit(triangle: u32, u: f32, v: f32) -> u64 {
 fn decode_hit(record: u64) -> (usize, f32, f32) {
     let q = |x: u64| (x & 0xffff) as f32 / 65535.0;
     ((record >> 32) as usize, q(record >> 16), q(record))
+}
+
+/// A task's reusable buffers for one point's rays.
+#[derive(Default)]
+struct Scratch {
+    /// SH basis of one direction.
+    basis: Vec<f32>,
+    /// The rays of the batch being traced, and their answers.
+    queries: Vec<RayQuery>,
+    hits: Vec<Option<super::Hit>>,
+    occluded: Vec<bool>,
+    /// Per window-light query: the window triangle aimed at and the squared distance to the target.
+    targets: Vec<(u32, f32)>,
 }
 
 /// One point rays leave from.
@@ -213,6 +226,7 @@ pub fn bake_transfer_receivers(
         vertices: vertex_count as u64,
         window_triangles: surfaces.window_triangle_count() as u64,
         points: point_count,
+        batching: scene.batching(),
         ..BakeStats::default()
     };
 
@@ -227,6 +241,10 @@ pub fn bake_transfer_receivers(
     let mut vertex_weight = vec![0.0f32; vertex_count];
     let mut layers: Vec<Vec<f32>> = Vec::new();
 
+    if !params.quiet {
+        let Batching { closest_hit, occlusion } = scene.batching();
+        eprintln!("rays: closest hit {closest_hit}, occlusion {occlusion} (the faster on this scene's probe rays)");
+    }
     for bounce in 0..=params.bounces {
         let phase_start = Instant::now();
         let pass_channels = if bounce == 0 { 1 } else { channels };
@@ -465,7 +483,7 @@ impl Pass<'_> {
             hits: Vec::new(),
         };
         let mut point_result = vec![0.0f32; stride];
-        let mut basis = vec![0.0f32; self.coeffs];
+        let mut scratch = Scratch { basis: vec![0.0f32; self.coeffs], ..Scratch::default() };
         for item in start..end {
             let local = item - start;
             match self.items {
@@ -479,7 +497,7 @@ impl Pass<'_> {
                         seed: hash_seed(&[self.params.seed, TAG_DIRECTION, v as u32, u32::MAX]),
                     };
                     point_result.fill(0.0);
-                    let traced = self.trace_point(&point, item as u64, bounce, false, &mut point_result, &mut basis, &mut out.hits);
+                    let traced = self.trace_point(&point, item as u64, bounce, false, &mut point_result, &mut scratch, &mut out.hits);
                     out.rays += self.params.rays as u64;
                     out.traced += traced.0;
                     out.weights[local] = 1.0;
@@ -507,7 +525,7 @@ impl Pass<'_> {
                         };
                         point_result.fill(0.0);
                         let (traced, inside) =
-                            self.trace_point(&point, global as u64, bounce, bounce == 0, &mut point_result, &mut basis, &mut out.hits);
+                            self.trace_point(&point, global as u64, bounce, bounce == 0, &mut point_result, &mut scratch, &mut out.hits);
                         out.rays += self.params.rays as u64;
                         out.traced += traced;
                         if inside {
@@ -539,7 +557,7 @@ impl Pass<'_> {
         bounce: u32,
         check_inside: bool,
         result: &mut [f32],
-        basis: &mut [f32],
+        scratch: &mut Scratch,
         hits: &mut Vec<u64>,
     ) -> (u64, bool) {
         let params = self.params;
@@ -565,57 +583,74 @@ impl Pass<'_> {
         // glass; cosine rays are traced only to probe and to record hits.
         let sample_windows = bounce == 0 && self.windows.is_some();
         let cosine_rays = if sample_windows && !self.record_hits { probe } else { ray_count };
-        let mut inside_hits = 0u32;
         let mut traced = 0u64;
-        for k in 0..cosine_rays {
-            if check_inside && k == probe && self.reject_inside(inside_hits, probe, hits) {
-                return (traced, true);
-            }
-            let direction = self.direction(point, k);
-            let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
-            traced += 1;
-            if bounce > 0 {
-                if let Some(hit) = self.scene.closest_hit(origin, direction, f32::INFINITY) {
-                    if self.gathers_from(&hit) {
-                        self.add_interpolated(hit.triangle as usize, hit.u, hit.v, ray_weight, result);
-                    }
-                }
+        // The rays go to the scene a batch at a time (so it can walk several
+        // at once): the probe rays first, whose verdict may end the point,
+        // then the rest. Results are added in ray order, as one at a time would.
+        for batch in [0..probe, probe..cosine_rays] {
+            if batch.is_empty() {
                 continue;
             }
-            // Bounce 0: window mode needs the first hit; open mode only occlusion, unless hits are recorded or probed.
-            let visibility = if window_mode || self.record_hits || k < probe {
-                let hit = self.scene.closest_hit(origin, direction, f32::INFINITY);
-                if k < probe && matches!(hit, Some(h) if h.back_face && h.t < self.reject_distance) {
-                    inside_hits += 1;
-                }
-                if self.record_hits {
-                    hits.push(match hit {
-                        Some(h) if self.gathers_from(&h) => encode_hit(h.triangle, h.u, h.v),
-                        _ => NO_HIT,
-                    });
-                }
-                match hit {
-                    Some(h) if window_mode => self.surfaces.window_transmittance[h.triangle as usize].unwrap_or(0.0),
-                    Some(_) => 0.0,
-                    None if window_mode => 0.0,
-                    None => 1.0,
-                }
-            } else if self.scene.occluded(origin, direction, f32::INFINITY) {
-                0.0
+            scratch.queries.clear();
+            for k in batch.clone() {
+                let direction = self.direction(point, k);
+                let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
+                scratch.queries.push(RayQuery { origin, direction, t_max: f32::INFINITY });
+            }
+            traced += scratch.queries.len() as u64;
+            // Bounce 0 in open mode needs only occlusion, unless hits are recorded or probed.
+            let closest = bounce > 0 || window_mode || self.record_hits || batch.start < probe;
+            if closest {
+                scratch.hits.resize(scratch.queries.len(), None);
+                self.scene.closest_hits(&scratch.queries, &mut scratch.hits);
             } else {
-                1.0
-            };
-            if visibility > 0.0 && !sample_windows {
-                sh::eval_basis(params.order, direction, basis);
-                let w = visibility * ray_weight;
-                result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
+                scratch.occluded.resize(scratch.queries.len(), false);
+                self.scene.occluded_each(&scratch.queries, &mut scratch.occluded);
+            }
+            let mut inside_hits = 0u32;
+            for (i, query) in scratch.queries.iter().enumerate() {
+                if bounce > 0 {
+                    if let Some(hit) = scratch.hits[i] {
+                        if self.gathers_from(&hit) {
+                            self.add_interpolated(hit.triangle as usize, hit.u, hit.v, ray_weight, result);
+                        }
+                    }
+                    continue;
+                }
+                let visibility = if closest {
+                    let hit = scratch.hits[i];
+                    if batch.start < probe && matches!(hit, Some(h) if h.back_face && h.t < self.reject_distance) {
+                        inside_hits += 1;
+                    }
+                    if self.record_hits {
+                        hits.push(match hit {
+                            Some(h) if self.gathers_from(&h) => encode_hit(h.triangle, h.u, h.v),
+                            _ => NO_HIT,
+                        });
+                    }
+                    match hit {
+                        Some(h) if window_mode => self.surfaces.window_transmittance[h.triangle as usize].unwrap_or(0.0),
+                        Some(_) => 0.0,
+                        None if window_mode => 0.0,
+                        None => 1.0,
+                    }
+                } else if scratch.occluded[i] {
+                    0.0
+                } else {
+                    1.0
+                };
+                if visibility > 0.0 && !sample_windows {
+                    sh::eval_basis(params.order, query.direction, &mut scratch.basis);
+                    let w = visibility * ray_weight;
+                    result.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
+                }
+            }
+            if check_inside && batch.start < probe && self.reject_inside(inside_hits, probe, hits) {
+                return (traced, true);
             }
         }
-        if check_inside && probe == cosine_rays && self.reject_inside(inside_hits, probe, hits) {
-            return (traced, true);
-        }
         if let (true, Some(windows)) = (sample_windows, self.windows) {
-            traced += self.add_window_light(point, windows, result, basis);
+            traced += self.add_window_light(point, windows, result, scratch);
         }
         (traced, false)
     }
@@ -624,9 +659,11 @@ impl Pass<'_> {
     /// triangles (by area); a point counts when the first hit toward it is
     /// its own triangle. Estimator of (1/π) ∫ y τ |n·ω| dω over directions
     /// through windows: y(ω) τ |n·ω| · A |cos θ_w| / (π r² N). Returns rays traced.
-    fn add_window_light(&self, point: &Point, windows: &WindowLights, result: &mut [f32], basis: &mut [f32]) -> u64 {
+    fn add_window_light(&self, point: &Point, windows: &WindowLights, result: &mut [f32], scratch: &mut Scratch) -> u64 {
         let rays = self.params.rays;
         let scale = (windows.total_area / std::f64::consts::PI / rays as f64) as f32;
+        scratch.queries.clear();
+        scratch.targets.clear();
         for k in 0..rays {
             let (u_pick, _) = sample_2d(self.params.pattern, k, 2, point.seed);
             let (u1, u2) = sample_2d(self.params.pattern, k, 1, point.seed);
@@ -643,15 +680,21 @@ impl Pass<'_> {
             let direction = offset / distance;
             let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
             let reach = distance * 1.001 + 4.0 * self.scene.tie_distance;
-            let Some(hit) = self.scene.closest_hit(origin, direction, reach) else { continue };
-            if hit.triangle != triangle {
+            scratch.queries.push(RayQuery { origin, direction, t_max: reach });
+            scratch.targets.push((triangle, distance_squared));
+        }
+        scratch.hits.resize(scratch.queries.len(), None);
+        self.scene.closest_hits(&scratch.queries, &mut scratch.hits);
+        for ((query, &(triangle, distance_squared)), hit) in scratch.queries.iter().zip(&scratch.targets).zip(&scratch.hits) {
+            if !matches!(hit, Some(h) if h.triangle == triangle) {
                 continue;
             }
+            let direction = query.direction;
             let tau = self.surfaces.window_transmittance[triangle as usize].unwrap_or(0.0);
             let cos_window = self.scene.face_normal(triangle).dot(direction).abs();
             let w = tau * point.normal.dot(direction).abs() * cos_window * scale / distance_squared;
-            sh::eval_basis(self.params.order, direction, basis);
-            result.iter_mut().zip(basis.iter()).for_each(|(r, y)| *r += w * y);
+            sh::eval_basis(self.params.order, direction, &mut scratch.basis);
+            result.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
         }
         rays as u64
     }
