@@ -92,8 +92,8 @@ pub struct Batching {
     pub occlusion: BatchMode,
 }
 
-/// Trees smaller than this (nodes and leaf blocks) stay in the 4 MiB L2
-/// and are never measured for interleaving.
+/// Trees smaller than this (nodes and leaf blocks) stay in cache and are
+/// never measured for interleaving.
 const INTERLEAVE_MIN_TREE_BYTES: usize = 4 << 20;
 /// Interleaving is kept only when its best probe time is below this
 /// fraction of one-by-one's: a near tie keeps the simpler way.
@@ -298,13 +298,18 @@ impl Scene {
     /// Times both ways of running a batch on probe rays like the bake's (a
     /// point's 64 rays over the sphere from triangles spread over the mesh),
     /// the best of four alternating rounds each, and keeps interleaving only
-    /// where it is clearly faster. Trees that fit in L2 stay one by one:
-    /// nothing there waits on memory.
+    /// where it is clearly faster. Trees under 4 MiB stay one by one: they
+    /// stay in cache, where nothing waits on memory.
     fn measure_batching(&self, mesh: &Mesh) -> Batching {
+        // `PRTBAKE_BATCHING=one_by_one|interleaved` forces a way, for measurements.
+        match std::env::var("PRTBAKE_BATCHING").as_deref() {
+            Ok("one_by_one") => return Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne },
+            Ok("interleaved") => return Batching { closest_hit: BatchMode::Interleaved, occlusion: BatchMode::Interleaved },
+            _ => {}
+        }
         let tree_bytes = std::mem::size_of_val(self.nodes.as_slice()) + self.leaf_triangles.len() * 4 * super::leaf_blocks::ROWS;
-        let serial = Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne };
         if tree_bytes < INTERLEAVE_MIN_TREE_BYTES {
-            return serial;
+            return Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne };
         }
         const POINTS: u32 = 64;
         const RAYS: u32 = 64;
