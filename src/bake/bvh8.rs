@@ -348,13 +348,24 @@ impl Walk {
                 while pending != 0 {
                     let child = node.children[pending.trailing_zeros() as usize];
                     pending &= pending - 1;
-                    if !is_leaf(child) {
-                        if let Some(node) = nodes.get(child as usize) {
-                            prefetch_bytes(node as *const Node8, std::mem::size_of::<Node8>());
+                    if INTERLEAVED {
+                        // Bound by memory: fetch exactly the child's lines.
+                        if is_leaf(child) {
+                            let (first, count) = leaf_range(child);
+                            prefetch_bytes(leaves.block_address(first), count as usize * BLOCK_BYTES_PER_TRIANGLE);
+                        } else {
+                            prefetch_bytes(nodes.as_ptr().wrapping_add(child as usize), std::mem::size_of::<Node8>());
                         }
                     } else {
-                        let (first, count) = leaf_range(child);
-                        leaves.prefetch(first, count);
+                        // Bound by instructions and mispredictions: the same
+                        // lines for a node or a leaf, chosen by a select
+                        // rather than a branch that mispredicts on mixed nodes.
+                        let address = if is_leaf(child) {
+                            leaves.block_address(leaf_range(child).0)
+                        } else {
+                            nodes.as_ptr().wrapping_add(child as usize).cast::<u8>()
+                        };
+                        prefetch_bytes(address, CHILD_PREFETCH_BYTES);
                     }
                 }
                 if rest == 0 {
@@ -413,12 +424,18 @@ impl Walk {
     }
 }
 
+/// Bytes a leaf block takes per triangle (12 floats).
+const BLOCK_BYTES_PER_TRIANGLE: usize = 48;
+/// Bytes prefetched per child a lone walk enters, node or leaf alike: a
+/// node's four lines and two more, or a leaf block's first six lines.
+const CHILD_PREFETCH_BYTES: usize = 384;
+
 /// What a walk does at its leaves. Implementations mark both methods
 /// `#[inline(always)]`: the walk runs inside AVX2 functions, and a leaf test
 /// left out of line there loses its SIMD (measured 4× slower).
 pub trait Leaves {
-    /// Asks for the cache lines of leaf `(first, count)`.
-    fn prefetch(&self, first: u32, count: u32);
+    /// Where the block of the leaf whose triangles start at `first` begins (for prefetching).
+    fn block_address(&self, first: u32) -> *const u8;
     /// Tests the leaf's triangles within `t_max`.
     fn visit(&mut self, first: u32, count: u32, t_max: f32) -> LeafResult;
 }

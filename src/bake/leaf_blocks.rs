@@ -85,13 +85,11 @@ impl LeafBlocks {
         RtTriangle { v0: vector(0), e1: vector(1), e2: vector(2), ng: vector(3) }
     }
 
-    /// Asks for the cache lines of the leaf `(first, count)`.
+    /// Where the block of the leaf starting at `first` begins (a hint for
+    /// prefetching: never dereferenced).
     #[inline(always)]
-    pub fn prefetch(&self, first: u32, count: u32) {
-        let start = ROWS * first as usize;
-        if let Some(block) = self.data.get(start..start + ROWS * count as usize) {
-            super::bvh8::prefetch_bytes(block.as_ptr(), std::mem::size_of_val(block));
-        }
+    pub fn block_address(&self, first: u32) -> *const u8 {
+        self.data.as_ptr().wrapping_add(ROWS * first as usize).cast()
     }
 
     /// The block of leaf `(first, count)`, with the tail an eight-lane read may touch.

@@ -114,8 +114,8 @@ struct ClosestLeaves<'a, Lf> {
 
 impl<Lf: LeafTest> bvh8::Leaves for ClosestLeaves<'_, Lf> {
     #[inline(always)]
-    fn prefetch(&self, first: u32, count: u32) {
-        self.scene.leaf_triangles.prefetch(first, count);
+    fn block_address(&self, first: u32) -> *const u8 {
+        self.scene.leaf_triangles.block_address(first)
     }
 
     #[inline(always)]
@@ -203,8 +203,8 @@ struct OcclusionLeaves<'a, Lf> {
 
 impl<Lf: LeafTest> bvh8::Leaves for OcclusionLeaves<'_, Lf> {
     #[inline(always)]
-    fn prefetch(&self, first: u32, count: u32) {
-        self.blocks.prefetch(first, count);
+    fn block_address(&self, first: u32) -> *const u8 {
+        self.blocks.block_address(first)
     }
 
     #[inline(always)]
