@@ -316,7 +316,8 @@ impl Walk {
     /// returns false once the walk has ended. Every child the ray enters is
     /// prefetched when its parent is tested, so a step rarely waits on memory
     /// when other walks' steps run between two of this one's
-    /// ([`super::scene`] interleaves them).
+    /// ([`super::queries`] interleaves them: `INTERLEAVED`). A lone walk
+    /// prefetches by a select instead of a branch, and skips a lone child.
     #[inline(always)]
     pub fn step<T: NodeTest, L: Leaves, const NEAREST_FIRST: bool, const INTERLEAVED: bool>(
         &mut self,
@@ -424,8 +425,8 @@ impl Walk {
     }
 }
 
-/// Bytes a leaf block takes per triangle (12 floats).
-const BLOCK_BYTES_PER_TRIANGLE: usize = 48;
+/// Bytes a leaf block takes per triangle.
+const BLOCK_BYTES_PER_TRIANGLE: usize = super::leaf_blocks::ROWS * std::mem::size_of::<f32>();
 /// Bytes prefetched per child a lone walk enters, node or leaf alike: a
 /// node's four lines and two more, or a leaf block's first six lines.
 const CHILD_PREFETCH_BYTES: usize = 384;
