@@ -100,7 +100,7 @@ struct ClosestSoFar {
 impl ClosestSoFar {
     #[inline(always)]
     fn new(query: &RayQuery) -> ClosestSoFar {
-        let ray = Ray::new(query.origin.into(), query.direction.into(), 0.0, query.t_max);
+        let ray = query.ray();
         ClosestSoFar { ray, t: f32::INFINITY, leaf: u32::MAX, back: false, mesh: u32::MAX }
     }
 }
@@ -224,13 +224,13 @@ impl QueryWalk for OcclusionWalk {
 
     #[inline(always)]
     fn new(query: &RayQuery) -> OcclusionWalk {
-        let ray = Ray::new(query.origin.into(), query.direction.into(), 0.0, query.t_max);
+        let ray = query.ray();
         OcclusionWalk { ray, boxes: RayBoxes::from_ray(&ray), walk: bvh8::Walk::new(query.t_max), found: None }
     }
 
     #[inline(always)]
     fn restart(&mut self, query: &RayQuery) {
-        self.ray = Ray::new(query.origin.into(), query.direction.into(), 0.0, query.t_max);
+        self.ray = query.ray();
         self.boxes = RayBoxes::from_ray(&self.ray);
         self.walk.restart(query.t_max);
         self.found = None;

@@ -329,12 +329,18 @@ impl Scene {
                 queries.push(RayQuery { origin: self.offset_origin(centroid, normal, direction), direction, t_max: f32::INFINITY });
             }
         }
-        let faster = |time: &dyn Fn(BatchMode)| {
+        // Best of four alternating rounds each way, a point's rays per batch.
+        fn faster<W: QueryWalk>(scene: &Scene, queries: &[RayQuery]) -> BatchMode {
             let mut best = [f64::INFINITY; 2];
+            let mut out: Vec<W::Answer> = (0..RAYS).map(|_| W::Answer::default()).collect();
             for round in 0..4 {
                 for which in [round % 2, 1 - round % 2] {
+                    let mode = [BatchMode::OneByOne, BatchMode::Interleaved][which];
                     let start = Instant::now();
-                    time([BatchMode::OneByOne, BatchMode::Interleaved][which]);
+                    for chunk in queries.chunks(RAYS as usize) {
+                        scene.run::<W>(chunk, &mut out[..chunk.len()], mode);
+                    }
+                    std::hint::black_box(&out);
                     best[which] = best[which].min(start.elapsed().as_secs_f64());
                 }
             }
@@ -343,21 +349,9 @@ impl Scene {
             } else {
                 BatchMode::OneByOne
             }
-        };
-        let closest_hit = faster(&|mode| {
-            let mut out = [None; RAYS as usize];
-            for chunk in queries.chunks(RAYS as usize) {
-                self.run::<ClosestWalk>(chunk, &mut out[..chunk.len()], mode);
-            }
-            std::hint::black_box(&out);
-        });
-        let occlusion = faster(&|mode| {
-            let mut out = [None; RAYS as usize];
-            for chunk in queries.chunks(RAYS as usize) {
-                self.run::<OcclusionWalk>(chunk, &mut out[..chunk.len()], mode);
-            }
-            std::hint::black_box(&out);
-        });
+        }
+        let closest_hit = faster::<ClosestWalk>(self, &queries);
+        let occlusion = faster::<OcclusionWalk>(self, &queries);
         Batching { closest_hit, occlusion }
     }
 
@@ -397,6 +391,14 @@ pub struct RayQuery {
     pub origin: Vec3,
     pub direction: Vec3,
     pub t_max: f32,
+}
+
+impl RayQuery {
+    /// The query as obvhs's ray (which holds the inverse direction the box test uses).
+    #[inline(always)]
+    pub fn ray(&self) -> Ray {
+        Ray::new(self.origin.into(), self.direction.into(), 0.0, self.t_max)
+    }
 }
 
 /// Brute-force closest hit and occlusion over every triangle: the oracle the
