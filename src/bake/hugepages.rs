@@ -10,9 +10,23 @@
 /// Copies `data` into a fresh allocation advised for huge pages (Linux; a
 /// plain copy elsewhere, or when `PRTBAKE_NO_HUGEPAGES` is set).
 pub fn copy_to_huge_pages<T: Copy>(data: &[T]) -> Vec<T> {
-    let mut out: Vec<T> = Vec::with_capacity(data.len());
-    advise_huge(out.as_ptr() as usize, data.len() * std::mem::size_of::<T>());
+    let mut out = reserve_huge(data.len());
     out.extend_from_slice(data);
+    out
+}
+
+/// An empty vector with room for `capacity` elements, advised for huge pages.
+pub fn reserve_huge<T>(capacity: usize) -> Vec<T> {
+    let out: Vec<T> = Vec::with_capacity(capacity);
+    advise_huge(out.as_ptr() as usize, capacity * std::mem::size_of::<T>());
+    out
+}
+
+/// A zeroed (`T::default()`) vector of `len` elements advised for huge
+/// pages, for large arrays read at random (the bounces' gather rows).
+pub fn filled_huge<T: Copy + Default>(len: usize) -> Vec<T> {
+    let mut out = reserve_huge(len);
+    out.resize(len, T::default());
     out
 }
 

@@ -4,6 +4,7 @@
 
 pub mod bvh8;
 pub mod cull;
+mod gather;
 pub mod hugepages;
 pub mod leaf_blocks;
 pub mod progress;

@@ -18,6 +18,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::gather::{encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
 use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
 use super::scene::{Batching, RayQuery, Scene};
@@ -36,32 +37,8 @@ const ITEMS_PER_MERGE: usize = 8192;
 
 /// Rays of each point first traced with closest hit to decide whether the point lies inside geometry.
 const INSIDE_PROBE_RAYS: u32 = 32;
-/// How many records ahead the bounces' gather prefetches a hit's triangle
-/// (corner indices, albedo) and, once those have arrived, its corner rows.
-/// Both are random reads, and they were ~60% of the gather's time in the
-/// demo (perf). With these, the demo's gathers took 2.2–2.7 s a bounce
-/// instead of 4.0–4.9 s (docs/performance.md).
-const GATHER_AHEAD_TRIANGLE: usize = 16;
-const GATHER_AHEAD_ROWS: usize = 8;
-
 /// Largest hit cache kept in memory (bytes); beyond it later bounces re-trace their rays.
 pub const HIT_CACHE_BUDGET_BYTES: u64 = 6 << 30;
-
-/// A cached ray result: no light comes back along this ray in bounces ≥ 1.
-const NO_HIT: u64 = u64::MAX;
-
-/// Packs a hit on `triangle` at barycentrics (u, v) into one word (16-bit barycentrics).
-#[inline]
-fn encode_hit(triangle: u32, u: f32, v: f32) -> u64 {
-    let q = |x: f32| (x.clamp(0.0, 1.0) * 65535.0).round() as u64;
-    (triangle as u64) << 32 | q(u) << 16 | q(v)
-}
-
-#[inline]
-fn decode_hit(record: u64) -> (usize, f32, f32) {
-    let q = |x: u64| (x & 0xffff) as f32 / 65535.0;
-    ((record >> 32) as usize, q(record >> 16), q(record))
-}
 
 /// A task's reusable buffers for one point's rays.
 #[derive(Default)]
@@ -114,6 +91,16 @@ impl Items {
             Items::Vertex { .. } => 1,
         }
     }
+    /// Global index of the first point of `item` (`len()`: the point count).
+    fn first_point(&self, item: usize) -> usize {
+        match self {
+            Items::Interior { first_sample, .. } => match first_sample.get(item) {
+                Some(&first) => first as usize,
+                None => self.point_count() as usize,
+            },
+            Items::Vertex { .. } => item,
+        }
+    }
     fn point_count(&self) -> u64 {
         match self {
             Items::Interior { counts, .. } => counts.iter().map(|&c| c as u64).sum(),
@@ -132,10 +119,8 @@ struct Pass<'a> {
     coeffs: usize,
     /// Channels of this pass's output (1 for bounce 0, whose transfer is colourless).
     channels: usize,
-    /// Previous bounce per vertex, `[vertex][channel][coeff]`, for bounces ≥ 1.
-    previous: Option<&'a [f32]>,
-    /// Per-channel albedo per triangle used at hits.
-    bounce_albedo: &'a [[f32; 3]],
+    /// What bounces ≥ 1 gather from: the previous bounce at hits.
+    gather: Option<Gather<'a>>,
     rejected: &'a [bool],
     reject_distance: f32,
     /// Bounce 0 records every ray's hit here (when bounces follow and it fits
@@ -247,6 +232,12 @@ pub fn bake_transfer_receivers(
     let window_lights = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(mesh, surfaces) } else { None };
     let mut vertex_weight = vec![0.0f32; vertex_count];
     let mut layers: Vec<Vec<f32>> = Vec::new();
+    // The previous bounce per vertex in line-aligned rows, for the next
+    // bounce's gathers. After bounce 0 it is colourless (one row serves every
+    // channel, a third of the bytes of its widened copy).
+    let mut source = RowBuffer::zeroed(0);
+    let mut source_channels = 1;
+    let avx2 = super::bvh8::avx2_available();
 
     if !params.quiet {
         let Batching { closest_hit, occlusion } = scene.batching();
@@ -265,8 +256,15 @@ pub fn bake_transfer_receivers(
             items: &items,
             coeffs,
             channels: pass_channels,
-            previous: layers.last().map(|l| l.as_slice()),
-            bounce_albedo: &bounce_albedo,
+            gather: (bounce > 0).then(|| Gather {
+                indices: &mesh.indices,
+                albedo: &bounce_albedo,
+                rows: source.as_slice(),
+                coeffs,
+                source_channels,
+                channels,
+                avx2,
+            }),
             rejected: &rejected,
             reject_distance: params.inside_distance * scene.diagonal,
             hit_cache: (use_cache && bounce > 0).then_some(hit_cache.as_slice()),
@@ -277,16 +275,30 @@ pub fn bake_transfer_receivers(
         let mut new_rejections = Vec::new();
         let mut rays = 0u64;
         let mut traced = 0u64;
-        let mut new_hits: Vec<u64> = Vec::new();
+        // Every point of bounce 0 records one hit per ray, at `point · rays`.
+        // Each task copies its points' records to their place, so the 8 bytes
+        // a ray of fresh pages fault in on both threads, not in the merge.
+        let record_count = |points: usize| if pass.record_hits { points * params.rays as usize } else { 0 };
+        let mut new_hits: Vec<u64> = vec![0; record_count(point_count as usize)];
+        let mut unfilled_hits = new_hits.as_mut_slice();
         let corners = items.corners();
         for merge_start in (0..items.len()).step_by(ITEMS_PER_MERGE) {
             let merge_end = (merge_start + ITEMS_PER_MERGE).min(items.len());
-            let outputs: Vec<TaskOutput> = (merge_start..merge_end)
+            let tasks: Vec<(usize, &mut [u64])> = (merge_start..merge_end)
                 .step_by(ITEMS_PER_TASK)
-                .collect::<Vec<_>>()
-                .into_par_iter()
                 .map(|task_start| {
+                    let task_end = (task_start + ITEMS_PER_TASK).min(merge_end);
+                    let points = items.first_point(task_end) - items.first_point(task_start);
+                    let (hits, rest) = std::mem::take(&mut unfilled_hits).split_at_mut(record_count(points));
+                    unfilled_hits = rest;
+                    (task_start, hits)
+                })
+                .collect();
+            let outputs: Vec<TaskOutput> = tasks
+                .into_par_iter()
+                .map(|(task_start, hits)| {
                     let out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(merge_end), bounce);
+                    hits.copy_from_slice(&out.hits);
                     progress.add(out.rays);
                     out
                 })
@@ -297,7 +309,6 @@ pub fn bake_transfer_receivers(
                 rays += out.rays;
                 traced += out.traced;
                 new_rejections.extend(out.rejected);
-                new_hits.extend_from_slice(&out.hits);
                 let stride = pass_channels * coeffs;
                 for (local, corner_sums) in out.sums.chunks_exact(corners * stride).enumerate() {
                     let vertices = pass.corner_vertices(task_start + local);
@@ -319,19 +330,28 @@ pub fn bake_transfer_receivers(
         for (index, flag) in new_rejections {
             rejected[index as usize] = flag;
         }
-        // Normalise by the barycentric weight each vertex received, and widen bounce 0 to all channels.
+        // Normalise by the barycentric weight each vertex received: the
+        // output layer with bounce 0 widened to all channels, and the next
+        // bounce's gather rows unwidened.
+        let stride = pass_channels * coeffs;
         let mut layer = vec![0.0f32; vertex_count * channels * coeffs];
-        for v in 0..vertex_count {
-            let w = vertex_weight[v];
-            if w <= 0.0 {
-                continue;
+        let weighted_rows = || accumulated.par_chunks(stride).zip(vertex_weight.par_iter());
+        layer.par_chunks_mut(channels * coeffs).zip(weighted_rows()).for_each(|(dst, (src, &w))| {
+            if w > 0.0 {
+                for (c, dst) in dst.chunks_exact_mut(coeffs).enumerate() {
+                    let source_channel = if pass_channels == 1 { 0 } else { c };
+                    dst.iter_mut().zip(&src[source_channel * coeffs..][..coeffs]).for_each(|(d, s)| *d = s / w);
+                }
             }
-            for c in 0..channels {
-                let source_channel = if pass_channels == 1 { 0 } else { c };
-                let src = &accumulated[(v * pass_channels + source_channel) * coeffs..][..coeffs];
-                let dst = &mut layer[(v * channels + c) * coeffs..][..coeffs];
-                dst.iter_mut().zip(src).for_each(|(d, s)| *d = s / w);
+        });
+        if bounce < params.bounces {
+            if source.len() != vertex_count * stride {
+                source = RowBuffer::zeroed(vertex_count * stride);
             }
+            source_channels = pass_channels;
+            source.as_mut_slice().par_chunks_mut(stride).zip(weighted_rows()).for_each(|(dst, (src, &w))| {
+                dst.iter_mut().zip(src).for_each(|(d, s)| *d = if w > 0.0 { s / w } else { 0.0 });
+            });
         }
         stats.rays_per_bounce.push(rays);
         stats.rays_traced += traced;
@@ -573,24 +593,11 @@ impl Pass<'_> {
         // Directions are drawn ∝ c(n,ω): each ray weighs 1/N (hemisphere) or 2/N (sphere).
         let ray_weight = if window_mode { 2.0 } else { 1.0 } / ray_count as f32;
         if bounce > 0 {
-            if let Some(cache) = self.hit_cache {
-                // This point's records, then the next points' (usually traced next).
+            if let (Some(cache), Some(gather)) = (self.hit_cache, &self.gather) {
+                // This point's records, then the next points' (usually
+                // gathered next), which the gather prefetches into.
                 let from_here = &cache[(point_index * ray_count as u64) as usize..];
-                let records = &from_here[..ray_count as usize];
-                for (i, &record) in records.iter().enumerate() {
-                    // A record's triangle data and then its corner rows are
-                    // two dependent misses: ask for both well ahead.
-                    if let Some(&ahead) = from_here.get(i + GATHER_AHEAD_TRIANGLE) {
-                        self.prefetch_triangle(ahead);
-                    }
-                    if let Some(&ahead) = from_here.get(i + GATHER_AHEAD_ROWS) {
-                        self.prefetch_corner_rows(ahead);
-                    }
-                    if record != NO_HIT {
-                        let (triangle, u, v) = decode_hit(record);
-                        self.add_interpolated(triangle, u, v, ray_weight, result);
-                    }
-                }
+                gather.point(from_here, ray_count as usize, ray_weight, result);
                 return (0, false);
             }
         }
@@ -629,9 +636,9 @@ impl Pass<'_> {
             let mut inside_hits = 0u32;
             for (i, query) in scratch.queries.iter().enumerate() {
                 if bounce > 0 {
-                    if let Some(hit) = scratch.hits[i] {
+                    if let (Some(hit), Some(gather)) = (scratch.hits[i], &self.gather) {
                         if self.gathers_from(&hit) {
-                            self.add_interpolated(hit.triangle as usize, hit.u, hit.v, ray_weight, result);
+                            gather.add_hit(hit.triangle as usize, hit.u, hit.v, ray_weight, result);
                         }
                     }
                     continue;
@@ -740,50 +747,6 @@ impl Pass<'_> {
     #[inline]
     fn gathers_from(&self, hit: &super::Hit) -> bool {
         self.surfaces.window_transmittance[hit.triangle as usize].is_none() && (self.params.mode == Mode::Window || !hit.back_face)
-    }
-
-    /// Asks for the corner indices and albedo of a hit record's triangle.
-    #[inline(always)]
-    fn prefetch_triangle(&self, record: u64) {
-        if record != NO_HIT {
-            let triangle = decode_hit(record).0;
-            super::bvh8::prefetch_bytes(self.mesh.indices.as_ptr().wrapping_add(3 * triangle), 12);
-            super::bvh8::prefetch_bytes(self.bounce_albedo.as_ptr().wrapping_add(triangle), 12);
-        }
-    }
-
-    /// Asks for the previous bounce's rows of a hit record's three corners.
-    #[inline(always)]
-    fn prefetch_corner_rows(&self, record: u64) {
-        if let (true, Some(previous)) = (record != NO_HIT, self.previous) {
-            let stride = self.channels * self.coeffs;
-            for vertex in self.mesh.triangle(decode_hit(record).0) {
-                super::bvh8::prefetch_bytes(previous.as_ptr().wrapping_add(vertex as usize * stride), stride * 4);
-            }
-        }
-    }
-
-    /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` for a hit at barycentrics (u, v) of `triangle`.
-    #[inline]
-    fn add_interpolated(&self, triangle: usize, u: f32, v: f32, weight: f32, result: &mut [f32]) {
-        let Some(previous) = self.previous else { return };
-        let stride = self.channels * self.coeffs;
-        // Three plain slices: `[u32; 3]::map` here stayed an out-of-line call (8% of the gathers' samples).
-        let row = |vertex: u32| &previous[vertex as usize * stride..][..stride];
-        let [v0, v1, v2] = self.mesh.triangle(triangle);
-        let (s0, s1, s2) = (row(v0), row(v1), row(v2));
-        let (b0, b1, b2) = (1.0 - u - v, u, v);
-        let albedo = self.bounce_albedo[triangle];
-        // One pass over the result per channel, the three corners blended in
-        // registers: ~20% faster gathers than a pass per corner (Ferrari).
-        for (c, &reflect) in albedo.iter().enumerate().take(self.channels) {
-            let w = weight * reflect;
-            let span = c * self.coeffs..(c + 1) * self.coeffs;
-            let (x0, x1, x2) = (&s0[span.clone()], &s1[span.clone()], &s2[span.clone()]);
-            for (i, d) in result[span].iter_mut().enumerate() {
-                *d += w * (b0 * x0[i] + b1 * x1[i] + b2 * x2[i]);
-            }
-        }
     }
 
     #[inline]
