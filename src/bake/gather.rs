@@ -3,12 +3,13 @@
 //! triangle's corner rows (DESIGN.md "Transfer"; seed 000 §4.1, eq. 6).
 //!
 //! No ray is traced here, so this is all memory and arithmetic: per record a
-//! triangle's corners and albedo, then three corner rows. The rows live in
-//! 64-byte lines ([`RowBuffer`]) so an order-3 row (16 coefficients) is one
-//! line per channel, and both dependent reads are prefetched well ahead. For
-//! orders 1–4 a point's sums stay in registers over its records, and the
-//! kernel runs with AVX2 where the CPU has it. AVX2 without FMA rounds as the
-//! scalar code does, so the bytes never depend on the CPU or the order path.
+//! triangle's corners and albedo, then three corner rows. The rows live in a
+//! line-aligned buffer on huge pages ([`RowBuffer`]; random reads of tens of
+//! MB would otherwise miss the TLB too), and both dependent reads are
+//! prefetched well ahead. For orders 1–5 a point's sums stay in registers
+//! over its records, and the kernel runs with AVX2 where the CPU has it. AVX2
+//! without FMA rounds as the scalar code does, so the bytes never depend on
+//! the CPU or the order path.
 
 use super::bvh8::prefetch_bytes;
 
@@ -39,7 +40,7 @@ pub(crate) fn decode_hit(record: u64) -> (usize, f32, f32) {
 #[repr(C, align(64))]
 struct Line([f32; 16]);
 
-/// Per-vertex rows `[vertex][channel][coeff]` in a 64-byte-aligned buffer.
+/// Per-vertex rows `[vertex][channel][coeff]` in a 64-byte-aligned buffer on huge pages.
 pub(crate) struct RowBuffer {
     lines: Vec<Line>,
     len: usize,
@@ -116,6 +117,7 @@ impl Gather<'_> {
             };
         }
         match self.coeffs {
+            1 => fixed!(1),
             4 => fixed!(4),
             9 => fixed!(9),
             16 => fixed!(16),

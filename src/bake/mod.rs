@@ -99,6 +99,12 @@ pub struct BakeParams {
     /// No progress line on stderr (not part of the bake: never stored).
     #[serde(skip)]
     pub quiet: bool,
+    /// Largest cache of bounce 0's hits (8 bytes a ray) kept for the later
+    /// bounces to gather from; beyond it they re-trace the same rays. The
+    /// results agree up to the cache's 16-bit barycentrics (not part of the
+    /// bake: never stored).
+    #[serde(skip)]
+    pub hit_cache_bytes: u64,
 }
 
 impl Default for BakeParams {
@@ -117,6 +123,7 @@ impl Default for BakeParams {
             window_sampling: false,
             inside_distance: 0.05,
             quiet: true,
+            hit_cache_bytes: transfer::HIT_CACHE_BUDGET_BYTES,
         }
     }
 }

@@ -37,7 +37,8 @@ const ITEMS_PER_MERGE: usize = 8192;
 
 /// Rays of each point first traced with closest hit to decide whether the point lies inside geometry.
 const INSIDE_PROBE_RAYS: u32 = 32;
-/// Largest hit cache kept in memory (bytes); beyond it later bounces re-trace their rays.
+/// Default largest hit cache kept in memory (bytes, [`BakeParams::hit_cache_bytes`]);
+/// beyond it later bounces re-trace their rays.
 pub const HIT_CACHE_BUDGET_BYTES: u64 = 6 << 30;
 
 /// A task's reusable buffers for one point's rays.
@@ -227,7 +228,7 @@ pub fn bake_transfer_receivers(
         if channels == 1 { surfaces.albedo.iter().map(|a| [(a[0] + a[1] + a[2]) / 3.0; 3]).collect() } else { surfaces.albedo.clone() };
     let mut rejected = vec![false; point_count as usize];
     let cache_bytes = point_count * params.rays as u64 * 8;
-    let use_cache = params.bounces > 0 && cache_bytes <= HIT_CACHE_BUDGET_BYTES;
+    let use_cache = params.bounces > 0 && cache_bytes <= params.hit_cache_bytes;
     let mut hit_cache: Vec<u64> = Vec::new();
     let window_lights = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(mesh, surfaces) } else { None };
     let mut vertex_weight = vec![0.0f32; vertex_count];
