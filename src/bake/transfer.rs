@@ -241,6 +241,14 @@ pub fn bake_transfer_receivers(
     let avx2 = super::bvh8::avx2_available();
 
     if !params.quiet {
+        if params.bounces > 0 && !use_cache {
+            eprintln!(
+                "hit cache: {:.1} GiB needed, {:.1} GiB allowed (--hit-cache-mib): bounces 1-{} re-trace their rays",
+                cache_bytes as f64 / (1u64 << 30) as f64,
+                params.hit_cache_bytes as f64 / (1u64 << 30) as f64,
+                params.bounces
+            );
+        }
         let Batching { closest_hit, occlusion } = scene.batching();
         eprintln!("rays: closest hit {closest_hit}, occlusion {occlusion} (the faster on this scene's probe rays)");
     }
