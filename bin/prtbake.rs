@@ -99,10 +99,11 @@ struct BakeArgs {
     #[arg(long)]
     window_sampling: bool,
     /// Memory for bounce 0's hit cache (8 bytes a ray), in MiB. Bounces ≥ 1
-    /// gather from it; over it they re-trace the same rays instead (slower,
-    /// same result up to the cache's 16-bit barycentrics).
-    #[arg(long, default_value_t = prtbake::bake::transfer::HIT_CACHE_BUDGET_BYTES >> 20)]
-    hit_cache_mib: u64,
+    /// gather from it; over it they re-trace the same rays instead (about 3×
+    /// slower, same bytes).
+    /// [default: half the memory available at start; 6144 where unknown]
+    #[arg(long)]
+    hit_cache_mib: Option<u64>,
     /// Transfer storage: f32, f16, i16 (per-vertex scale), f16-tinted (grey + per-channel tint), or auto (smallest within --max-error,
     /// or within 0.1% shaded error without it).
     /// [default: f32, or auto with --max-error]
@@ -447,7 +448,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         },
         quiet: a.quiet || a.json,
         window_sampling: a.window_sampling,
-        hit_cache_bytes: a.hit_cache_mib.saturating_mul(1 << 20),
+        hit_cache_bytes: a.hit_cache_mib.map_or_else(prtbake::bake::transfer::available_hit_cache_bytes, |mib| mib.saturating_mul(1 << 20)),
         ..BakeParams::default()
     };
     params.check()?;

@@ -18,7 +18,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gather::{encode_hit, Gather, RowBuffer, NO_HIT};
+use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
 use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
 use super::scene::{Batching, RayQuery, Scene};
@@ -40,6 +40,17 @@ const INSIDE_PROBE_RAYS: u32 = 32;
 /// Default largest hit cache kept in memory (bytes, [`BakeParams::hit_cache_bytes`]);
 /// beyond it later bounces re-trace their rays.
 pub const HIT_CACHE_BUDGET_BYTES: u64 = 6 << 30;
+
+/// A hit cache budget for this machine: half the memory available now
+/// (Linux `MemAvailable`), or [`HIT_CACHE_BUDGET_BYTES`] where that is
+/// unknown. The bytes of a bake never depend on it, only its speed.
+pub fn available_hit_cache_bytes() -> u64 {
+    let available_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|info| {
+        let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok()
+    });
+    available_kib.map_or(HIT_CACHE_BUDGET_BYTES, |kib| kib * 1024 / 2)
+}
 
 /// A task's reusable buffers for one point's rays.
 #[derive(Default)]
@@ -243,7 +254,7 @@ pub fn bake_transfer_receivers(
     if !params.quiet {
         if params.bounces > 0 && !use_cache {
             eprintln!(
-                "hit cache: {:.1} GiB needed, {:.1} GiB allowed (--hit-cache-mib): bounces 1-{} re-trace their rays",
+                "hit cache: {:.1} GiB needed, {:.1} GiB allowed (--hit-cache-mib): bounces 1-{} re-trace their rays (same bytes, slower)",
                 cache_bytes as f64 / (1u64 << 30) as f64,
                 params.hit_cache_bytes as f64 / (1u64 << 30) as f64,
                 params.bounces
@@ -647,7 +658,9 @@ impl Pass<'_> {
                 if bounce > 0 {
                     if let (Some(hit), Some(gather)) = (scratch.hits[i], &self.gather) {
                         if self.gathers_from(&hit) {
-                            gather.add_hit(hit.triangle as usize, hit.u, hit.v, ray_weight, result);
+                            // Through the cache's encoding, so the bytes do not depend on whether the cache fit.
+                            let (triangle, u, v) = decode_hit(encode_hit(hit.triangle, hit.u, hit.v));
+                            gather.add_hit(triangle, u, v, ray_weight, result);
                         }
                     }
                     continue;
