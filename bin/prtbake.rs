@@ -99,7 +99,7 @@ struct BakeArgs {
     #[arg(long)]
     window_sampling: bool,
     /// Memory for bounce 0's hit cache (8 bytes a ray), in MiB. Bounces ≥ 1
-    /// gather from it; over it they re-trace the same rays instead (about 3×
+    /// gather from it; over it they re-trace the same rays instead (3–4×
     /// slower, same bytes).
     /// [default: half the memory available at start; 6144 where unknown]
     #[arg(long)]

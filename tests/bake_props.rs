@@ -34,29 +34,35 @@ fn bake_is_identical_for_any_thread_count() {
 /// DC of bounce b = Y00 · f · (ρ_c (1 − f))^b.
 #[test]
 fn re_traced_bounces_equal_cached_gathers_and_match_the_closed_form() {
-    let (mut mesh, f) = shapes::integrating_sphere(3, 0.6, 0.7, shapes::Opening::Window);
-    let albedo = [0.7f32, 0.5, 0.3];
-    mesh.materials[0].albedo = albedo;
-    let params = BakeParams { order: 3, rays: 256, bounces: 2, mode: Mode::Window, store_bounces: true, ..BakeParams::default() };
-    let cached = bake_mesh(&mesh, &params, &[]).unwrap().0;
-    let (traced, surfaces, _) = bake_mesh(&mesh, &BakeParams { hit_cache_bytes: 0, ..params }, &[]).unwrap();
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    for b in 0..=2 {
-        assert_eq!(bits(&cached.bounces[b]), bits(&traced.bounces[b]), "bounce {b}: cached and re-traced differ");
-    }
-    assert_eq!(bits(&cached.total), bits(&traced.total));
-    let coeffs = prtbake::sh::coeff_count(params.order);
-    let wall: Vec<usize> = (0..mesh.vertex_count())
-        .filter(|&i| {
-            (0..mesh.triangle_count()).all(|t| surfaces.window_transmittance[t].is_none() || !mesh.triangle(t).contains(&(i as u32)))
-        })
-        .collect();
-    for b in 0..=2 {
-        for (c, &rho) in albedo.iter().enumerate() {
-            let dc = |i: usize| traced.bounces[b][(i * 3 + c) * coeffs] as f64;
-            let got = wall.iter().map(|&i| dc(i)).sum::<f64>() / wall.len() as f64;
-            let expected = prtbake::verify::Y00 * f * (rho as f64 * (1.0 - f)).powi(b as i32);
-            assert!((got - expected).abs() / expected < 0.01, "bounce {b}, channel {c}: {got} vs {expected}");
+    // Window mode in colour, and open mode through a hole in grey (one
+    // channel; there bounce 0 traces occlusion when nothing is cached).
+    let cap_height = 0.7;
+    for (opening, mode, albedo) in
+        [(shapes::Opening::Window, Mode::Window, [0.7f32, 0.5, 0.3]), (shapes::Opening::Hole, Mode::Open, [0.6f32; 3])]
+    {
+        let (mut mesh, f) = shapes::integrating_sphere(3, 0.6, cap_height, opening);
+        mesh.materials[0].albedo = albedo;
+        let params = BakeParams { order: 3, rays: 256, bounces: 2, mode, store_bounces: true, ..BakeParams::default() };
+        let cached = bake_mesh(&mesh, &params, &[]).unwrap().0;
+        let (traced, surfaces, _) = bake_mesh(&mesh, &BakeParams { hit_cache_bytes: 0, ..params }, &[]).unwrap();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for b in 0..=2 {
+            assert_eq!(bits(&cached.bounces[b]), bits(&traced.bounces[b]), "{mode:?}, bounce {b}: cached and re-traced differ");
+        }
+        assert_eq!(bits(&cached.total), bits(&traced.total));
+        let (coeffs, channels) = (prtbake::sh::coeff_count(params.order), traced.channels);
+        assert_eq!(channels, if mode == Mode::Window { 3 } else { 1 });
+        let touches_window = |i: usize| {
+            (0..mesh.triangle_count()).any(|t| surfaces.window_transmittance[t].is_some() && mesh.triangle(t).contains(&(i as u32)))
+        };
+        let wall: Vec<usize> = (0..mesh.vertex_count()).filter(|&i| mesh.positions[i].y < cap_height && !touches_window(i)).collect();
+        for b in 0..=2 {
+            for (c, &rho) in albedo.iter().enumerate().take(channels) {
+                let dc = |i: usize| traced.bounces[b][(i * channels + c) * coeffs] as f64;
+                let got = wall.iter().map(|&i| dc(i)).sum::<f64>() / wall.len() as f64;
+                let expected = prtbake::verify::Y00 * f * (rho as f64 * (1.0 - f)).powi(b as i32);
+                assert!((got - expected).abs() / expected < 0.01, "{mode:?}, bounce {b}, channel {c}: {got} vs {expected}");
+            }
         }
     }
 }

@@ -68,19 +68,35 @@ impl RowBuffer {
 /// What a bounce gathers from.
 pub(crate) struct Gather<'a> {
     /// Corner indices per triangle (3 per triangle).
-    pub indices: &'a [u32],
+    indices: &'a [u32],
     /// Per-channel albedo per triangle.
-    pub albedo: &'a [[f32; 3]],
+    albedo: &'a [[f32; 3]],
     /// The previous bounce per vertex, `[vertex][source channel][coeff]`.
-    pub rows: &'a [f32],
-    pub coeffs: usize,
+    rows: &'a [f32],
+    coeffs: usize,
     /// Channels of `rows`: 1 when every output channel reads the same row
     /// (bounce 0's colourless transfer), else `channels`.
-    pub source_channels: usize,
+    source_channels: usize,
     /// Channels of the result.
-    pub channels: usize,
-    /// Whether the AVX2 kernel may run (the CPU reported AVX2).
-    pub avx2: bool,
+    channels: usize,
+    /// Whether the AVX2 kernel may run: private, and set only from the CPU's
+    /// report, since running it without AVX2 is undefined behaviour.
+    avx2: bool,
+}
+
+impl<'a> Gather<'a> {
+    /// A gather of `channels` channels from `rows` (`source_channels` per
+    /// vertex), on the AVX2 kernel when this CPU has it.
+    pub(crate) fn new(
+        indices: &'a [u32],
+        albedo: &'a [[f32; 3]],
+        rows: &'a [f32],
+        coeffs: usize,
+        source_channels: usize,
+        channels: usize,
+    ) -> Gather<'a> {
+        Gather { indices, albedo, rows, coeffs, source_channels, channels, avx2: super::bvh8::avx2_available() }
+    }
 }
 
 impl Gather<'_> {
@@ -250,7 +266,16 @@ mod tests {
         let albedo = (0..triangles).map(|_| [0, 1, 2].map(|_| (next() % 1000) as f32 / 1000.0)).collect();
         let mut rows = RowBuffer::zeroed(vertices as usize * source_channels * coeffs);
         rows.as_mut_slice().iter_mut().for_each(|x| *x = (next() % 20001) as f32 / 10000.0 - 1.0);
-        let records = (0..300).map(|_| if next() % 5 == 0 { NO_HIT } else { encode_hit(next() % triangles as u32, 0.3, 0.45) }).collect();
+        let records = (0..300)
+            .map(|_| {
+                let (u, v) = ((next() % 1000) as f32 / 2000.0, (next() % 1000) as f32 / 2000.0);
+                if next() % 5 == 0 {
+                    NO_HIT
+                } else {
+                    encode_hit(next() % triangles as u32, u, v)
+                }
+            })
+            .collect();
         Fixture { indices, albedo, rows, records }
     }
 
@@ -283,11 +308,10 @@ mod tests {
                 let f = fixture(coeffs, source_channels, (coeffs * 10 + channels + source_channels) as u64);
                 let mut outputs = Vec::new();
                 for avx2 in [false, super::super::bvh8::avx2_available()] {
-                    let g =
-                        Gather { indices: &f.indices, albedo: &f.albedo, rows: f.rows.as_slice(), coeffs, source_channels, channels, avx2 };
+                    let g = Gather { avx2, ..Gather::new(&f.indices, &f.albedo, f.rows.as_slice(), coeffs, source_channels, channels) };
                     let count = 64;
                     let weight = 2.0 / 64.0;
-                    // Fixed kernel (orders 1-4) or general, then the general one on its own.
+                    // Fixed kernel (orders 1-5) or general, then the general one on its own.
                     let mut fast = vec![0.0f32; channels * coeffs];
                     g.point(&f.records, count, weight, &mut fast);
                     let mut general = vec![0.0f32; channels * coeffs];
@@ -303,7 +327,7 @@ mod tests {
                             "{coeffs} coeffs, {channels}/{source_channels}: {got} vs {want}"
                         );
                     }
-                    outputs.push(fast);
+                    outputs.push(fast.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
                 }
                 assert_eq!(outputs[0], outputs[1], "AVX2 and scalar kernels differ");
             }

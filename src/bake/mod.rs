@@ -101,7 +101,7 @@ pub struct BakeParams {
     pub quiet: bool,
     /// Largest cache of bounce 0's hits (8 bytes a ray) kept for the later
     /// bounces to gather from; beyond it they re-trace the same rays (about
-    /// 3× slower on the Ferrari) and gather through the same 16-bit
+    /// 3–4× slower on the Ferrari) and gather through the same 16-bit
     /// barycentrics, so the bytes are the same either way (not part of the
     /// bake: never stored).
     #[serde(skip)]

@@ -45,11 +45,20 @@ pub const HIT_CACHE_BUDGET_BYTES: u64 = 6 << 30;
 /// (Linux `MemAvailable`), or [`HIT_CACHE_BUDGET_BYTES`] where that is
 /// unknown. The bytes of a bake never depend on it, only its speed.
 pub fn available_hit_cache_bytes() -> u64 {
-    let available_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|info| {
+    // The host's free memory, and a container's limit where one is set
+    // (cgroup v2, then v1): /proc/meminfo shows the host's even inside one.
+    let read = |path: &str| std::fs::read_to_string(path).ok();
+    let available = read("/proc/meminfo").and_then(|info| {
         let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-        line.split_whitespace().nth(1)?.parse::<u64>().ok()
+        line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib.saturating_mul(1024))
     });
-    available_kib.map_or(HIT_CACHE_BUDGET_BYTES, |kib| kib * 1024 / 2)
+    let container = ["/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"]
+        .iter()
+        .find_map(|path| read(path)?.trim().parse::<u64>().ok());
+    match (available, container) {
+        (None, None) => HIT_CACHE_BUDGET_BYTES,
+        (a, c) => a.unwrap_or(u64::MAX).min(c.unwrap_or(u64::MAX)) / 2,
+    }
 }
 
 /// A task's reusable buffers for one point's rays.
@@ -249,12 +258,11 @@ pub fn bake_transfer_receivers(
     // channel, a third of the bytes of its widened copy).
     let mut source = RowBuffer::zeroed(0);
     let mut source_channels = 1;
-    let avx2 = super::bvh8::avx2_available();
 
     if !params.quiet {
         if params.bounces > 0 && !use_cache {
             eprintln!(
-                "hit cache: {:.1} GiB needed, {:.1} GiB allowed (--hit-cache-mib): bounces 1-{} re-trace their rays (same bytes, slower)",
+                "hit cache: {:.1} GiB needed, {:.1} GiB allowed (--hit-cache-mib): the {} later bounce(s) re-trace their rays (same bytes, slower)",
                 cache_bytes as f64 / (1u64 << 30) as f64,
                 params.hit_cache_bytes as f64 / (1u64 << 30) as f64,
                 params.bounces
@@ -276,15 +284,7 @@ pub fn bake_transfer_receivers(
             items: &items,
             coeffs,
             channels: pass_channels,
-            gather: (bounce > 0).then(|| Gather {
-                indices: &mesh.indices,
-                albedo: &bounce_albedo,
-                rows: source.as_slice(),
-                coeffs,
-                source_channels,
-                channels,
-                avx2,
-            }),
+            gather: (bounce > 0).then(|| Gather::new(&mesh.indices, &bounce_albedo, source.as_slice(), coeffs, source_channels, channels)),
             rejected: &rejected,
             reject_distance: params.inside_distance * scene.diagonal,
             hit_cache: (use_cache && bounce > 0).then_some(hit_cache.as_slice()),
@@ -297,7 +297,7 @@ pub fn bake_transfer_receivers(
         let mut traced = 0u64;
         // Every point of bounce 0 records one hit per ray, at `point · rays`.
         // Each task copies its points' records to their place, so the 8 bytes
-        // a ray of fresh pages fault in on both threads, not in the merge.
+        // a ray of fresh pages fault in on every thread, not in the merge.
         let record_count = |points: usize| if pass.record_hits { points * params.rays as usize } else { 0 };
         let mut new_hits: Vec<u64> = vec![0; record_count(point_count as usize)];
         let mut unfilled_hits = new_hits.as_mut_slice();
@@ -317,8 +317,10 @@ pub fn bake_transfer_receivers(
             let outputs: Vec<TaskOutput> = tasks
                 .into_par_iter()
                 .map(|(task_start, hits)| {
-                    let out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(merge_end), bounce);
+                    let mut out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(merge_end), bounce);
                     hits.copy_from_slice(&out.hits);
+                    // Freed now, not after the merge: a merge's records would otherwise be held twice.
+                    out.hits = Vec::new();
                     progress.add(out.rays);
                     out
                 })
