@@ -186,6 +186,7 @@ pub fn bake_sun_masks(
     let started = Instant::now();
     let words = suns.len().div_ceil(32);
     let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces), params.samples_per_vertex, params.max_per_triangle);
+    super::transfer::check_point_count(layout.sample_count())?;
     let point_count = layout.sample_count() as usize;
     let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
 

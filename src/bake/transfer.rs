@@ -234,6 +234,7 @@ pub fn bake_transfer_receivers(
     let vertex_count = mesh.vertex_count();
     let items = build_items(mesh, surfaces, params, receivers);
     let point_count = items.point_count();
+    check_point_count(point_count)?;
     let mut stats = BakeStats {
         triangles: mesh.triangle_count() as u64,
         vertices: vertex_count as u64,
@@ -419,7 +420,8 @@ fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams, receivers:
             let mut next = 0u32;
             for &c in &counts {
                 first_sample.push(next);
-                next += c;
+                // Saturates past u32: `check_point_count` refuses such a bake.
+                next = next.saturating_add(c);
             }
             Items::Interior { triangles, counts, first_sample }
         }
@@ -460,9 +462,21 @@ pub(crate) fn interior_layout(mesh: &Mesh, triangles: Vec<u32>, samples_per_vert
     let mut next = 0u32;
     for &c in &counts {
         first_sample.push(next);
-        next += c;
+        // Saturates past u32: `check_point_count` refuses such a bake.
+        next = next.saturating_add(c);
     }
     InteriorLayout { triangles, counts, first_sample }
+}
+
+/// Sample points are indexed with `u32`: refuses a bake with more.
+pub(crate) fn check_point_count(points: u64) -> Result<(), BakeError> {
+    if points > u32::MAX as u64 {
+        return Err(BakeError::Params(format!(
+            "{points} sample points, more than the {} this baker indexes: lower the samples per vertex",
+            u32::MAX
+        )));
+    }
+    Ok(())
 }
 
 /// Barycentrics of sample `s` (of `count`) in mesh triangle `t` for a bake
@@ -781,5 +795,15 @@ impl Pass<'_> {
         } else {
             cosine_hemisphere(point.normal, u1, u2)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn point_counts_past_u32_are_refused_not_wrapped() {
+        assert!(super::check_point_count(u32::MAX as u64).is_ok());
+        let error = super::check_point_count(u32::MAX as u64 + 1).unwrap_err().to_string();
+        assert!(error.contains("4294967296 sample points") && error.contains("samples per vertex"), "{error}");
     }
 }
