@@ -1,7 +1,8 @@
 //! Throughput of the baker on a ≥ 500k-triangle scene (the demo cabin at
 //! higher detail) and, when ../shared/data is present, on the Ferrari:
-//! BVH build time, occlusion and closest-hit rays/s on 1 and 2 threads, and a
-//! whole transfer bake. Criterion's "elements/s" are rays per second.
+//! BVH build time, occlusion and closest-hit rays/s on 1 and 2 threads, and
+//! whole transfer bakes (the Ferrari's at order 3 with 3 bounces).
+//! Criterion's "elements/s" are rays per second.
 //!
 //! Run: `cargo bench --bench bake` (add `-- trace` etc. to filter).
 
@@ -120,6 +121,25 @@ fn bench_bake(c: &mut Criterion, name: &str, mesh: &Mesh, window: &[String]) {
     group.finish();
 }
 
+/// Issue 3's whole bake: the Ferrari in window mode, order 3, 3 bounces, 64
+/// rays, 2 threads. Elements/s is the effective rate (rays traced / bake
+/// time), to set against `trace/ferrari/closest_hit/2t`
+/// (`benches/bake_rate.py` pairs the two run by run).
+fn bench_ferrari_bake(c: &mut Criterion, mesh: &Mesh) {
+    let window = ["Glass_Gray".to_string()];
+    let params = BakeParams { order: 3, rays: 64, bounces: 3, mode: Mode::Window, ..BakeParams::default() };
+    let pool = pool(2);
+    let (probe, _, _) = pool.install(|| bake_mesh(mesh, &params, &window).unwrap());
+    let mut group = c.benchmark_group("bake/ferrari");
+    group.sample_size(10);
+    group.measurement_time(std::time::Duration::from_secs_f64(probe.stats.seconds * 12.0));
+    group.throughput(Throughput::Elements(probe.stats.rays_traced));
+    group.bench_function("order3_3bounces_64rays_2t", |b| {
+        b.iter_batched(|| (), |_| pool.install(|| bake_mesh(mesh, &params, &window).unwrap()), BatchSize::PerIteration)
+    });
+    group.finish();
+}
+
 fn benches(c: &mut Criterion) {
     let (cabin, _) = generate_cabin(BIG_DETAIL);
     assert!(cabin.triangle_count() >= 500_000, "{}", cabin.triangle_count());
@@ -130,6 +150,7 @@ fn benches(c: &mut Criterion) {
     match load_mesh(&ferrari, &LoadOptions::default()) {
         Ok(loaded) => {
             bench_scene(c, "ferrari", &loaded.mesh);
+            bench_ferrari_bake(c, &loaded.mesh);
         }
         Err(e) => eprintln!("SKIP ferrari benches: {e}"),
     }
