@@ -552,17 +552,19 @@ impl Pass<'_> {
             match self.items {
                 Items::Vertex { vertices } => {
                     let v = vertices[item] as usize;
-                    let normal = self.mesh.normals[v];
-                    let point = Point {
-                        position: self.mesh.positions[v],
-                        normal,
-                        face_normal: normal,
-                        seed: hash_seed(&[self.params.seed, TAG_DIRECTION, v as u32, u32::MAX]),
-                    };
                     point_result.fill(0.0);
-                    let traced = self.trace_point(&point, item as u64, bounce, false, &mut point_result, &mut scratch, &mut out.hits);
+                    if !self.gather_cached(item as u64, &mut point_result) {
+                        let normal = self.mesh.normals[v];
+                        let point = Point {
+                            position: self.mesh.positions[v],
+                            normal,
+                            face_normal: normal,
+                            seed: hash_seed(&[self.params.seed, TAG_DIRECTION, v as u32, u32::MAX]),
+                        };
+                        let traced = self.trace_point(&point, bounce, false, &mut point_result, &mut scratch, &mut out.hits);
+                        out.traced += traced.0;
+                    }
                     out.rays += self.params.rays as u64;
-                    out.traced += traced.0;
                     out.weights[local] = 1.0;
                     out.sums[local * stride..(local + 1) * stride].copy_from_slice(&point_result);
                 }
@@ -579,16 +581,18 @@ impl Pass<'_> {
                         }
                         let b =
                             triangle_sample(self.params.pattern, self.params.point_seed.unwrap_or(self.params.seed), t, s, counts[item]);
-                        let shading = (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal);
-                        let point = Point {
-                            position: pa * b[0] + pb * b[1] + pc * b[2],
-                            normal: shading,
-                            face_normal,
-                            seed: hash_seed(&[self.params.seed, TAG_DIRECTION, t, s]),
-                        };
                         point_result.fill(0.0);
-                        let (traced, inside) =
-                            self.trace_point(&point, global as u64, bounce, bounce == 0, &mut point_result, &mut scratch, &mut out.hits);
+                        let (traced, inside) = if self.gather_cached(global as u64, &mut point_result) {
+                            (0, false)
+                        } else {
+                            let point = Point {
+                                position: pa * b[0] + pb * b[1] + pc * b[2],
+                                normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
+                                face_normal,
+                                seed: hash_seed(&[self.params.seed, TAG_DIRECTION, t, s]),
+                            };
+                            self.trace_point(&point, bounce, bounce == 0, &mut point_result, &mut scratch, &mut out.hits)
+                        };
                         out.rays += self.params.rays as u64;
                         out.traced += traced;
                         if inside {
@@ -607,16 +611,35 @@ impl Pass<'_> {
         out
     }
 
-    /// Traces the rays of one point for `bounce`, adding the estimate to
+    /// Each ray's weight: directions are drawn ∝ c(n,ω), so 1/N over the
+    /// hemisphere (open mode) or 2/N over the sphere (window mode).
+    #[inline]
+    fn ray_weight(&self) -> f32 {
+        (if self.params.mode == Mode::Window { 2.0 } else { 1.0 }) / self.params.rays as f32
+    }
+
+    /// Bounces ≥ 1 with a hit cache: adds point `point_index`'s estimate from
+    /// its cached hits to `result` and returns true; false when this pass
+    /// traces rays instead (then the point's position and seed are needed).
+    #[inline]
+    fn gather_cached(&self, point_index: u64, result: &mut [f32]) -> bool {
+        let (Some(cache), Some(gather)) = (self.hit_cache, &self.gather) else { return false };
+        let rays = self.params.rays as usize;
+        // This point's records, then the next points' (usually gathered
+        // next), which the gather prefetches into.
+        gather.point(&cache[point_index as usize * rays..], rays, self.ray_weight(), result);
+        true
+    }
+
+    /// Traces the rays of one point for `bounce` (those of bounces ≥ 1 when
+    /// nothing is cached), adding the estimate to
     /// `result` (`[channel][coeff]`). In bounce 0 with caching, appends one
     /// hit record per ray to `hits`. Returns the rays traced through the BVH
     /// and, when `check_inside`, whether the point lies inside geometry (then
     /// `result` is meaningless).
-    #[allow(clippy::too_many_arguments)]
     fn trace_point(
         &self,
         point: &Point,
-        point_index: u64,
         bounce: u32,
         check_inside: bool,
         result: &mut [f32],
@@ -626,17 +649,7 @@ impl Pass<'_> {
         let params = self.params;
         let window_mode = params.mode == Mode::Window;
         let ray_count = params.rays;
-        // Directions are drawn ∝ c(n,ω): each ray weighs 1/N (hemisphere) or 2/N (sphere).
-        let ray_weight = if window_mode { 2.0 } else { 1.0 } / ray_count as f32;
-        if bounce > 0 {
-            if let (Some(cache), Some(gather)) = (self.hit_cache, &self.gather) {
-                // This point's records, then the next points' (usually
-                // gathered next), which the gather prefetches into.
-                let from_here = &cache[(point_index * ray_count as u64) as usize..];
-                gather.point(from_here, ray_count as usize, ray_weight, result);
-                return (0, false);
-            }
-        }
+        let ray_weight = self.ray_weight();
         // The first rays of bounce 0 also decide whether the point lies inside
         // geometry (most of them hit back faces close by): they are traced with
         // closest hit once, and serve both purposes.
