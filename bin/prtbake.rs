@@ -127,6 +127,9 @@ struct BakeArgs {
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
+    /// Replace the output even if it is read-only.
+    #[arg(long)]
+    force: bool,
     /// Stats as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -169,6 +172,9 @@ struct CleanArgs {
     /// Keep one triangle per winding of a doubled sheet (two-sided surfaces).
     #[arg(long)]
     keep_two_sided: bool,
+    /// Replace read-only outputs, and an existing .mtl that prtbake did not write.
+    #[arg(long)]
+    force: bool,
     #[arg(long, value_enum, default_value_t = Up::Y)]
     up: Up,
     /// The report as JSON on stdout.
@@ -254,6 +260,9 @@ struct SunArgs {
     /// Trace without the shadow cache (for measurement; the masks are the same).
     #[arg(long)]
     no_shadow_cache: bool,
+    /// Replace the output even if it is read-only.
+    #[arg(long)]
+    force: bool,
     /// Stats as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -323,15 +332,21 @@ struct ViewArgs {
     json: bool,
 }
 
+// Every subcommand takes negative numbers as values, so `--rays -1` gets a
+// range error ("invalid value") instead of "unexpected argument".
 #[derive(Subcommand)]
 enum Command {
     /// Bake per-vertex SH transfer of a mesh into a bundle.
+    #[command(allow_negative_numbers = true)]
     Bake(BakeArgs),
     /// Repair a mesh for PRT (duplicates, overlaps, cracks, T-junctions, slivers, winding) and report every change.
+    #[command(allow_negative_numbers = true)]
     Clean(CleanArgs),
     /// Bake a day's sun-shadow bits per vertex, with per-step sun and sky, into a bundle.
+    #[command(allow_negative_numbers = true)]
     Sun(SunArgs),
     /// Write a generated scene (the colonnade monument) as .glb or .obj.
+    #[command(allow_negative_numbers = true)]
     Generate {
         /// Scene name: colonnade.
         #[arg(value_parser = ["colonnade"])]
@@ -341,14 +356,19 @@ enum Command {
         /// small (tests), monument (≈620k triangles), million (> 1M vertices).
         #[arg(long, default_value = "monument", value_parser = ["small", "monument", "million"])]
         detail: String,
+        /// Replace read-only outputs, and an existing .mtl that prtbake did not write.
+        #[arg(long)]
+        force: bool,
     },
     /// Show what a bundle holds.
+    #[command(allow_negative_numbers = true)]
     Inspect {
         bundle: PathBuf,
         #[arg(long)]
         json: bool,
     },
     /// Bake analytic scenes and compare with closed forms (exit 1 on failure).
+    #[command(allow_negative_numbers = true)]
     Verify {
         #[arg(long, default_value_t = 1024)]
         rays: u32,
@@ -361,6 +381,7 @@ enum Command {
     },
     /// Sweep rays, direction pattern, sampling, SH order and bounces on analytic scenes and the
     /// demo cabin; write speed-accuracy.csv/.svg and an equal-time summary.
+    #[command(allow_negative_numbers = true)]
     Chart {
         /// Output folder (the cabin reference bake is cached here).
         #[arg(short, long, default_value = "chart-out")]
@@ -374,6 +395,7 @@ enum Command {
         json: bool,
     },
     /// Generate the demo cabin, bake it in window mode and write a bundle and a summary.
+    #[command(allow_negative_numbers = true)]
     Demo {
         /// Output folder.
         #[arg(short, long, default_value = "demo-out")]
@@ -386,8 +408,10 @@ enum Command {
         quiet: bool,
     },
     /// Relight a bundle interactively (wgpu), or headlessly into a PNG with --screenshot.
+    #[command(allow_negative_numbers = true)]
     View(ViewArgs),
     /// Write the bundle's mesh as GLB with transfer and sun masks as _PRT_ vertex attributes.
+    #[command(allow_negative_numbers = true)]
     Export {
         bundle: PathBuf,
         /// GLB to write.
@@ -398,6 +422,9 @@ enum Command {
         layer: String,
         #[arg(long)]
         json: bool,
+        /// Replace the output even if it is read-only.
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -476,11 +503,12 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         json: a.json,
         clean: a.clean.then(CleanParams::cad),
         storage: cli::bake_cmd::StorageRequest { quantize, max_error: a.max_error },
+        force: a.force,
         view_box: match &a.view_box {
             Some(text) => {
                 let view_box = prtbake::bake::cull::ViewBox::parse(text).map_err(anyhow::Error::msg)?;
-                if a.view_points == 0 || a.view_rays == 0 || a.view_rays > 65536 {
-                    anyhow::bail!("--view-points must be ≥ 1 and --view-rays in 1..=65536");
+                if !(1..=MAX_VIEW_POINTS).contains(&a.view_points) || a.view_rays == 0 || a.view_rays > 65536 {
+                    anyhow::bail!("--view-points must be in 1..={MAX_VIEW_POINTS} and --view-rays in 1..=65536");
                 }
                 let params = prtbake::bake::cull::CullParams {
                     points: a.view_points,
@@ -494,6 +522,10 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         },
     })
 }
+
+/// Viewpoints sampled in a view box at most: 65,536 × 65,536 rays is already
+/// 4.3·10⁹ rays, hours on a workstation.
+const MAX_VIEW_POINTS: u32 = 65_536;
 
 fn up_axis(up: Up) -> UpAxis {
     match up {
@@ -525,6 +557,7 @@ fn clean_config(a: CleanArgs) -> anyhow::Result<cli::clean_cmd::CleanConfig> {
         params,
         json: a.json,
         quiet: a.quiet,
+        force: a.force,
     })
 }
 
@@ -618,6 +651,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         window_patterns: a.windows,
         threads: a.threads,
         json: a.json,
+        force: a.force,
     })
 }
 
@@ -626,14 +660,16 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
         Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
         Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
-        Command::Generate { scene: _, output, detail } => cli::generate_cmd::run_colonnade(&output, &detail).map(|_| Outcome::Ok),
+        Command::Generate { scene: _, output, detail, force } => {
+            cli::generate_cmd::run_colonnade(&output, &detail, force).map(|_| Outcome::Ok)
+        }
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
         Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),
-        Command::Export { bundle, output, layer, json } => {
-            cli::export_cmd::run(&bundle, &output, cli::export_cmd::parse_layer(&layer)?, json).map(|_| Outcome::Ok)
+        Command::Export { bundle, output, layer, json, force } => {
+            cli::export_cmd::run(&bundle, &output, cli::export_cmd::parse_layer(&layer)?, json, force).map(|_| Outcome::Ok)
         }
     }
 }
@@ -645,6 +681,10 @@ fn main() -> ExitCode {
     // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    // Ctrl-C or SIGTERM removes this run's temporary outputs and exits 130/143.
+    if let Err(e) = prtbake::files::install_interrupt_cleanup() {
+        eprintln!("warning: cannot install the interrupt handler ({e}); an interrupted run may leave .prtbake-*.tmp files");
     }
     let parsed = match Cli::try_parse() {
         Ok(c) => c,

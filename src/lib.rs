@@ -11,11 +11,11 @@ pub mod bundle;
 pub mod chart;
 pub mod clean;
 pub mod cli;
+pub mod files;
 pub mod fixtures;
 pub mod mesh;
 pub mod sh;
 pub mod sky;
-pub mod util;
 pub mod verify;
 #[cfg(feature = "viewer")]
 pub mod view;

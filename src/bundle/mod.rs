@@ -25,7 +25,6 @@ mod types;
 #[cfg(test)]
 mod tests;
 
-use std::fs;
 use std::path::Path;
 
 pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
@@ -141,15 +140,30 @@ pub fn list_sections(bytes: &[u8]) -> Result<Vec<SectionInfo>, BundleError> {
     Container::parse(bytes).map(|c| c.sections)
 }
 
-/// Encodes `b` and writes it atomically ([`crate::util::write_atomic`]): on
+/// Encodes `b` and writes it atomically ([`crate::files::write_atomic`]): on
 /// failure `path` is untouched.
 pub fn write_bundle(path: &Path, b: &Bundle) -> Result<(), BundleError> {
     let bytes = encode_bundle(b).map_err(|source| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) })?;
-    crate::util::write_atomic(path, &bytes).map_err(|source| BundleError::Io { path: path.to_path_buf(), source })
+    crate::files::write_atomic(path, &bytes).map_err(|source| BundleError::Io { path: path.to_path_buf(), source })
 }
 
 /// Reads and decodes a bundle file; errors carry the path.
 pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
-    let bytes = fs::read(path).map_err(|source| BundleError::Io { path: path.to_path_buf(), source })?;
+    let bytes = read_bundle_bytes(path)?;
     decode_bundle(&bytes).map_err(|source| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) })
+}
+
+/// A bundle file's bytes, read only from a regular file within
+/// [`Limit::Bundle`](crate::files::Limit), and only once its first bytes are
+/// the magic: a 3 GB file of something else is refused after 8 bytes.
+pub fn read_bundle_bytes(path: &Path) -> Result<Vec<u8>, BundleError> {
+    use crate::files::{read::read_head, read_limited, Limit};
+    let io = |source| BundleError::Io { path: path.to_path_buf(), source };
+    let head = read_head(path, Limit::Bundle, MAGIC.len() as u64).map_err(io)?;
+    if head != MAGIC {
+        if let Err(source) = Container::parse(&head) {
+            return Err(BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) });
+        }
+    }
+    read_limited(path, Limit::Bundle).map_err(io)
 }

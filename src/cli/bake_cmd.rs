@@ -8,7 +8,10 @@ use serde_json::json;
 use crate::bake::{self, BakeParams, TransferResult};
 use crate::budget;
 use crate::bundle::{self, Bundle, LayerKind, Quantization, Transfer, TransferLayer};
+use crate::files::Staged;
 use crate::mesh::{Mesh, UpAxis};
+
+use super::Output;
 
 /// A checked `bake` configuration.
 #[derive(Clone, Debug)]
@@ -26,6 +29,8 @@ pub struct BakeConfig {
     pub storage: StorageRequest,
     /// Store only triangles visible from this box (`--view-box`).
     pub view_box: Option<(bake::cull::ViewBox, bake::cull::CullParams)>,
+    /// Replace a read-only output (`--force`).
+    pub force: bool,
 }
 
 /// What the user asked about storage.
@@ -82,8 +87,11 @@ impl StorageRequest {
 
 /// Runs a bake end to end and prints its stats line (or JSON).
 pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
+    let outputs = [Output::new(&config.output, BUNDLE_FORMAT)];
+    super::check_outputs(&[&config.input], &outputs, config.force)?;
+    super::check_threads(config.threads)?;
     let load_start = std::time::Instant::now();
-    let mut mesh = super::load_mesh(&config.input, config.up, config.params.quiet)?;
+    let mut mesh = super::load_mesh(&config.input, config.up, config.params.quiet, &outputs, config.force)?;
     let load_seconds = load_start.elapsed().as_secs_f64();
     let clean_start = std::time::Instant::now();
     let mut meta = json!({ "source": config.input.file_name().map(|n| n.to_string_lossy().to_string()) });
@@ -96,7 +104,9 @@ pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
         mesh = cleaned;
     }
     let clean_seconds = clean_start.elapsed().as_secs_f64();
-    let mut report = bake_to_bundle(&mesh, config, meta)?;
+    let mut staged = Staged::new();
+    let mut report = bake_to_bundle(&mesh, config, meta, &mut staged)?;
+    staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
     report.load_seconds = load_seconds;
     report.clean_seconds = config.clean.is_some().then_some(clean_seconds);
     print_report(&report, config.json)
@@ -118,8 +128,13 @@ pub struct BakeReport {
     pub cull: Option<bake::cull::CullReport>,
 }
 
-/// Bakes `mesh` and writes the bundle named in `config`; `extra_meta` is merged into the metadata.
-pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value) -> anyhow::Result<BakeReport> {
+/// Extensions of a bundle output.
+pub const BUNDLE_FORMAT: &[&str] = &["prtb"];
+
+/// Bakes `mesh` and stages the bundle named in `config` among the command's
+/// outputs (it lands when the caller commits them); `extra_meta` is merged
+/// into the metadata.
+pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value, staged: &mut Staged) -> anyhow::Result<BakeReport> {
     let (result, surfaces, build_seconds, cull) = super::with_threads(config.threads, || bake_maybe_culled(mesh, config))??;
     if config.params.mode == bake::Mode::Window && surfaces.window_triangle_count() == 0 {
         anyhow::bail!(
@@ -160,8 +175,9 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
     };
     let choice = config.storage.choose(&result);
     let bundle = make_bundle_stored(&stored_mesh, &result, &config.params, extra_meta, choice.as_ref());
-    bundle::write_bundle(&config.output, &bundle).context("cannot write the bundle")?;
-    let bundle_bytes = std::fs::metadata(&config.output).map(|m| m.len()).unwrap_or(0);
+    let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
+    staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
+    let bundle_bytes = encoded.len() as u64;
     Ok(BakeReport {
         output: config.output.clone(),
         result,
@@ -278,7 +294,7 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     let s = &report.result.stats;
     if as_json {
         return super::print_json(&json!({
-            "output": report.output,
+            "output": super::json_path(&report.output),
             "order": report.result.order,
             "channels": report.result.channels,
             "stats": s,

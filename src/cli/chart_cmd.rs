@@ -30,16 +30,16 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
     let started = std::time::Instant::now();
     let rows = super::with_threads(threads, || chart::scenes::sweep(size, dir))??;
     let csv_path = dir.join("speed-accuracy.csv");
-    crate::util::write_atomic(&csv_path, chart::to_csv(&rows).as_bytes())
+    crate::files::write_atomic(&csv_path, chart::to_csv(&rows).as_bytes())
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     let svg = chart::plot::render_svg(&rows).map_err(anyhow::Error::msg).context("cannot draw the chart")?;
     let svg_path = dir.join("speed-accuracy.svg");
-    crate::util::write_atomic(&svg_path, svg.as_bytes()).with_context(|| format!("cannot write {}", svg_path.display()))?;
+    crate::files::write_atomic(&svg_path, svg.as_bytes()).with_context(|| format!("cannot write {}", svg_path.display()))?;
     let comparisons: Vec<pareto::Comparison> = COMPARISONS.iter().map(|(s, a, b)| pareto::compare(&rows, s, a, b)).collect();
     let front: Vec<_> = rows.iter().filter(|r| r.pareto).collect();
     let summary = json!({
-        "csv": csv_path,
-        "svg": svg_path,
+        "csv": super::json_path(&csv_path),
+        "svg": super::json_path(&svg_path),
         "bakes": rows.len(),
         "sweep_seconds": started.elapsed().as_secs_f64(),
         "quick": quick,
@@ -47,7 +47,7 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
         "pareto_front": front,
     });
     let summary_path = dir.join("speed-accuracy-summary.json");
-    crate::util::write_atomic(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())
+    crate::files::write_atomic(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())
         .with_context(|| format!("cannot write {}", summary_path.display()))?;
     if as_json {
         super::print_json(&summary)?;

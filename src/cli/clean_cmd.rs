@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
+use super::Output;
 use crate::clean::{clean_mesh, CleanParams, CleanReport};
+use crate::files::Staged;
 use crate::mesh::{Mesh, UpAxis};
 
 /// A checked `clean` configuration.
@@ -18,6 +20,8 @@ pub struct CleanConfig {
     pub params: CleanParams,
     pub json: bool,
     pub quiet: bool,
+    /// Replace read-only outputs, and a `.mtl` prtbake did not write (`--force`).
+    pub force: bool,
 }
 
 /// Cleans `mesh` (loaded from `source`, named in errors).
@@ -25,35 +29,50 @@ pub fn clean_loaded(mesh: &Mesh, params: &CleanParams, source: &Path) -> anyhow:
     clean_mesh(mesh, params).with_context(|| format!("{}: cannot clean", source.display()))
 }
 
-/// Writes `mesh` as OBJ or GLB, chosen by the extension of `path`.
-pub fn write_mesh(path: &Path, mesh: &Mesh) -> anyhow::Result<()> {
-    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-    match extension.as_str() {
-        "obj" => crate::mesh::write_obj(path, mesh)?,
-        "glb" => crate::mesh::write_glb(path, mesh)?,
-        _ => anyhow::bail!("{}: unknown output format {extension:?}: use .obj or .glb", path.display()),
-    }
-    Ok(())
+/// Output formats of a cleaned mesh, by extension.
+const MESH_FORMATS: &[&str] = &["obj", "glb"];
+
+/// Every file `clean` writes: the mesh, the `.mtl` beside an OBJ (replaced
+/// only if prtbake wrote it, unless forced), and the report.
+fn outputs(config: &CleanConfig) -> (Vec<Output<'_>>, Option<PathBuf>) {
+    let is_obj = config.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    let mtl = is_obj.then(|| crate::mesh::mtl_path_for(&config.output));
+    (vec![Output::new(&config.output, MESH_FORMATS)], mtl)
 }
 
 pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
-    // Check the output format before spending time on the clean-up.
-    let extension = config.output.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-    if !matches!(extension.as_deref(), Some("obj" | "glb")) {
-        anyhow::bail!("{}: unknown output format: use .obj or .glb", config.output.display());
+    // Check every output before spending time on the clean-up.
+    let (mut outputs, mtl) = outputs(config);
+    if let Some(mtl) = &mtl {
+        outputs.push(Output { own_marker: Some(crate::mesh::MTL_HEADER.as_bytes()), ..Output::new(mtl, &["mtl"]) });
     }
-    let mesh = super::load_mesh(&config.input, config.up, config.quiet)?;
+    if let Some(report) = &config.report {
+        outputs.push(Output::new(report, &["json"]));
+    }
+    super::check_outputs(&[&config.input], &outputs, config.force)?;
+    let mesh = super::load_mesh(&config.input, config.up, config.quiet, &outputs, config.force)?;
     let (cleaned, report) = clean_loaded(&mesh, &config.params, &config.input)?;
-    write_mesh(&config.output, &cleaned)?;
+    // All outputs land together or none does.
+    let mut staged = Staged::new();
+    if mtl.is_some() {
+        crate::mesh::stage_obj(&mut staged, &config.output, &cleaned)?;
+    } else {
+        crate::mesh::stage_glb(&mut staged, &config.output, &cleaned)?;
+    }
     if let Some(path) = &config.report {
-        crate::util::write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())
+        staged
+            .stage_bytes(path, serde_json::to_string_pretty(&report)?.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
+    staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
     if config.json {
         super::print_json(&serde_json::to_value(&report)?)?;
     } else {
         println!("{}: {}", config.input.display(), report.summary());
-        println!("wrote {}", config.output.display());
+        match &mtl {
+            Some(mtl) => println!("wrote {} (materials in {})", config.output.display(), mtl.display()),
+            None => println!("wrote {}", config.output.display()),
+        }
     }
     Ok(())
 }

@@ -8,8 +8,9 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::bake_cmd::{bake_to_bundle, BakeConfig};
-use super::Outcome;
+use super::{Outcome, Output};
 use crate::bake::{BakeParams, Mode};
+use crate::files::Staged;
 use crate::fixtures::cabin;
 use crate::mesh::UpAxis;
 
@@ -27,7 +28,11 @@ pub fn demo_params(quiet: bool) -> BakeParams {
 pub const DEMO_DETAIL: f32 = 64.0;
 
 pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> anyhow::Result<Outcome> {
+    super::check_threads(threads)?;
     std::fs::create_dir_all(output_dir).with_context(|| format!("cannot create {}", output_dir.display()))?;
+    let bundle_path = output_dir.join("cabin.prtb");
+    let summary_path = output_dir.join("summary.json");
+    super::check_outputs(&[], &[Output::new(&bundle_path, &["prtb"]), Output::new(&summary_path, &["json"])], false)?;
     let started = std::time::Instant::now();
     let (mesh, defects) = cabin::generate_cabin(DEMO_DETAIL);
     if !quiet {
@@ -39,7 +44,7 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
     }
     let config = BakeConfig {
         input: "demo-cabin (generated)".into(),
-        output: output_dir.join("cabin.prtb"),
+        output: bundle_path,
         up: UpAxis::Y,
         params: demo_params(quiet || as_json),
         window_patterns: Vec::new(),
@@ -48,11 +53,14 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         clean: None,
         storage: Default::default(),
         view_box: None,
+        force: false,
     };
-    let report = bake_to_bundle(&mesh, &config, json!({ "source": "demo cabin", "defects_injected": defects, "clean": clean_report }))?;
+    let mut staged = Staged::new();
+    let meta = json!({ "source": "demo cabin", "defects_injected": defects, "clean": clean_report });
+    let report = bake_to_bundle(&mesh, &config, meta, &mut staged)?;
     let s = &report.result.stats;
     let summary = json!({
-        "bundle": report.output,
+        "bundle": super::json_path(&report.output),
         "triangles": s.triangles,
         "vertices": s.vertices,
         "window_triangles": s.window_triangles,
@@ -66,9 +74,10 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         "total_seconds": started.elapsed().as_secs_f64(),
         "bundle_bytes": report.bundle_bytes,
     });
-    let summary_path = output_dir.join("summary.json");
-    crate::util::write_atomic(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())
+    staged
+        .stage_bytes(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())
         .with_context(|| format!("cannot write {}", summary_path.display()))?;
+    staged.commit().with_context(|| format!("cannot write into {}", output_dir.display()))?;
     if as_json {
         super::print_json(&summary)?;
     } else {

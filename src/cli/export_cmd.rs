@@ -19,12 +19,13 @@ pub fn parse_layer(text: &str) -> anyhow::Result<Option<LayerKind>> {
 }
 
 /// Exports the bundle at `input` to the GLB `output`.
-pub fn run(input: &Path, output: &Path, layer: Option<LayerKind>, as_json: bool) -> anyhow::Result<()> {
+pub fn run(input: &Path, output: &Path, layer: Option<LayerKind>, as_json: bool, force: bool) -> anyhow::Result<()> {
+    super::check_outputs(&[input], &[super::Output::new(output, &["glb"])], force)?;
     let b = bundle::read_bundle(input).with_context(|| format!("cannot export {}", input.display()))?;
     let report =
         bundle::export_glb(output, &b, layer).with_context(|| format!("cannot export {} to {}", input.display(), output.display()))?;
     if as_json {
-        return super::print_json(&serde_json::json!({ "output": output, "report": report }));
+        return super::print_json(&serde_json::json!({ "output": super::json_path(output), "report": report }));
     }
     println!(
         "wrote {}: {} vertices, {} triangles, {} _PRT_TRANSFER_ attributes ({}), {} _PRT_SUN_ attributes",

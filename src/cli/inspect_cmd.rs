@@ -9,7 +9,7 @@ use crate::bundle;
 
 /// Describes the bundle at `path` on stdout (JSON with `as_json`).
 pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = bundle::read_bundle_bytes(path)?;
     let sections = bundle::list_sections(&bytes).with_context(|| format!("{}: not a valid bundle", path.display()))?;
     let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", path.display()))?;
     let transfer = b.transfer.as_ref().map(|t| {
@@ -30,7 +30,7 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         })
     });
     let doc = json!({
-        "file": path,
+        "file": super::json_path(path),
         "bytes": bytes.len(),
         "vertices": b.mesh.vertex_count(),
         "triangles": b.mesh.triangle_count(),

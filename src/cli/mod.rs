@@ -13,7 +13,9 @@ pub mod sun_cmd;
 pub mod verify_cmd;
 pub mod view_cmd;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+pub use crate::files::Output;
 
 use anyhow::Context;
 
@@ -26,8 +28,26 @@ pub enum Outcome {
     CheckFailed,
 }
 
+/// The most worker threads a command accepts: four per available core, at
+/// least 8. More only costs memory and start-up (each thread has its own
+/// stack and per-thread buffers), and 100,000 of them exhausted the machine.
+pub fn max_threads() -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    (4 * cores).max(8)
+}
+
+/// Checks `--threads` (0 = every core) against [`max_threads`].
+pub fn check_threads(threads: usize) -> anyhow::Result<()> {
+    let max = max_threads();
+    if threads > max {
+        anyhow::bail!("--threads {threads}: at most {max} (4 per available core); 0 uses every core");
+    }
+    Ok(())
+}
+
 /// Runs `f` on a rayon pool of `threads` threads (0 = all cores).
 pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> anyhow::Result<T> {
+    check_threads(threads)?;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start the thread pool")?;
     Ok(pool.install(f))
 }
@@ -49,13 +69,32 @@ pub fn conventions() -> serde_json::Value {
     })
 }
 
-/// Loads a mesh file with the path in every error.
-pub fn load_mesh(path: &Path, up: crate::mesh::UpAxis, quiet: bool) -> anyhow::Result<crate::mesh::Mesh> {
+/// Loads a mesh file with the path in every error, prints its warnings, and
+/// refuses `outputs` that are any file the loader read (`.mtl` libraries,
+/// glTF buffers), as [`check_outputs`] does for the mesh file itself.
+pub fn load_mesh(path: &Path, up: crate::mesh::UpAxis, quiet: bool, outputs: &[Output], force: bool) -> anyhow::Result<crate::mesh::Mesh> {
     let loaded = crate::mesh::load_mesh(path, &crate::mesh::LoadOptions { up })?;
     if !quiet {
         for w in &loaded.warnings {
             eprintln!("warning: {}: {w}", path.display());
         }
     }
+    let mut inputs: Vec<&Path> = vec![path];
+    inputs.extend(loaded.sources.iter().map(PathBuf::as_path));
+    check_outputs(&inputs, outputs, force)?;
     Ok(loaded.mesh)
+}
+
+/// Refuses (exit 2, before any work) outputs that are inputs or each other,
+/// not regular files, of the wrong extension, or read-only without `--force`
+/// ([`crate::files::outputs`]).
+pub fn check_outputs(inputs: &[&Path], outputs: &[Output], force: bool) -> anyhow::Result<()> {
+    crate::files::check_outputs(inputs, outputs, force)?;
+    Ok(())
+}
+
+/// A path for JSON output: lossy where it is not UTF-8 (serde refuses such
+/// paths, and a report must not fail on a file name).
+pub fn json_path(path: &Path) -> serde_json::Value {
+    serde_json::Value::String(path.to_string_lossy().into_owned())
 }

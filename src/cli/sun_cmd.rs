@@ -14,7 +14,12 @@ use serde_json::json;
 
 use crate::bake::{self, BuildQuality, Mode, Scene, SunMasks, SunParams, Surfaces};
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
+use crate::files::read::read_head;
+use crate::files::{read_limited, Limit};
 use crate::mesh::UpAxis;
+
+use super::bake_cmd::BUNDLE_FORMAT;
+use super::Output;
 use crate::sky::{self, LocalDate, Site, SkyFrame, StepSpec};
 
 /// Where the sun's directions come from.
@@ -52,6 +57,8 @@ pub struct SunConfig {
     pub window_patterns: Vec<String>,
     pub threads: usize,
     pub json: bool,
+    /// Replace a read-only output (`--force`).
+    pub force: bool,
 }
 
 /// What `sun` reports.
@@ -72,11 +79,8 @@ pub fn run(config: &SunConfig) -> anyhow::Result<()> {
 }
 
 fn is_bundle(path: &Path) -> anyhow::Result<bool> {
-    use std::io::Read;
-    let mut head = [0u8; 8];
-    let mut file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let n = file.read(&mut head).with_context(|| format!("cannot read {}", path.display()))?;
-    Ok(n == 8 && head == bundle::MAGIC)
+    let head = read_head(path, Limit::Bundle, 8).with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(head == bundle::MAGIC)
 }
 
 fn is_obj(path: &Path) -> bool {
@@ -87,7 +91,15 @@ fn is_obj(path: &Path) -> bool {
 pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     let quiet = config.params.quiet;
     let input = &config.input;
+    super::check_threads(config.threads)?;
     let input_was_bundle = is_bundle(input)?;
+    // `sun B.prtb -o B.prtb` is the documented in-place update; every other
+    // overlap of an output with an input is refused.
+    let outputs = [Output { may_be_input: input_was_bundle, ..Output::new(&config.output, BUNDLE_FORMAT) }];
+    super::check_outputs(&[input], &outputs, config.force)?;
+    if let SunSource::Directions(csv) = &config.source {
+        super::check_outputs(&[csv], &[Output::new(&config.output, BUNDLE_FORMAT)], config.force)?;
+    }
     // The bake's world is +Y up; user vectors come in the input's axes.
     let file_up = if input_was_bundle {
         if config.up == UpAxis::Z {
@@ -100,11 +112,11 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         UpAxis::Y
     };
     let (mesh, original_bytes) = if input_was_bundle {
-        let bytes = std::fs::read(input).with_context(|| format!("cannot read {}", input.display()))?;
+        let bytes = read_limited(input, Limit::Bundle).with_context(|| format!("cannot read {}", input.display()))?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
         (b.mesh, Some((bytes, b.meta)))
     } else {
-        (super::load_mesh(input, config.up, quiet)?, None)
+        (super::load_mesh(input, config.up, quiet, &outputs, config.force)?, None)
     };
     let up = Vec3::Y;
     let north = match config.north {
@@ -128,7 +140,8 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
                 sky::day_steps(site, &timeline, sky::DEFAULT_DELTA_T_S, &frame)
             }
             SunSource::Directions(path) => {
-                let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+                let bytes = read_limited(path, Limit::Text).with_context(|| format!("cannot read {}", path.display()))?;
+                let text = String::from_utf8(bytes).map_err(|e| anyhow::anyhow!("{}: not UTF-8 text ({e})", path.display()))?;
                 let directions = sky::parse_directions(&text, bake::sun::MAX_SUN_STEPS)
                     .map_err(|e| anyhow::anyhow!("{}:{}: {}", path.display(), e.line, e.message))?;
                 let world: Vec<Vec3> = directions.into_iter().map(|d| file_up.to_y_up(d)).collect();
@@ -166,7 +179,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
                 meta = json!({ "previous_meta": meta, "sun": sun_meta });
             }
             let encoded = bundle::encode_with_sun(&bytes, &meta, &series).with_context(|| format!("cannot encode {}", output.display()))?;
-            crate::util::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
+            crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
         }
         None => {
             let meta = json!({
@@ -229,7 +242,7 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
     let s = &report.masks.stats;
     if as_json {
         return super::print_json(&json!({
-            "output": report.output,
+            "output": super::json_path(&report.output),
             "added_to_bundle": report.input_was_bundle,
             "stats": s,
             "sky_seconds": report.sky_seconds,

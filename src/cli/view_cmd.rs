@@ -61,6 +61,11 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     use crate::view::{self, Camera, LayerSelection, LightingSource, ToneMap, ToneOperator, ViewState};
 
     let path = &config.bundle;
+    if let Some(shot) = &config.screenshot {
+        let mut inputs = vec![path.as_path()];
+        inputs.extend(config.env.as_deref());
+        super::check_outputs(&inputs, &[super::Output::new(shot, &["png"])], false)?;
+    }
     let bundle = crate::bundle::read_bundle(path).with_context(|| format!("cannot view {}", path.display()))?;
     let transfer = bundle.transfer.as_ref().with_context(|| format!("{}: the bundle has no transfer to shade", path.display()))?;
     let order = transfer.order as usize;

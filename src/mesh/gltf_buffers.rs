@@ -83,13 +83,15 @@ pub(crate) fn split_glb(bytes: &[u8]) -> Result<GlbChunks<'_>, String> {
 /// Loads the bytes of every buffer of `document`, in buffer order.
 ///
 /// A buffer without `uri` is the GLB binary chunk; `data:...;base64,` URIs are
-/// decoded; other URIs are percent-decoded and read relative to `base_dir`. Each
+/// decoded; other URIs are percent-decoded and read relative to `base_dir` (only
+/// regular files, at most `byteLength` bytes; their paths are added to `sources`). Each
 /// result is checked to hold at least `byteLength` bytes and cut to exactly that.
 pub(crate) fn load_buffers<'a>(
     document: &gltf::Document,
     glb_bin: Option<&'a [u8]>,
     base_dir: &Path,
     path: &Path,
+    sources: &mut Vec<PathBuf>,
 ) -> Result<Vec<Cow<'a, [u8]>>, MeshError> {
     let mut buffers = Vec::with_capacity(document.buffers().len());
     for buffer in document.buffers() {
@@ -104,7 +106,11 @@ pub(crate) fn load_buffers<'a>(
             }
             gltf::buffer::Source::Uri(uri) => {
                 let file = resolve_relative_uri(uri, base_dir).map_err(|e| MeshError::gltf(path, format!("buffer {index}: {e}")))?;
-                match std::fs::read(&file) {
+                // Never read past the declared length: a uri naming /dev/zero or a
+                // FIFO is refused, and a huge file is read only as far as needed.
+                let declared = buffer.length() as u64;
+                sources.push(file.clone());
+                match crate::files::read::read_head(&file, crate::files::Limit::Mesh, declared) {
                     Ok(bytes) => Cow::Owned(bytes),
                     Err(source) => return Err(MeshError::MissingBuffer { path: path.to_path_buf(), buffer: index, file, source }),
                 }

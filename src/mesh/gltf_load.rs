@@ -49,7 +49,12 @@ const GEOMETRY_NEUTRAL_EXTENSIONS: &[&str] = &[
 
 /// Loads a `.gltf` or `.glb` file already read into `bytes`. `path` is used for
 /// messages and to resolve external buffers. Non-fatal problems go to `warnings`.
-pub(crate) fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Mesh, MeshError> {
+pub(crate) fn load_gltf(
+    path: &Path,
+    bytes: &[u8],
+    warnings: &mut Vec<String>,
+    sources: &mut Vec<std::path::PathBuf>,
+) -> Result<Mesh, MeshError> {
     let (json_bytes, glb_bin) = if is_glb(bytes) {
         let chunks = split_glb(bytes).map_err(|e| MeshError::gltf(path, e))?;
         (chunks.json, chunks.bin)
@@ -62,7 +67,7 @@ pub(crate) fn load_gltf(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -
     let base_color_given = probe_base_color_factors(json_bytes);
     let document = gltf::Document::from_json_without_validation(root);
     let base_dir = path.parent().unwrap_or(Path::new("."));
-    let buffers = load_buffers(&document, glb_bin, base_dir, path)?;
+    let buffers = load_buffers(&document, glb_bin, base_dir, path, sources)?;
     let materials = convert_materials(&document, &base_color_given);
     let root = document.as_json();
 

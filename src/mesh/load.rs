@@ -41,6 +41,9 @@ pub struct LoadOptions {
 pub struct LoadedMesh {
     pub mesh: Mesh,
     pub warnings: Vec<String>,
+    /// Files read besides the mesh file itself (`.mtl` libraries, glTF
+    /// buffers), so a command can refuse to overwrite any of them.
+    pub sources: Vec<std::path::PathBuf>,
 }
 
 /// Loads an `.obj`, `.gltf` or `.glb` file (extension, case-insensitive, decides)
@@ -64,11 +67,12 @@ pub fn load_mesh(path: &Path, options: &LoadOptions) -> Result<LoadedMesh, MeshE
     if !matches!(extension.as_str(), "obj" | "gltf" | "glb") {
         return Err(MeshError::UnsupportedFormat { path: path.to_path_buf(), extension });
     }
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Read { path: path.to_path_buf(), source })?;
-    let mut warnings = Vec::new();
+    let bytes = crate::files::read_limited(path, crate::files::Limit::Mesh)
+        .map_err(|source| MeshError::Read { path: path.to_path_buf(), source })?;
+    let (mut warnings, mut sources) = (Vec::new(), Vec::new());
     let mesh = match extension.as_str() {
-        "obj" => obj::load_obj(path, &bytes, options.up, &mut warnings)?,
-        _ => gltf_load::load_gltf(path, &bytes, &mut warnings)?,
+        "obj" => obj::load_obj(path, &bytes, options.up, &mut warnings, &mut sources)?,
+        _ => gltf_load::load_gltf(path, &bytes, &mut warnings, &mut sources)?,
     };
-    Ok(LoadedMesh { mesh, warnings })
+    Ok(LoadedMesh { mesh, warnings, sources })
 }

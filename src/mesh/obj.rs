@@ -12,7 +12,7 @@
 use std::borrow::Cow;
 use std::cell::RefCell;
 use std::collections::BTreeSet;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
 
@@ -26,17 +26,36 @@ pub(crate) const MTL_TRANSMITTANCE_KEY: &str = "prtbake_transmittance";
 
 /// Loads an OBJ file already read into `bytes`; `.mtl` files are read relative to
 /// `path`'s folder. Positions and normals are rotated to +Y up when `up` is `Z`.
-pub(crate) fn load_obj(path: &Path, bytes: &[u8], up: UpAxis, warnings: &mut Vec<String>) -> Result<Mesh, MeshError> {
+pub(crate) fn load_obj(
+    path: &Path,
+    bytes: &[u8],
+    up: UpAxis,
+    warnings: &mut Vec<String>,
+    sources: &mut Vec<PathBuf>,
+) -> Result<Mesh, MeshError> {
     let (text, latin1) = decode_text(bytes).map_err(|e| MeshError::obj(path, e))?;
     if latin1 {
         warnings.push("the file is not UTF-8; it was read as Latin-1".to_string());
     }
-    let material_names_used = prescan(path, &text)?;
+    let Prescan { used_materials: material_names_used, polylines } = prescan(path, &text)?;
+    // tobj reads `l 1 2 3` as a triangle: polylines have no area, so they are
+    // blanked (keeping line numbers) and skipped, as glTF line primitives are.
+    let text = if polylines.is_empty() { text } else { Cow::Owned(blank_lines(&text, &polylines)) };
+    if !polylines.is_empty() {
+        warnings.push(format!(
+            "{} polyline statement(s) (`l`, first at line {}) skipped: lines have no surface to bake",
+            polylines.len(),
+            polylines[0] + 1
+        ));
+    }
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mtl_warnings = RefCell::new(Vec::new());
+    let mtl_sources = RefCell::new(Vec::new());
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true };
     let (models, tobj_materials) = tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &options, |mtl_path| {
-        let result = load_mtl(&base_dir.join(mtl_path)).and_then(|parsed| parsed.map_err(|e| e.to_string()));
+        let mtl_file = base_dir.join(mtl_path);
+        mtl_sources.borrow_mut().push(mtl_file.clone());
+        let result = load_mtl(&mtl_file).and_then(|parsed| parsed.map_err(|e| e.to_string()));
         if let Err(e) = &result {
             mtl_warnings
                 .borrow_mut()
@@ -44,8 +63,9 @@ pub(crate) fn load_obj(path: &Path, bytes: &[u8], up: UpAxis, warnings: &mut Vec
         }
         result.map_err(|_| tobj::LoadError::GenericFailure)
     })
-    .map_err(|e| MeshError::obj(path, e.to_string()))?;
+    .map_err(|e| MeshError::obj(path, describe_tobj_error(&text, &e)))?;
     warnings.extend(mtl_warnings.into_inner());
+    sources.extend(mtl_sources.into_inner());
     // Errors were reported as they happened, above.
     let tobj_materials = tobj_materials.unwrap_or_default();
 
@@ -124,7 +144,7 @@ pub(crate) fn load_obj(path: &Path, bytes: &[u8], up: UpAxis, warnings: &mut Vec
 
 /// Reads and parses a `.mtl` file with the same text rules as the OBJ.
 fn load_mtl(path: &Path) -> Result<tobj::MTLLoadResult, String> {
-    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let bytes = crate::files::read_limited(path, crate::files::Limit::Materials).map_err(|e| e.to_string())?;
     let (text, _) = decode_text(&bytes)?;
     Ok(tobj::load_mtl_buf(&mut std::io::Cursor::new(text.as_bytes())))
 }
@@ -158,10 +178,64 @@ fn convert_material(material: &tobj::Material) -> Material {
     Material { name: material.name.clone(), albedo, role, transmittance }
 }
 
-/// Checks the text before tobj parses it; returns the material names `usemtl` asks for.
-fn prescan(path: &Path, text: &str) -> Result<BTreeSet<String>, MeshError> {
+/// What the pre-scan found besides errors.
+struct Prescan {
+    /// Material names `usemtl` asks for.
+    used_materials: BTreeSet<String>,
+    /// 0-based indices of `l` (polyline) lines.
+    polylines: Vec<usize>,
+}
+
+/// `text` with the given 0-based lines emptied (line breaks kept).
+fn blank_lines(text: &str, lines: &[usize]) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut next = lines.iter().peekable();
+    for (index, line) in text.split('\n').enumerate() {
+        if index > 0 {
+            out.push('\n');
+        }
+        if next.peek() == Some(&&index) {
+            next.next();
+        } else {
+            out.push_str(line);
+        }
+    }
+    out
+}
+
+/// tobj's error with the line it comes from: tobj reports only the kind, so
+/// the first line its rule for that kind rejects is found again here.
+fn describe_tobj_error(text: &str, error: &tobj::LoadError) -> String {
+    use tobj::LoadError as E;
+    let floats = |words: &[&str], n: usize| words.len() >= n && words[..n].iter().all(|w| w.parse::<f32>().is_ok());
+    let corner_ok = |corner: &str| {
+        let mut parts = corner.split('/');
+        parts.next().is_some_and(|v| v.parse::<isize>().is_ok()) && parts.all(|p| p.is_empty() || p.parse::<isize>().is_ok())
+    };
+    let rejects = |keyword: &str, words: &[&str]| match (error, keyword) {
+        (E::PositionParseError, "v") => !floats(words, 3),
+        (E::ColorParseError, "v") => !(words.len() == 3 || words.len() == 4 || (words.len() == 6 && floats(words, 6))),
+        (E::TexcoordParseError, "vt") => !floats(words, 2),
+        (E::NormalParseError, "vn") => !floats(words, 3),
+        (E::FaceParseError, "f") => !words.iter().all(|c| corner_ok(c)),
+        _ => false,
+    };
+    for (index, line) in text.split('\n').enumerate() {
+        let mut words = line.split_whitespace();
+        let Some(keyword) = words.next() else { continue };
+        let rest: Vec<&str> = words.collect();
+        if rejects(keyword, &rest) {
+            return format!("line {}: {error} in {:?}", index + 1, line.trim());
+        }
+    }
+    error.to_string()
+}
+
+/// Checks the text before tobj parses it.
+fn prescan(path: &Path, text: &str) -> Result<Prescan, MeshError> {
     let mut counts = [0usize; 3]; // v, vt, vn defined so far
     let mut used_materials = BTreeSet::new();
+    let mut polylines = Vec::new();
     for (line_index, line) in text.split('\n').enumerate() {
         let line_number = line_index + 1;
         let mut words = line.split_whitespace();
@@ -179,7 +253,8 @@ fn prescan(path: &Path, text: &str) -> Result<BTreeSet<String>, MeshError> {
             }
             Some("vt") => counts[1] += 1,
             Some("vn") => counts[2] += 1,
-            Some("f") | Some("l") => {
+            Some("l") => polylines.push(line_index),
+            Some("f") => {
                 for corner in words {
                     check_face_corner(corner, &counts).map_err(|e| MeshError::obj(path, format!("line {line_number}: {e}")))?;
                 }
@@ -193,7 +268,7 @@ fn prescan(path: &Path, text: &str) -> Result<BTreeSet<String>, MeshError> {
             _ => {}
         }
     }
-    Ok(used_materials)
+    Ok(Prescan { used_materials, polylines })
 }
 
 /// Checks one face corner `v[/vt[/vn]]` against the element counts so far. Numbers
@@ -217,6 +292,38 @@ fn check_face_corner(corner: &str, counts: &[usize; 3]) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn load(text: &str) -> Result<(Mesh, Vec<String>), MeshError> {
+        let mut warnings = Vec::new();
+        let mesh = load_obj(Path::new("t.obj"), text.as_bytes(), UpAxis::Y, &mut warnings, &mut Vec::new())?;
+        Ok((mesh, warnings))
+    }
+
+    #[test]
+    fn polylines_are_skipped_not_baked_as_triangles() {
+        let vertices = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n";
+        let only_lines = format!("{vertices}l 1 2 3\nl 2 3 4\nl 1 2\nl 3 4 1 2\nl 1 3\nl 2 4\n");
+        let e = load(&only_lines).unwrap_err().to_string();
+        assert!(e.contains("no triangles"), "{e}");
+        let (mesh, warnings) = load(&format!("{vertices}l 1 2 3 4\nf 1 2 3\n")).unwrap();
+        assert_eq!(mesh.triangle_count(), 1);
+        assert!(warnings.iter().any(|w| w.contains("1 polyline statement(s) (`l`, first at line 5) skipped")), "{warnings:?}");
+    }
+
+    #[test]
+    fn tobj_errors_name_their_line() {
+        let cases = [
+            ("v 0 0 0\nv 1 x 0\nv 0 1 0\nf 1 2 3\n", "line 2: "),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0\nf 1 2 3\n", "line 4: "),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 1\nf 1 2 3\n", "line 4: "),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 a 3\n", "line 5: "),
+            ("v 0 0 0\nv 1 0 0 1 1\nv 0 1 0\nf 1 2 3\n", "line 2: "),
+        ];
+        for (text, needle) in cases {
+            let e = load(text).err().unwrap_or_else(|| panic!("{text:?} loaded")).to_string();
+            assert!(e.contains(needle), "{text:?}: {e}");
+        }
+    }
 
     #[test]
     fn face_corners_are_checked_against_counts_so_far() {

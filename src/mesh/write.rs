@@ -9,16 +9,30 @@
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde_json::{json, Value};
 
 use super::obj::{MTL_ROLE_KEY, MTL_TRANSMITTANCE_KEY};
 use super::{Material, MaterialRole, Mesh, MeshError};
+use crate::files::Staged;
 
-/// Writes `path` atomically ([`crate::util::write_atomic_with`]).
-fn write_atomically(path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
-    crate::util::write_atomic_with(path, fill).map_err(|source| MeshError::Write { path: path.to_path_buf(), source })
+/// Stages `path`'s content among a command's outputs ([`Staged`]).
+fn stage_file(staged: &mut Staged, path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<(), MeshError> {
+    staged.stage(path, fill).map_err(|source| MeshError::Write { path: path.to_path_buf(), source })
+}
+
+/// Renames a writer's staged files into place.
+fn commit(staged: Staged, path: &Path) -> Result<(), MeshError> {
+    staged.commit().map_err(|source| MeshError::Write { path: path.to_path_buf(), source })
+}
+
+/// The `.mtl` that [`write_obj`] writes beside `path` (beside the file a
+/// symbolic link points to, named after it, as `mtllib` refers to it).
+pub fn mtl_path_for(path: &Path) -> PathBuf {
+    let target = crate::files::outputs::final_target(path).unwrap_or_else(|_| path.to_path_buf());
+    let stem = target.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
+    target.with_file_name(format!("{stem}.mtl"))
 }
 
 fn check_writable(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
@@ -45,15 +59,27 @@ fn obj_name(name: &str) -> String {
 /// kept. The `.mtl` has `Kd` per material plus `prtbake_role` /
 /// `prtbake_transmittance` keys. Refuses a mesh that fails [`Mesh::validate`].
 pub fn write_obj(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
-    check_writable(path, mesh)?;
-    let stem = path.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
-    let mtl_name = format!("{stem}.mtl");
-    write_atomically(&path.with_file_name(&mtl_name), |w| write_mtl_text(w, &mesh.materials))?;
-    write_atomically(path, |w| write_obj_text(w, mesh, &mtl_name))
+    let mut staged = Staged::new();
+    stage_obj(&mut staged, path, mesh)?;
+    commit(staged, path)
 }
 
+/// [`write_obj`] into a command's staged outputs: the OBJ and its `.mtl`
+/// land together with the command's other outputs, or not at all.
+pub fn stage_obj(staged: &mut Staged, path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    check_writable(path, mesh)?;
+    let mtl_path = mtl_path_for(path);
+    let mtl_name = mtl_path.file_name().map_or_else(|| "mesh.mtl".into(), |n| n.to_string_lossy().into_owned());
+    stage_file(staged, &mtl_path, |w| write_mtl_text(w, &mesh.materials))?;
+    stage_file(staged, path, |w| write_obj_text(w, mesh, &mtl_name))
+}
+
+/// First line of every `.mtl` prtbake writes: an existing `.mtl` without it is
+/// not replaced unless forced.
+pub const MTL_HEADER: &str = "# written by prtbake";
+
 fn write_mtl_text(w: &mut impl Write, materials: &[Material]) -> std::io::Result<()> {
-    writeln!(w, "# written by prtbake")?;
+    writeln!(w, "{MTL_HEADER}")?;
     for material in materials {
         let [r, g, b] = material.albedo;
         writeln!(w, "\nnewmtl {}\nKd {r} {g} {b}", obj_name(&material.name))?;
@@ -180,6 +206,11 @@ pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
     write_glb_with(path, mesh, &[], None)
 }
 
+/// [`write_glb`] into a command's staged outputs.
+pub fn stage_glb(staged: &mut Staged, path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    stage_glb_with(staged, path, mesh, &[], None)
+}
+
 /// Per-vertex values written as an application-specific glTF vertex attribute.
 ///
 /// The semantic must start with `_` (glTF 2.0 §3.7.2.1); it is stored with the
@@ -250,6 +281,19 @@ impl CustomAttribute {
 /// not start with `_` or repeat, lengths that do not match the vertex count,
 /// and non-finite floats.
 pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute], extras: Option<Value>) -> Result<(), MeshError> {
+    let mut staged = Staged::new();
+    stage_glb_with(&mut staged, path, mesh, attributes_in, extras)?;
+    commit(staged, path)
+}
+
+/// [`write_glb_with`] into a command's staged outputs.
+pub fn stage_glb_with(
+    staged: &mut Staged,
+    path: &Path,
+    mesh: &Mesh,
+    attributes_in: &[CustomAttribute],
+    extras: Option<Value>,
+) -> Result<(), MeshError> {
     check_writable(path, mesh)?;
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
     for (i, attribute) in attributes_in.iter().enumerate() {
@@ -334,7 +378,7 @@ pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute
         document["extensionsUsed"] = json!(["KHR_materials_transmission"]);
     }
     let glb = assemble_glb(document.to_string().into_bytes(), bin.bytes).ok_or_else(too_large)?;
-    write_atomically(path, |w| w.write_all(&glb))
+    stage_file(staged, path, |w| w.write_all(&glb))
 }
 
 /// Frames JSON and BIN chunks as GLB: JSON padded with spaces and BIN with zeros

@@ -67,7 +67,7 @@ const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
 /// 16384×8192 pixels.
 pub fn load_equirect(path: &Path) -> Result<EquirectImage, EnvMapError> {
     let owned = || path.to_path_buf();
-    let bytes = std::fs::read(path).map_err(|source| match source.kind() {
+    let bytes = crate::files::read_limited(path, crate::files::Limit::Image).map_err(|source| match source.kind() {
         std::io::ErrorKind::NotFound => EnvMapError::NotFound { path: owned() },
         _ => EnvMapError::Io { path: owned(), source },
     })?;

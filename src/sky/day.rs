@@ -115,6 +115,8 @@ pub struct DirectionsError {
 /// more than `max_steps` directions.
 pub fn parse_directions(text: &str, max_steps: usize) -> Result<Vec<Vec3>, DirectionsError> {
     let mut out = Vec::new();
+    // Spreadsheets often start a UTF-8 CSV with a byte-order mark.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let content = raw.split('#').next().unwrap_or("").trim();
@@ -133,8 +135,10 @@ pub fn parse_directions(text: &str, max_steps: usize) -> Result<Vec<Vec3>, Direc
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| DirectionsError { line, message: format!("{field:?} is not a finite number") })?;
         }
-        let d = Vec3::from(v)
+        // Normalised in f64: 1e30² overflows f32, and a long vector is still a direction.
+        let d = glam::DVec3::from(v.map(f64::from))
             .try_normalize()
+            .map(|d| d.as_vec3())
             .ok_or_else(|| DirectionsError { line, message: format!("direction {content:?} has no length") })?;
         if out.len() == max_steps {
             return Err(DirectionsError { line, message: format!("more than {max_steps} directions") });
@@ -159,6 +163,11 @@ mod tests {
     #[test]
     fn csv_rows_parse_and_bad_rows_name_their_line() {
         let d = parse_directions("# sun\n0, 2, 0\n\n1,1,0 # east-ish\n", 1024).unwrap();
+        // A byte-order mark and huge finite components are fine.
+        let bom = parse_directions("\u{feff}0,1,0\n1e30,1e30,1e30\n", 1024).unwrap();
+        assert_eq!(bom[0], Vec3::Y);
+        assert!((bom[1] - Vec3::splat(1.0 / 3f32.sqrt())).length() < 1e-6, "{:?}", bom[1]);
+        assert!(parse_directions("0,0,0\n", 1024).unwrap_err().message.contains("no length"));
         assert_eq!(d.len(), 2);
         assert!((d[0] - Vec3::Y).length() < 1e-7);
         assert!((d[1].length() - 1.0).abs() < 1e-6);

@@ -47,7 +47,7 @@ impl Image {
     pub fn write_png(&self, path: &Path) -> Result<(), ViewError> {
         let error = |message: String| ViewError::Write { path: path.to_path_buf(), message };
         let bytes = self.encode_png().map_err(error)?;
-        crate::util::write_atomic(path, &bytes).map_err(|e| error(e.to_string()))
+        crate::files::write_atomic(path, &bytes).map_err(|e| error(e.to_string()))
     }
 }
 

@@ -1,0 +1,128 @@
+//! Bounded reads of input files. Every loader reads through [`read_limited`],
+//! which refuses anything that is not a regular file (after following links)
+//! and anything larger than the limit for its kind, before reading a byte.
+
+use std::io::Read;
+use std::path::Path;
+
+/// The largest input of each kind prtbake reads (docs/safety.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Limit {
+    /// A mesh file (.obj, .gltf, .glb) or a glTF external buffer: 8 GiB.
+    Mesh,
+    /// A `.mtl` material library: 256 MiB.
+    Materials,
+    /// A bundle (.prtb): 32 GiB.
+    Bundle,
+    /// An environment map (.exr, .hdr): 4 GiB.
+    Image,
+    /// A small text input (a CSV of sun directions): 16 MiB.
+    Text,
+}
+
+impl Limit {
+    pub fn bytes(self) -> u64 {
+        match self {
+            Limit::Mesh => 8 << 30,
+            Limit::Materials => 256 << 20,
+            Limit::Bundle => 32 << 30,
+            Limit::Image => 4 << 30,
+            Limit::Text => 16 << 20,
+        }
+    }
+}
+
+/// What a non-regular file is, for the error message.
+pub(super) fn kind_of(file_type: std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if file_type.is_fifo() {
+            return "a FIFO";
+        }
+        if file_type.is_char_device() {
+            return "a character device";
+        }
+        if file_type.is_block_device() {
+            return "a block device";
+        }
+        if file_type.is_socket() {
+            return "a socket";
+        }
+    }
+    if file_type.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
+fn invalid(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidInput, message)
+}
+
+/// Checks that `path` is a regular file (links followed) of at most `limit`
+/// bytes, and returns its size.
+pub fn check_regular(path: &Path, limit: Limit) -> std::io::Result<u64> {
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() {
+        return Err(invalid(format!("is {}, not a regular file", kind_of(meta.file_type()))));
+    }
+    if meta.len() > limit.bytes() {
+        return Err(invalid(format!("is {} bytes, over the {} byte limit for this kind of input", meta.len(), limit.bytes())));
+    }
+    Ok(meta.len())
+}
+
+/// Reads a whole regular file of at most `limit` bytes. Never reads more
+/// than the size checked first, even if the file grows meanwhile.
+pub fn read_limited(path: &Path, limit: Limit) -> std::io::Result<Vec<u8>> {
+    let size = check_regular(path, limit)?;
+    read_prefix(path, size)
+}
+
+/// Reads at most `max` bytes from the start of `path` (a regular file
+/// within `limit`): e.g. a header to check before the body is read.
+pub fn read_head(path: &Path, limit: Limit, max: u64) -> std::io::Result<Vec<u8>> {
+    let size = check_regular(path, limit)?;
+    read_prefix(path, size.min(max))
+}
+
+fn read_prefix(path: &Path, len: u64) -> std::io::Result<Vec<u8>> {
+    let file = std::fs::File::open(path)?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(len).read_to_end(&mut bytes)?;
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regular_files_read_whole_and_others_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("a.obj");
+        std::fs::write(&file, "v 0 0 0\n").unwrap();
+        assert_eq!(read_limited(&file, Limit::Mesh).unwrap(), b"v 0 0 0\n");
+        assert_eq!(read_head(&file, Limit::Mesh, 3).unwrap(), b"v 0");
+        let e = read_limited(dir.path(), Limit::Mesh).unwrap_err();
+        assert!(e.to_string().contains("a directory"), "{e}");
+        #[cfg(unix)]
+        {
+            let e = read_limited(Path::new("/dev/zero"), Limit::Mesh).unwrap_err();
+            assert!(e.to_string().contains("character device"), "{e}");
+        }
+    }
+
+    #[test]
+    fn files_over_the_limit_are_refused_before_reading() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("big.csv");
+        // A sparse file: its size costs no disk.
+        let f = std::fs::File::create(&file).unwrap();
+        f.set_len(Limit::Text.bytes() + 1).unwrap();
+        let e = read_limited(&file, Limit::Text).unwrap_err();
+        assert!(e.to_string().contains("over the 16777216 byte limit"), "{e}");
+    }
+}
