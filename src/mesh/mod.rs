@@ -19,6 +19,8 @@ mod write;
 #[cfg(test)]
 mod corpus_tests;
 #[cfg(test)]
+mod fuzz_tests;
+#[cfg(test)]
 mod load_tests;
 
 pub use error::MeshError;
