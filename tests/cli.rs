@@ -127,3 +127,24 @@ fn draco_file_is_refused_by_name() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("KHR_draco_mesh_compression"));
 }
+
+/// Glass chosen by `--window PATTERN=TAU` is stored as a window-role material
+/// with that transmittance, so the bundle says which glass was a window.
+#[test]
+fn window_patterns_are_stored_as_material_roles() {
+    let dir = Scratch::new("roles");
+    let obj = dir.path("g.obj");
+    std::fs::write(
+        &obj,
+        "mtllib g.mtl\nusemtl wall\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nusemtl Glass_Gray\nf 2 3 4\n",
+    )
+    .unwrap();
+    std::fs::write(dir.path("g.mtl"), "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl Glass_Gray\nKd 0.1 0.1 0.1\n").unwrap();
+    let out = dir.path("g.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--window", "Glass_*=0.6", "--rays", "8", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let b = prtbake::bundle::read_bundle(&out).unwrap();
+    let roles: Vec<_> = b.mesh.materials.iter().map(|m| (m.name.as_str(), m.role, m.transmittance)).collect();
+    use prtbake::mesh::MaterialRole::{Opaque, Window};
+    assert_eq!(roles, [("wall", Opaque, 1.0), ("Glass_Gray", Window, 0.6)]);
+}

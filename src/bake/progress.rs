@@ -18,9 +18,11 @@ impl Progress {
     pub fn start(label: String, total: u64, quiet: bool) -> Progress {
         let done = Arc::new(AtomicU64::new(0));
         let finished = Arc::new(AtomicBool::new(false));
+        // The clock starts with the pass, not with the reporter thread.
+        let start = Instant::now();
         let reporter = (!quiet).then(|| {
             let (done, finished) = (done.clone(), finished.clone());
-            std::thread::spawn(move || report_loop(&label, total, &done, &finished))
+            std::thread::spawn(move || report_loop(&label, total, start, &done, &finished))
         });
         Progress { done, finished, reporter }
     }
@@ -41,26 +43,39 @@ impl Drop for Progress {
     }
 }
 
-fn report_loop(label: &str, total: u64, done: &AtomicU64, finished: &AtomicBool) {
-    let start = Instant::now();
+/// A rate is shown only once this much time has passed: over the first
+/// milliseconds one finished task would read as billions of rays a second.
+const MIN_SECONDS_FOR_RATE: f64 = 0.25;
+
+/// `" 12.34 Mrays/s"`-style rate text, or a dash while too early to tell.
+fn rate_text(count: u64, seconds: f64) -> String {
+    if seconds < MIN_SECONDS_FOR_RATE {
+        return "– Mrays/s".to_string();
+    }
+    format!("{:.2} Mrays/s", count as f64 / seconds / 1e6)
+}
+
+fn report_loop(label: &str, total: u64, start: Instant, done: &AtomicU64, finished: &AtomicBool) {
     let mut stderr = std::io::stderr();
     loop {
         let is_finished = finished.load(Ordering::Relaxed);
         let count = done.load(Ordering::Relaxed).min(total);
         let seconds = start.elapsed().as_secs_f64();
         let fraction = if total == 0 { 1.0 } else { count as f64 / total as f64 };
-        let rate = count as f64 / seconds.max(1e-9);
-        let eta = if rate > 0.0 { (total - count) as f64 / rate } else { 0.0 };
+        let eta = if seconds >= MIN_SECONDS_FOR_RATE && count > 0 {
+            format!("{:.0}s left", (total - count) as f64 * seconds / count as f64)
+        } else {
+            "–s left".to_string()
+        };
         let _ = write!(
             stderr,
-            "\r{label}: {:5.1}%  {:.1} Mrays  {:.2} Mrays/s  {:.0}s left   ",
+            "\r{label}: {:5.1}%  {:.1} Mrays  {}  {eta}   ",
             100.0 * fraction,
             count as f64 / 1e6,
-            rate / 1e6,
-            eta
+            rate_text(count, seconds)
         );
         if is_finished {
-            let _ = writeln!(stderr, "\r{label}: done in {seconds:.2}s ({:.2} Mrays/s){:20}", rate / 1e6, "");
+            let _ = writeln!(stderr, "\r{label}: done in {seconds:.2}s ({}){:20}", rate_text(count, seconds), "");
             return;
         }
         let _ = stderr.flush();
@@ -71,5 +86,16 @@ fn report_loop(label: &str, total: u64, done: &AtomicU64, finished: &AtomicBool)
             }
             std::thread::sleep(Duration::from_millis(50));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn no_rate_is_claimed_before_there_is_time_to_measure_it() {
+        assert_eq!(rate_text(1_000_000, 1e-6), "– Mrays/s");
+        assert_eq!(rate_text(5_000_000, 2.0), "2.50 Mrays/s");
     }
 }

@@ -53,6 +53,23 @@ impl Surfaces {
         Ok(Surfaces { window_transmittance, albedo, window_names })
     }
 
+    /// `mesh` with the window role (and the pattern's transmittance) on every
+    /// material that `window_patterns` match by name, so a bundle says which
+    /// glass was a window (`inspect`, the viewer, the panel gather) without
+    /// its patterns. A pattern that matches only group names cannot be a
+    /// material role; META `window_patterns` keeps those.
+    pub fn with_window_roles(mesh: &Mesh, window_patterns: &[String]) -> Result<Mesh, PatternError> {
+        let patterns = window_patterns.iter().map(|p| parse_pattern(p)).collect::<Result<Vec<_>, _>>()?;
+        let mut marked = mesh.clone();
+        for material in &mut marked.materials {
+            if let Some((_, tau)) = patterns.iter().find(|(p, _)| p.matches(&material.name)) {
+                material.role = MaterialRole::Window;
+                material.transmittance = tau.unwrap_or(material.transmittance).clamp(0.0, 1.0);
+            }
+        }
+        Ok(marked)
+    }
+
     /// Number of window triangles.
     pub fn window_triangle_count(&self) -> usize {
         self.window_transmittance.iter().filter(|w| w.is_some()).count()

@@ -174,6 +174,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         None => (std::borrow::Cow::Borrowed(mesh), result),
     };
     let choice = config.storage.choose(&result);
+    let stored_mesh = bake::Surfaces::with_window_roles(&stored_mesh, &config.window_patterns)?;
     let bundle = make_bundle_stored(&stored_mesh, &result, &config.params, extra_meta, choice.as_ref());
     let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;

@@ -93,7 +93,16 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
             anyhow::bail!("--step {k}: the bundle has {} steps (0..{})", sun.step_count(), sun.step_count())
         }
         (Some(_), Some(k), _) => Some(k),
-        (Some(sun), None, Some(time)) => view::lighting::step_nearest_time(sun, crate::sky::time::parse_hhmm(time)?, tz_minutes),
+        (Some(sun), None, Some(time)) => {
+            let step = view::lighting::step_nearest_time(sun, crate::sky::time::parse_hhmm(time)?, tz_minutes);
+            if let Some(k) = step {
+                let shown = view::lighting::step_local_time(sun, k, tz_minutes);
+                if shown != *time && !config.json {
+                    eprintln!("--time {time}: the nearest step of the time lapse is {k}, at {shown}");
+                }
+            }
+            step
+        }
         (Some(sun), None, None) => (sun.step_count() > 0).then_some(sun.step_count() / 2),
     };
     let source = match &config.env {
@@ -134,6 +143,7 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     let Some(screenshot) = &config.screenshot else {
         return view::window::run_window(bundle, scene, state, camera, tz_minutes).map_err(Into::into);
     };
+    quiet_headless_vulkan();
     let gpu = view::Gpu::headless()?;
     let settings = state.frame_settings(bundle.sun.as_ref(), order);
     let (width, height) = size;
@@ -150,7 +160,7 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     };
     if config.json {
         return super::print_json(&json!({
-            "screenshot": screenshot, "width": width, "height": height, "adapter": gpu.adapter_name(),
+            "screenshot": super::json_path(screenshot), "width": width, "height": height, "adapter": gpu.adapter_name(),
             "step": step, "step_local_time": step_time, "camera": camera.to_arg(), "timing": timing,
         }));
     }
@@ -163,3 +173,23 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Without a session, Mesa's Vulkan loader prints "XDG_RUNTIME_DIR is invalid
+/// or not set" (twice) while probing window systems a headless frame never
+/// uses. Point it at a private folder first (only when unset; the viewer's own
+/// threads are not started yet, so changing the environment is safe here).
+#[cfg(all(feature = "viewer", unix))]
+fn quiet_headless_vulkan() {
+    use std::os::unix::fs::PermissionsExt;
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+        return;
+    }
+    // SAFETY: getuid has no preconditions.
+    let dir = std::env::temp_dir().join(format!("prtbake-runtime-{}", unsafe { libc::getuid() }));
+    if std::fs::create_dir_all(&dir).is_ok() && std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)).is_ok() {
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
+#[cfg(all(feature = "viewer", not(unix)))]
+fn quiet_headless_vulkan() {}

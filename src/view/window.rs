@@ -65,7 +65,9 @@ struct App {
 
 /// Opens a window on `bundle` and runs until it is closed.
 pub fn run_window(bundle: Bundle, scene: PreparedScene, state: ViewState, camera: Camera, tz_minutes: i32) -> Result<(), ViewError> {
-    let event_loop = EventLoop::new().map_err(|e| ViewError::Window(format!("cannot open the window system: {e}")))?;
+    let event_loop = EventLoop::new().map_err(|e| {
+        ViewError::Window(format!("cannot open the window system: {e} (without a display, render headlessly with --screenshot OUT.png)"))
+    })?;
     let bounds = scene.bounds;
     let playing = state.step.is_some() && bundle.sun.is_some();
     let mut app = App {
