@@ -455,3 +455,30 @@ fn obj_byte_substitutions_never_panic() {
         }
     }
 }
+
+/// A mesh whose groups and materials share vertices survives OBJ → load with
+/// the same vertices: the writer's one vertex pool and the loader agree (the
+/// loader no longer splits a shared vertex per `o`/`usemtl` block).
+#[test]
+fn obj_round_trip_keeps_shared_vertices() {
+    let (cabin, _) = crate::fixtures::cabin::generate_cabin(8.0);
+    let (cleaned, _) = crate::clean::clean_mesh(&cabin, &crate::clean::CleanParams::cad()).unwrap();
+    assert!(cleaned.groups.len() > 3, "the cabin has several groups");
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let name = "c.obj";
+        let path = dir.path().join(name);
+        write_obj(&path, &cleaned).unwrap();
+        let back = load(&path).unwrap().mesh;
+        assert_eq!(back.triangle_count(), cleaned.triangle_count(), "{name}");
+        assert_eq!(back.vertex_count(), cleaned.vertex_count(), "{name}: vertices split or merged");
+        // The same triangles (as corner positions), whatever the vertex order.
+        let corners = |m: &Mesh| {
+            let mut t: Vec<[[u32; 3]; 3]> =
+                m.indices.chunks_exact(3).map(|c| [0, 1, 2].map(|k| m.positions[c[k] as usize].to_array().map(f32::to_bits))).collect();
+            t.sort_unstable();
+            t
+        };
+        assert!(corners(&back) == corners(&cleaned), "{name}: triangles differ");
+    }
+}

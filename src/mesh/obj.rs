@@ -6,12 +6,16 @@
 //! report vaguely: NaN/infinite vertex positions
 //! (named by vertex number and line) and face indices outside the elements defined
 //! so far (tobj does unchecked `index * 2 + 1` arithmetic on them, which overflows).
+//! tobj gives each object/material block its own copy of the vertices it uses;
+//! a vertex identical in every attribute across blocks is one vertex again, so
+//! `write_obj` → `load_mesh` keeps the vertex count (and a cleaned mesh bakes
+//! the same through OBJ as inline). OBJ `l` polylines are skipped with a warning.
 //! A missing or broken `.mtl` is not fatal: parts fall back to a default grey
 //! material and a warning says why.
 
 use std::borrow::Cow;
 use std::cell::RefCell;
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
@@ -80,6 +84,7 @@ pub(crate) fn load_obj(
     let mut builder = MeshBuilder::new(materials);
     let mut default_material = None;
     let mut unresolved = false;
+    let mut first_vertex: HashMap<VertexKey, u32> = HashMap::new();
 
     for model in &models {
         let mesh = &model.mesh;
@@ -112,24 +117,33 @@ pub(crate) fn load_obj(
         let uvs = (mesh.texcoords.len() == 2 * n).then_some(&mesh.texcoords);
         let colors = (mesh.vertex_color.len() == 3 * n).then_some(&mesh.vertex_color);
 
-        let base = builder.vertex_count();
-        if base.checked_add(n).and_then(|end| u32::try_from(end).ok()).is_none() {
+        if builder.vertex_count().checked_add(n).and_then(|end| u32::try_from(end).ok()).is_none() {
             return Err(MeshError::TooLarge { path: path.to_path_buf(), message: "more than 2^32 vertices".into() });
         }
         builder.reserve(n, mesh.indices.len() / 3);
+        let mut local_to_global = Vec::with_capacity(n);
         for v in 0..n {
             let vec3 = |values: &Vec<f32>| Vec3::new(values[3 * v], values[3 * v + 1], values[3 * v + 2]);
             let position = up.to_y_up(vec3(&mesh.positions));
             let normal = normals.map(|values| up.to_y_up(vec3(values)));
             let uv = uvs.map(|values| Vec2::new(values[2 * v], values[2 * v + 1]));
             let color = colors.map(|values| vec3(values).to_array());
-            builder.push_vertex(position, normal, uv, color);
+            // tobj gives each object/material block its own vertices: a vertex the
+            // file shares between blocks (same position, normal, uv, colour) is
+            // one vertex again, as it is in the file and in a GLB of the same mesh.
+            let key = VertexKey::new(position, normal, uv, color);
+            let next = builder.vertex_count() as u32;
+            let index = *first_vertex.entry(key).or_insert(next);
+            if index == next {
+                builder.push_vertex(position, normal, uv, color);
+            }
+            local_to_global.push(index);
         }
         for triangle in mesh.indices.chunks_exact(3) {
             if triangle.iter().any(|&i| i as usize >= n) {
                 return Err(MeshError::obj(path, format!("object '{}' has a face index past its {n} vertices", model.name)));
             }
-            builder.push_triangle([triangle[0], triangle[1], triangle[2]].map(|i| base as u32 + i), material, group);
+            builder.push_triangle([triangle[0], triangle[1], triangle[2]].map(|i| local_to_global[i as usize]), material, group);
         }
     }
     if unresolved && !material_names_used.is_empty() {
@@ -140,6 +154,26 @@ pub(crate) fn load_obj(
         }
     }
     builder.finish(path, warnings)
+}
+
+/// A vertex's attributes bit for bit, to find the same vertex in two blocks.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+struct VertexKey {
+    position: [u32; 3],
+    normal: Option<[u32; 3]>,
+    uv: Option<[u32; 2]>,
+    color: Option<[u32; 3]>,
+}
+
+impl VertexKey {
+    fn new(position: Vec3, normal: Option<Vec3>, uv: Option<Vec2>, color: Option<[f32; 3]>) -> VertexKey {
+        VertexKey {
+            position: position.to_array().map(f32::to_bits),
+            normal: normal.map(|n| n.to_array().map(f32::to_bits)),
+            uv: uv.map(|t| t.to_array().map(f32::to_bits)),
+            color: color.map(|c| c.map(f32::to_bits)),
+        }
+    }
 }
 
 /// Reads and parses a `.mtl` file with the same text rules as the OBJ.
