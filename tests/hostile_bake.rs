@@ -75,25 +75,71 @@ fn a_gltf_node_scaled_by_1e30_is_refused() {
     assert_refused(&["sun", path_str(&gltf), "-o", path_str(&out), "--quiet", "--steps", "4"], &gltf, &reasons);
 }
 
-/// A bundle the reader accepts (finite positions, valid checksums) with one
-/// position moved to 1e30: `sun` builds its scene from the bundle's mesh.
-#[test]
-fn a_bundle_with_a_position_of_1e30_is_refused_by_sun() {
-    let dir = Scratch::new("hostile-bundle");
+/// Bakes fixtures/scene.obj into `dir`, lets `edit` change the bundle's
+/// mesh, and writes it as `name`: a bundle the reader accepts (finite
+/// positions, valid checksums) for `sun` to build its scene from.
+fn edited_bundle(dir: &Scratch, name: &str, edit: impl FnOnce(&mut prtbake::mesh::Mesh)) -> std::path::PathBuf {
     let obj = dir.path("scene.obj");
     write_scene_obj(&obj);
     let baked = dir.path("baked.prtb");
     let o = prtbake(&["bake", path_str(&obj), "-o", path_str(&baked), "--rays", "8", "--quiet"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mut bundle = prtbake::bundle::read_bundle(&baked).unwrap();
-    bundle.mesh.positions[0] = Vec3::new(1e30, 0.0, 0.0);
-    let hostile = dir.path("far.prtb");
-    prtbake::bundle::write_bundle(&hostile, &bundle).unwrap();
-    prtbake::bundle::read_bundle(&hostile).expect("the reader accepts the bundle");
+    edit(&mut bundle.mesh);
+    let edited = dir.path(name);
+    prtbake::bundle::write_bundle(&edited, &bundle).unwrap();
+    prtbake::bundle::read_bundle(&edited).expect("the reader accepts the bundle");
+    edited
+}
+
+#[test]
+fn a_bundle_with_a_position_of_1e30_is_refused_by_sun() {
+    let dir = Scratch::new("hostile-bundle-far");
+    let far = edited_bundle(&dir, "far.prtb", |mesh| mesh.positions[0] = Vec3::new(1e30, 0.0, 0.0));
     let out = dir.path("out.prtb");
     assert_refused(
-        &["sun", path_str(&hostile), "-o", path_str(&out), "--quiet", "--steps", "4"],
-        &hostile,
+        &["sun", path_str(&far), "-o", path_str(&out), "--quiet", "--steps", "4"],
+        &far,
         &["coordinates up to 1.0e30", TOO_LARGE],
     );
+}
+
+#[test]
+fn every_triangle_a_window_is_refused_by_bake_and_sun() {
+    let dir = Scratch::new("hostile-all-windows");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let out = dir.path("out.prtb");
+    let (input, output) = (path_str(&obj), path_str(&out));
+    let reasons = ["nothing to bake", "every triangle is a window", "no surface receives light"];
+    assert_refused(&["bake", input, "-o", output, "--quiet", "--window", "*"], &obj, &reasons);
+    assert_refused(&["bake", input, "-o", output, "--quiet", "--window", "*", "--view-box", "0,1,0,0,1,0"], &obj, &reasons);
+    assert_refused(&["sun", input, "-o", output, "--quiet", "--steps", "4", "--window", "*"], &obj, &reasons);
+    assert!(!out.exists(), "nothing is written");
+}
+
+#[test]
+fn an_all_degenerate_mesh_is_refused_by_bake_and_sun() {
+    let dir = Scratch::new("hostile-degenerate");
+    let obj = dir.path("collinear.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\n").unwrap();
+    let out = dir.path("out.prtb");
+    let reasons = ["nothing to bake", "all 2 triangles are degenerate (zero area)"];
+    assert_refused(&["bake", path_str(&obj), "-o", path_str(&out), "--quiet"], &obj, &reasons);
+    assert_refused(&["sun", path_str(&obj), "-o", path_str(&out), "--quiet", "--steps", "4"], &obj, &reasons);
+    // A bundle whose mesh collapsed to a point, through sun.
+    let point = edited_bundle(&dir, "point.prtb", |mesh| mesh.positions.iter_mut().for_each(|p| *p = Vec3::ONE));
+    let reasons = ["nothing to bake", "triangles are degenerate (zero area)"];
+    assert_refused(&["sun", path_str(&point), "-o", path_str(&out), "--quiet", "--steps", "4"], &point, &reasons);
+}
+
+#[test]
+fn a_gltf_node_with_a_zero_matrix_is_refused() {
+    let dir = Scratch::new("hostile-gltf-zero");
+    let gltf = dir.path("zero.gltf");
+    write_one_triangle_gltf(&gltf, serde_json::json!({ "matrix": vec![0.0f32; 16] }));
+    let out = dir.path("out.prtb");
+    let reasons = ["nothing to bake", "the only triangle is degenerate (zero area)"];
+    assert_refused(&["bake", path_str(&gltf), "-o", path_str(&out), "--quiet"], &gltf, &reasons);
+    assert_refused(&["sun", path_str(&gltf), "-o", path_str(&out), "--quiet", "--steps", "4"], &gltf, &reasons);
 }

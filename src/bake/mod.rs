@@ -20,7 +20,7 @@ pub use sampling::DirectionPattern;
 pub use scene::{check_extent, BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, SceneError, Traversal, MAX_SCENE_EXTENT};
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
-pub use transfer::{bake_transfer, bake_transfer_receivers};
+pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 
 use crate::sh;
 
@@ -174,6 +174,8 @@ pub enum BakeError {
     Pattern(#[from] surfaces::PatternError),
     #[error(transparent)]
     Scene(#[from] SceneError),
+    #[error(transparent)]
+    NothingToBake(#[from] NothingToBake),
 }
 
 /// What a bake measured.

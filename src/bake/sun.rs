@@ -159,8 +159,9 @@ struct Point {
 /// frame, or `None` when the sun is below the horizon (all bits of that step
 /// are 0). Runs on the current rayon pool; no I/O.
 ///
-/// Errors: bad parameters, a step count outside `1..=1024`, or a day
-/// direction that is not finite and non-zero.
+/// Errors: bad parameters, a step count outside `1..=1024`, a day
+/// direction that is not finite and non-zero, or a mesh on which no
+/// triangle receives light ([`super::NothingToBake`]).
 pub fn bake_sun_masks(
     mesh: &Mesh,
     scene: &Scene,
@@ -185,7 +186,7 @@ pub fn bake_sun_masks(
         .collect::<Result<_, _>>()?;
     let started = Instant::now();
     let words = suns.len().div_ceil(32);
-    let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces), params.samples_per_vertex, params.max_per_triangle);
+    let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces)?, params.samples_per_vertex, params.max_per_triangle);
     super::transfer::check_point_count(layout.sample_count())?;
     let point_count = layout.sample_count() as usize;
     let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
@@ -495,6 +496,23 @@ mod tests {
                     assert!(!m.bit(v, 0), "vertex {v} at {p} outside the pane (floor up {up})");
                 }
             }
+        }
+    }
+
+    /// Sun masks for a floor that is all window or all degenerate are
+    /// refused like its transfer bake: no vertex could ever be lit.
+    #[test]
+    fn masks_where_no_triangle_receives_light_are_refused() {
+        let mut glass = floor(2, 0.0, true);
+        glass.materials[0].role = crate::mesh::MaterialRole::Window;
+        let mut collapsed = floor(2, 0.0, true);
+        collapsed.positions.iter_mut().for_each(|p| *p = Vec3::ZERO);
+        for (mesh, reason) in [(glass, "every triangle is a window"), (collapsed, "triangles are degenerate (zero area)")] {
+            let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+            let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+            let refused = bake_sun_masks(&mesh, &scene, &surfaces, &[Some(Vec3::Y)], &SunParams::default()).err().expect("refused");
+            assert!(matches!(refused, BakeError::NothingToBake(_)), "{refused:?}");
+            assert!(refused.to_string().contains(reason), "{refused}");
         }
     }
 
