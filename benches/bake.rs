@@ -48,11 +48,11 @@ fn pool(threads: usize) -> rayon::ThreadPool {
 fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     let mut group = c.benchmark_group(format!("build/{name}"));
     group.sample_size(10);
-    group.bench_function("sah", |b| b.iter(|| Scene::build(mesh, BuildQuality::Sah)));
-    group.bench_function("ploc", |b| b.iter(|| Scene::build(mesh, BuildQuality::Ploc)));
+    group.bench_function("sah", |b| b.iter(|| Scene::build(mesh, BuildQuality::Sah).unwrap()));
+    group.bench_function("ploc", |b| b.iter(|| Scene::build(mesh, BuildQuality::Ploc).unwrap()));
     group.finish();
 
-    let scene = Scene::build(mesh, BuildQuality::Sah);
+    let scene = Scene::build(mesh, BuildQuality::Sah).unwrap();
     let rays = workload(mesh, &scene);
     let mut group = c.benchmark_group(format!("trace/{name}"));
     group.sample_size(10);
@@ -89,17 +89,17 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: &Mesh) {
     // portable walk and the PLOC tree.
     let pool = pool(1);
     for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
-        let mut forced = Scene::build(mesh, BuildQuality::Sah);
+        let mut forced = Scene::build(mesh, BuildQuality::Sah).unwrap();
         forced.set_batching(Batching { closest_hit: mode, occlusion: mode });
         let mode = format!("{mode:?}").to_lowercase();
         group.bench_function(format!("occlusion_{mode}/1t"), |b| b.iter(|| occlusion(&forced, &pool)));
         group.bench_function(format!("closest_hit_{mode}/1t"), |b| b.iter(|| closest(&forced, &pool)));
     }
-    let mut portable = Scene::build(mesh, BuildQuality::Sah);
+    let mut portable = Scene::build(mesh, BuildQuality::Sah).unwrap();
     portable.set_traversal(Traversal::Portable);
     group.bench_function("occlusion_portable/1t", |b| b.iter(|| occlusion(&portable, &pool)));
     group.bench_function("closest_hit_portable/1t", |b| b.iter(|| closest(&portable, &pool)));
-    let ploc = Scene::build(mesh, BuildQuality::Ploc);
+    let ploc = Scene::build(mesh, BuildQuality::Ploc).unwrap();
     group.bench_function("occlusion_ploc/1t", |b| b.iter(|| occlusion(&ploc, &pool)));
     group.bench_function("closest_hit_ploc/1t", |b| b.iter(|| closest(&ploc, &pool)));
     group.finish();

@@ -19,7 +19,7 @@ fn sun_masks(c: &mut Criterion) {
     };
     let mesh = colonnade(&params);
     let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
-    let scene = Scene::build(&mesh, BuildQuality::Sah);
+    let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
     let frame = SkyFrame { north: sky::default_north(glam::Vec3::Y), up: glam::Vec3::Y, turbidity: 3.0, sky_order: 0 };
     let steps = sky::day_steps(&sky::Site::acropolis(), &sky::default_timeline(), sky::DEFAULT_DELTA_T_S, &frame);
     let suns = sky::day_directions(&steps);

@@ -42,7 +42,7 @@ fn main() {
     };
     let start = Instant::now();
     let quality = if arg(&args, "--build", "sah".to_string()) == "ploc" { BuildQuality::Ploc } else { BuildQuality::Sah };
-    let mut scene = Scene::build(&mesh, quality);
+    let mut scene = Scene::build(&mesh, quality).unwrap();
     if args.iter().any(|a| a == "--portable") {
         scene.set_traversal(prtbake::bake::Traversal::Portable);
     }
@@ -125,7 +125,7 @@ fn main() {
     // `--compare-batching`: both ways of running a batch, whichever the scene chose.
     if args.iter().any(|a| a == "--compare-batching") {
         for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
-            let mut forced = Scene::build(&mesh, quality);
+            let mut forced = Scene::build(&mesh, quality).unwrap();
             forced.set_traversal(scene.traversal());
             forced.set_batching(Batching { closest_hit: mode, occlusion: mode });
             measure(&format!("occlusion {mode:?}"), &|q| occlusion(&forced, q));

@@ -78,7 +78,7 @@ fn bvh_queries_match_brute_force() {
     let mut sphere = shapes::icosphere(2);
     shapes::transform(&mut sphere, 0.7, Vec3::new(0.3, 0.9, -0.2));
     shapes::append(&mut mesh, &sphere);
-    let mut scene = Scene::build(&mesh, BuildQuality::Sah);
+    let mut scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
     let mut paths = vec![Traversal::Portable];
     if scene.set_traversal(Traversal::Avx2) == Traversal::Avx2 {
         paths.push(Traversal::Avx2);
@@ -155,7 +155,7 @@ fn bvh_rays_from_walls_match_brute_force() {
     let (mesh, _) = shapes::integrating_sphere(2, 0.2, 0.5, shapes::Opening::Hole);
     let mut box_mesh = shapes::plane_grid(12, 2.0);
     shapes::append(&mut box_mesh, &mesh);
-    let mut scene = Scene::build(&box_mesh, BuildQuality::Sah);
+    let mut scene = Scene::build(&box_mesh, BuildQuality::Sah).unwrap();
     for path in [Traversal::Portable, Traversal::Avx2] {
         if scene.set_traversal(path) != path {
             continue;

@@ -90,7 +90,7 @@ fn grazing_sun_self_shadowing() {
         let mut floor = shapes::plane_grid(64, 8.0);
         // A gentle slope in z: the floor is not axis-aligned, so rounding is not exact.
         floor.positions.iter_mut().for_each(|p| *p = Vec3::new(p.x + offset, p.y + 0.01 * p.z + offset, p.z + offset));
-        let scene = Scene::build(&floor, BuildQuality::Sah);
+        let scene = Scene::build(&floor, BuildQuality::Sah).unwrap();
         let slope_normal = Vec3::new(0.0, 1.0, -0.01).normalize();
         for elevation_deg in [0.05f32, 0.5, 5.0] {
             let e = elevation_deg.to_radians();
@@ -219,7 +219,7 @@ fn scale_relative_epsilons() {
         let surfaces = bake::Surfaces::resolve(&mesh, &[]).unwrap();
         let mut row = Vec::new();
         for fixed in [None, Some(1e-4f32)] {
-            let mut scene = Scene::build(&mesh, BuildQuality::Sah);
+            let mut scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
             if let Some(eps) = fixed {
                 scene.origin_offset = eps;
                 scene.tie_distance = eps;

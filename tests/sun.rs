@@ -108,7 +108,7 @@ fn plane_and_sphere_bits_match_the_analytic_shadow() {
 fn masks_do_not_depend_on_threads_or_loop_order() {
     let mesh = plane_and_sphere();
     let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
-    let scene = Scene::build(&mesh, BuildQuality::Sah);
+    let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
     let suns: Vec<Option<Vec3>> = (0..40)
         .map(|k| {
             let a = k as f32 * 0.15;

@@ -6,6 +6,7 @@ mod chart;
 mod clean_props;
 mod cli;
 mod export;
+mod hostile_bake;
 mod safety;
 mod stability;
 mod storage;

@@ -252,7 +252,7 @@ mod tests {
     #[test]
     fn hidden_object_is_culled_and_walls_kept() {
         let (mesh, crate_range, hidden) = room_with_hidden_object();
-        let scene = Scene::build(&mesh, BuildQuality::Sah);
+        let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
         let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
         let view = ViewBox { min: Vec3::new(-1.0, -0.5, -1.0), max: Vec3::new(0.0, 0.5, 0.0) };
         let params = CullParams { points: 32, rays_per_point: 4096, ..CullParams::default() };

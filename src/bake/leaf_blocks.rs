@@ -92,11 +92,14 @@ impl LeafBlocks {
         self.data.as_ptr().wrapping_add(ROWS * first as usize).cast()
     }
 
-    /// The block of leaf `(first, count)`, with the tail an eight-lane read may touch.
+    /// The block of leaf `(first, count)`, with the tail an eight-lane read
+    /// may touch; `None` past the data. The walk reaches leaves through box
+    /// tests on floats: should one ever pick an empty child slot (whose
+    /// reference decodes far past the end), the leaf is skipped, never read.
     #[inline(always)]
-    fn block(&self, first: u32, count: u32) -> &[f32] {
+    fn block(&self, first: u32, count: u32) -> Option<&[f32]> {
         let start = ROWS * first as usize;
-        &self.data[start..start + ROWS * count as usize + TAIL]
+        self.data.get(start..start + ROWS * count as usize + TAIL)
     }
 }
 
@@ -111,7 +114,7 @@ pub struct ScalarLeaf;
 impl LeafTest for ScalarLeaf {
     #[inline(always)]
     fn test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits {
-        let block = blocks.block(first, count);
+        let Some(block) = blocks.block(first, count) else { return LeafHits::default() };
         let n = count as usize;
         let (o, d) = (ray.origin, ray.direction);
         let mut hits = LeafHits::default();
@@ -146,7 +149,7 @@ impl LeafTest for AvxLeaf {
     #[inline(always)]
     fn test_leaf(blocks: &LeafBlocks, first: u32, count: u32, ray: &Ray, t_max: f32) -> LeafHits {
         use std::arch::x86_64::*;
-        let block = blocks.block(first, count);
+        let Some(block) = blocks.block(first, count) else { return LeafHits::default() };
         let n = count as usize;
         // SAFETY: reached only from functions compiled with AVX2 after
         // runtime detection; every read is eight floats from row start `r·n`
@@ -260,6 +263,23 @@ mod tests {
             }
         }
         assert!(hit_lanes > 1000, "only {hit_lanes} hits");
+    }
+
+    /// A leaf reference past the blocks (an empty child slot decodes to
+    /// one) reports no hit on either path instead of reading out of range.
+    #[test]
+    fn a_leaf_past_the_blocks_reports_no_hit() {
+        let triangles = random_triangles(5);
+        let blocks = LeafBlocks::new(&triangles, [(0, 5)]);
+        let ray = Ray::new(Vec3A::ZERO, Vec3A::X, 0.0, f32::INFINITY);
+        for (first, count) in [(1u32 << 27, 15u32), (5, 1), (1, 8)] {
+            assert_eq!(ScalarLeaf::test_leaf(&blocks, first, count, &ray, f32::INFINITY).mask, 0, "{first}, {count}");
+            #[cfg(target_arch = "x86_64")]
+            if crate::bake::bvh8::avx2_available() {
+                // SAFETY: AVX2 was detected.
+                assert_eq!(unsafe { avx_test_leaf(&blocks, first, count, &ray, f32::INFINITY) }.mask, 0);
+            }
+        }
     }
 
     #[cfg(target_arch = "x86_64")]

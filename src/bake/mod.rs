@@ -17,10 +17,10 @@ pub mod surfaces;
 pub mod transfer;
 
 pub use sampling::DirectionPattern;
-pub use scene::{BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, Traversal};
+pub use scene::{check_extent, BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, SceneError, Traversal, MAX_SCENE_EXTENT};
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
-pub use transfer::{bake_transfer, bake_transfer_receivers};
+pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 
 use crate::sh;
 
@@ -172,6 +172,10 @@ pub enum BakeError {
     Params(String),
     #[error(transparent)]
     Pattern(#[from] surfaces::PatternError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    NothingToBake(#[from] NothingToBake),
 }
 
 /// What a bake measured.
@@ -262,7 +266,7 @@ pub fn bake_mesh(
     params.check()?;
     check_mesh(mesh)?;
     let surfaces = Surfaces::resolve(mesh, window_patterns)?;
-    let scene = Scene::build(mesh, BuildQuality::Sah);
+    let scene = Scene::build(mesh, BuildQuality::Sah)?;
     let build_seconds = scene.build_time.as_secs_f64();
     let result = bake_transfer(mesh, &scene, &surfaces, params)?;
     Ok((result, surfaces, build_seconds))

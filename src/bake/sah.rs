@@ -145,6 +145,9 @@ fn bin_mapping(centre_bounds: &Aabb, axis: usize) -> (f32, f32) {
     (lo, if extent > 0.0 { BINS as f32 * (1.0 - 1e-6) / extent } else { 0.0 })
 }
 
+/// The bin of a centroid. `as` saturates (NaN gives 0, infinity the
+/// largest value) and the clamp keeps the result in range, so a non-finite
+/// centroid still lands in a bin.
 #[inline]
 fn bin_of(centre: f32, lo: f32, scale: f32) -> usize {
     (((centre - lo) * scale) as usize).min(BINS - 1)

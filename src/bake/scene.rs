@@ -108,6 +108,43 @@ const LEAF_TRIANGLES: u32 = 8;
 /// collapse (3, 6, 10, 15 tried with 8-triangle leaves: 6–10 equal, 3 worse).
 const NODE_COST: f32 = 6.0;
 
+/// Largest bounding-box diagonal a scene may have. The bake works in f32,
+/// and the largest value it forms is the squared length of an edge cross
+/// product (normalised for face normals and areas), which grows as the
+/// fourth power of the extent D: at D = 1e9 it is at most 1e36, 340× below
+/// f32::MAX (it overflows from about 4.3e9 on, where a flat plane silently
+/// baked to zero before this limit). The ray–triangle distance (≤ 3·D³) and
+/// the areas (≤ D²) stay further below. Larger scenes are refused, never
+/// traced with infinities.
+pub const MAX_SCENE_EXTENT: f32 = 1e9;
+
+/// Why a mesh cannot be traced.
+#[derive(Debug, PartialEq, thiserror::Error)]
+pub enum SceneError {
+    #[error("vertex {vertex} has a non-finite coordinate {position}")]
+    NonFiniteCoordinate { vertex: usize, position: Vec3 },
+    #[error(
+        "coordinates up to {max_coordinate:.1e} and a bounding-box diagonal of {extent:.1e}: beyond the {MAX_SCENE_EXTENT:.0e} the baker's \
+         single-precision geometry handles without overflow; rescale the model"
+    )]
+    ExtentTooLarge { max_coordinate: f64, extent: f64 },
+}
+
+/// Refuses a mesh whose coordinates are not finite or whose extent exceeds
+/// [`MAX_SCENE_EXTENT`]. The extent is measured in f64, where it cannot overflow.
+pub fn check_extent(mesh: &Mesh) -> Result<(), SceneError> {
+    if let Some(vertex) = mesh.positions.iter().position(|p| !p.is_finite()) {
+        return Err(SceneError::NonFiniteCoordinate { vertex, position: mesh.positions[vertex] });
+    }
+    let (lo, hi) = mesh.bounds();
+    let extent = (hi.as_dvec3() - lo.as_dvec3()).length();
+    if extent > f64::from(MAX_SCENE_EXTENT) {
+        let max_coordinate = lo.as_dvec3().abs().max(hi.as_dvec3().abs()).max_element();
+        return Err(SceneError::ExtentTooLarge { max_coordinate, extent });
+    }
+    Ok(())
+}
+
 /// A built acceleration structure over a mesh.
 pub struct Scene {
     pub(super) nodes: Vec<Node8>,
@@ -133,8 +170,9 @@ pub struct Scene {
 
 impl Scene {
     /// Builds the BVH over every triangle of `mesh` (degenerate ones included:
-    /// they never report a hit).
-    pub fn build(mesh: &Mesh, quality: BuildQuality) -> Scene {
+    /// they never report a hit). Refuses meshes [`check_extent`] refuses.
+    pub fn build(mesh: &Mesh, quality: BuildQuality) -> Result<Scene, SceneError> {
+        check_extent(mesh)?;
         let start = Instant::now();
         let triangles: Vec<Triangle> = (0..mesh.triangle_count())
             .map(|t| {
@@ -185,7 +223,7 @@ impl Scene {
         };
         scene.batching = scene.measure_batching(mesh);
         scene.build_time = start.elapsed();
-        scene
+        Ok(scene)
     }
 
     /// Unit geometric normal of mesh triangle `t` (counter-clockwise front).
@@ -273,12 +311,30 @@ impl Scene {
             out.iter_mut().for_each(|o| *o = W::Answer::default());
             return;
         }
+        if !queries.iter().all(RayQuery::is_traceable) {
+            return self.run_traceable::<W>(queries, out, mode);
+        }
         #[cfg(target_arch = "x86_64")]
         if self.traversal == Traversal::Avx2 {
             // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
             return unsafe { self.run_avx2::<W>(queries, out, mode) };
         }
         self.run_with::<W, ScalarTest, ScalarLeaf>(queries, out, mode)
+    }
+
+    /// [`Scene::run`] for a batch holding rays that cannot be traced: those
+    /// answer "no hit" (a NaN ray would enter every box, empty child slots
+    /// included, and index past the leaves); the others are walked one at a
+    /// time, which gives the same answers as a batch.
+    #[cold]
+    fn run_traceable<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        for (query, answer) in queries.iter().zip(out.iter_mut()) {
+            if query.is_traceable() {
+                self.run::<W>(std::slice::from_ref(query), std::slice::from_mut(answer), mode);
+            } else {
+                *answer = W::Answer::default();
+            }
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -364,6 +420,9 @@ impl Scene {
     /// [`Scene::occluded`].
     #[inline]
     pub fn occluded_cached(&self, origin: Vec3, direction: Vec3, t_max: f32, hint: &mut u32) -> bool {
+        if !(RayQuery { origin, direction, t_max }).is_traceable() {
+            return false;
+        }
         if (*hint as usize) < self.leaf_triangles.len() {
             let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
             if self.leaf_triangles.triangle(*hint).intersect(&ray).is_finite() {
@@ -394,6 +453,13 @@ pub struct RayQuery {
 }
 
 impl RayQuery {
+    /// A finite origin and direction and a reach that is not NaN: what the
+    /// walks need to stay inside the tree (answers are "no hit" otherwise).
+    #[inline(always)]
+    pub fn is_traceable(&self) -> bool {
+        self.origin.is_finite() && self.direction.is_finite() && !self.t_max.is_nan()
+    }
+
     /// The query as obvhs's ray (which holds the inverse direction the box test uses).
     #[inline(always)]
     pub fn ray(&self) -> Ray {
@@ -415,4 +481,145 @@ pub fn brute_force_closest(mesh: &Mesh, origin: Vec3, direction: Vec3, t_max: f3
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bake::{bake_mesh, BakeError, BakeParams, Mode};
+    use crate::verify::{shapes, Y00};
+
+    /// A 4 × 4 plane under a sphere of radius 0.5: shadows and a bounce.
+    fn plane_under_sphere() -> Mesh {
+        let mut mesh = shapes::plane_grid(16, 4.0);
+        let mut sphere = shapes::icosphere(2);
+        shapes::transform(&mut sphere, 0.5, Vec3::new(0.0, 1.0, 0.0));
+        shapes::append(&mut mesh, &sphere);
+        mesh
+    }
+
+    fn scaled(mesh: &Mesh, scale: f32) -> Mesh {
+        let mut mesh = mesh.clone();
+        shapes::transform(&mut mesh, scale, Vec3::ZERO);
+        mesh
+    }
+
+    /// The largest power of two that keeps `mesh`'s diagonal within the limit.
+    fn scale_to_limit(mesh: &Mesh) -> f32 {
+        let mut scale = 1.0f32;
+        while mesh.diagonal() * scale * 2.0 <= MAX_SCENE_EXTENT {
+            scale *= 2.0;
+        }
+        scale
+    }
+
+    /// Scaling by a power of two is exact in f32 and every epsilon of the
+    /// bake is relative to the scene, so a scene scaled up to the extent
+    /// limit bakes the same bits as at unit scale: no product overflows on
+    /// the way (open mode with a bounce; window mode sampling the glass,
+    /// whose weights divide areas by squared distances).
+    #[test]
+    fn scenes_up_to_the_extent_limit_bake_the_same_bits_as_at_unit_scale() {
+        let open = BakeParams { rays: 64, bounces: 1, store_bounces: true, ..BakeParams::default() };
+        let (sphere, _) = shapes::integrating_sphere(2, 0.5, 0.6, shapes::Opening::Window);
+        let window = BakeParams { rays: 64, bounces: 1, mode: Mode::Window, window_sampling: true, ..BakeParams::default() };
+        for (mesh, params) in [(plane_under_sphere(), open), (sphere, window)] {
+            let big = scaled(&mesh, scale_to_limit(&mesh));
+            assert!(big.diagonal() > MAX_SCENE_EXTENT / 2.0 && big.diagonal() <= MAX_SCENE_EXTENT, "{}", big.diagonal());
+            let unit = bake_mesh(&mesh, &params, &[]).unwrap().0;
+            let at_limit = bake_mesh(&big, &params, &[]).unwrap().0;
+            assert!(unit.total.iter().any(|&t| t != 0.0));
+            assert_eq!(unit.total, at_limit.total, "{:?} bake at diagonal {:.2e}", params.mode, big.diagonal());
+            assert_eq!(unit.bounces, at_limit.bounces);
+            assert_eq!(unit.stats.points_rejected, at_limit.stats.points_rejected);
+        }
+    }
+
+    /// Closed form at the limit: on a plane open to the sky every ray
+    /// escapes, so every vertex's DC transfer is y00 (the cosine-weighted
+    /// hemisphere integrates to π, which the 1/π of the transfer cancels).
+    #[test]
+    fn an_open_plane_at_the_extent_limit_sees_the_whole_sky() {
+        let plane = scaled(&shapes::plane_grid(8, 1.0), 0.7 * MAX_SCENE_EXTENT);
+        let (result, _, _) = bake_mesh(&plane, &BakeParams { rays: 64, ..BakeParams::default() }, &[]).unwrap();
+        assert_eq!(result.stats.points_rejected, 0);
+        for v in 0..plane.vertex_count() {
+            let dc = result.coefficients(v, 0)[0] as f64;
+            assert!((dc - Y00).abs() < 1e-5, "vertex {v}: DC {dc}, expected {Y00}");
+        }
+    }
+
+    /// Past the limit (1e10, where an edge cross product's squared length
+    /// overflows and a plane once baked to zero; 1e20; 1e30) the scene is
+    /// refused with a message naming its size and the fix.
+    #[test]
+    fn scenes_past_the_extent_limit_are_refused_with_the_documented_message() {
+        for (half_size, shown) in [(1e10f32, "1.0e10"), (1e20, "1.0e20"), (1e30, "1.0e30")] {
+            let plane = scaled(&shapes::plane_grid(1, 1.0), 2.0 * half_size);
+            let Err(refused) = Scene::build(&plane, BuildQuality::Sah) else { panic!("{half_size:e} was traced") };
+            assert!(matches!(refused, SceneError::ExtentTooLarge { .. }));
+            let message = refused.to_string();
+            assert!(message.contains(&format!("coordinates up to {shown}")), "{message}");
+            assert!(
+                message.contains("beyond the 1e9 the baker's single-precision geometry") && message.contains("rescale the model"),
+                "{message}"
+            );
+            let baked = bake_mesh(&plane, &BakeParams { rays: 8, ..BakeParams::default() }, &[]);
+            assert!(matches!(baked, Err(BakeError::Scene(SceneError::ExtentTooLarge { .. }))));
+        }
+        // Just under the limit is traced.
+        let at_limit = scaled(&shapes::plane_grid(1, 1.0), 0.9999 * MAX_SCENE_EXTENT / 2f32.sqrt());
+        assert!(at_limit.diagonal() > 0.999 * MAX_SCENE_EXTENT && at_limit.diagonal() <= MAX_SCENE_EXTENT);
+        assert!(Scene::build(&at_limit, BuildQuality::Sah).is_ok());
+    }
+
+    #[test]
+    fn non_finite_coordinates_are_refused() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut plane = shapes::plane_grid(2, 1.0);
+            plane.positions[4].y = bad;
+            let message = Scene::build(&plane, BuildQuality::Sah).err().expect("refused").to_string();
+            assert!(message.contains("vertex 4 has a non-finite coordinate"), "{message}");
+        }
+    }
+
+    /// A ray with a NaN or infinite origin or direction, or a NaN reach,
+    /// answers "no hit" on every path (a NaN ray enters every box, empty
+    /// child slots too, whose references decode past the leaves), and does
+    /// not change the answers of the rays batched with it.
+    #[test]
+    fn untraceable_rays_answer_no_hit_on_every_path() {
+        let mut scene = Scene::build(&shapes::plane_grid(4, 2.0), BuildQuality::Sah).unwrap();
+        let good = RayQuery { origin: Vec3::new(0.1, 1.0, 0.2), direction: -Vec3::Y, t_max: f32::INFINITY };
+        let bad = [
+            RayQuery { origin: Vec3::NAN, ..good },
+            RayQuery { origin: Vec3::new(f32::INFINITY, 1.0, 0.0), ..good },
+            RayQuery { direction: Vec3::new(0.0, f32::NAN, 0.0), ..good },
+            RayQuery { direction: Vec3::new(0.0, f32::NEG_INFINITY, 0.0), ..good },
+            RayQuery { t_max: f32::NAN, ..good },
+        ];
+        let expected = scene.closest_hit(good.origin, good.direction, good.t_max);
+        assert!(expected.is_some());
+        let batch: Vec<RayQuery> = bad.iter().flat_map(|&b| [good, b]).collect();
+        for traversal in [Traversal::Avx2, Traversal::Portable] {
+            scene.set_traversal(traversal);
+            for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
+                scene.set_batching(Batching { closest_hit: mode, occlusion: mode });
+                for q in &bad {
+                    assert_eq!(scene.closest_hit(q.origin, q.direction, q.t_max), None, "{q:?}");
+                    assert!(!scene.occluded(q.origin, q.direction, q.t_max), "{q:?}");
+                    let mut hint = 0;
+                    assert!(!scene.occluded_cached(q.origin, q.direction, q.t_max, &mut hint), "{q:?}");
+                }
+                let mut hits = vec![None; batch.len()];
+                scene.closest_hits(&batch, &mut hits);
+                let mut blocked = vec![false; batch.len()];
+                scene.occluded_each(&batch, &mut blocked);
+                for (k, (hit, blocked)) in hits.iter().zip(&blocked).enumerate() {
+                    assert_eq!(*hit, if k % 2 == 0 { expected } else { None }, "ray {k}, {mode}");
+                    assert_eq!(*blocked, k % 2 == 0, "ray {k}, {mode}");
+                }
+            }
+        }
+    }
 }

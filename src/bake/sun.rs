@@ -159,8 +159,9 @@ struct Point {
 /// frame, or `None` when the sun is below the horizon (all bits of that step
 /// are 0). Runs on the current rayon pool; no I/O.
 ///
-/// Errors: bad parameters, a step count outside `1..=1024`, or a day
-/// direction that is not finite and non-zero.
+/// Errors: bad parameters, a step count outside `1..=1024`, a day
+/// direction that is not finite and non-zero, or a mesh on which no
+/// triangle receives light ([`super::NothingToBake`]).
 pub fn bake_sun_masks(
     mesh: &Mesh,
     scene: &Scene,
@@ -185,7 +186,7 @@ pub fn bake_sun_masks(
         .collect::<Result<_, _>>()?;
     let started = Instant::now();
     let words = suns.len().div_ceil(32);
-    let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces), params.samples_per_vertex, params.max_per_triangle);
+    let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces)?, params.samples_per_vertex, params.max_per_triangle);
     super::transfer::check_point_count(layout.sample_count())?;
     let point_count = layout.sample_count() as usize;
     let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
@@ -435,7 +436,7 @@ mod tests {
 
     fn bake(mesh: &Mesh, suns: &[Option<Vec3>], mode: Mode) -> SunMasks {
         let surfaces = Surfaces::resolve(mesh, &[]).unwrap();
-        let scene = Scene::build(mesh, BuildQuality::Sah);
+        let scene = Scene::build(mesh, BuildQuality::Sah).unwrap();
         bake_sun_masks(mesh, &scene, &surfaces, suns, &SunParams { mode, ..SunParams::default() }).unwrap()
     }
 
@@ -459,7 +460,7 @@ mod tests {
     fn step_counts_outside_1_to_1024_are_refused() {
         let mesh = floor(2, 0.0, true);
         let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
-        let scene = Scene::build(&mesh, BuildQuality::Sah);
+        let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
         let p = SunParams::default();
         assert!(bake_sun_masks(&mesh, &scene, &surfaces, &[], &p).is_err());
         assert!(bake_sun_masks(&mesh, &scene, &surfaces, &vec![None; 1025], &p).is_err());
@@ -496,6 +497,47 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Sun masks for a floor that is all window or all degenerate are
+    /// refused like its transfer bake: no vertex could ever be lit.
+    #[test]
+    fn masks_where_no_triangle_receives_light_are_refused() {
+        let mut glass = floor(2, 0.0, true);
+        glass.materials[0].role = crate::mesh::MaterialRole::Window;
+        let mut collapsed = floor(2, 0.0, true);
+        collapsed.positions.iter_mut().for_each(|p| *p = Vec3::ZERO);
+        for (mesh, reason) in [(glass, "every triangle is a window"), (collapsed, "triangles are degenerate (zero area)")] {
+            let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+            let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+            let refused = bake_sun_masks(&mesh, &scene, &surfaces, &[Some(Vec3::Y)], &SunParams::default()).err().expect("refused");
+            assert!(matches!(refused, BakeError::NothingToBake(_)), "{refused:?}");
+            assert!(refused.to_string().contains(reason), "{refused}");
+        }
+    }
+
+    /// Sun masks are scale-free like the transfer: a floor with a cover,
+    /// scaled by a power of two to just under the extent limit, gets the
+    /// same bits as at unit scale. Past the limit the scene the sun pass
+    /// needs is refused.
+    #[test]
+    fn masks_up_to_the_extent_limit_match_unit_scale_and_larger_scenes_are_refused() {
+        let mut mesh = floor(8, 0.0, true);
+        let mut cover = floor(2, 0.2, true);
+        crate::verify::shapes::transform(&mut cover, 0.4, Vec3::ZERO);
+        crate::verify::shapes::append(&mut mesh, &cover);
+        let suns: Vec<Option<Vec3>> = (0..12).map(|k| Some(Vec3::new((k as f32 * 0.5).cos(), 0.4 + 0.1 * k as f32, 0.3))).collect();
+        let unit = bake(&mesh, &suns, Mode::Open);
+        let scale = (2.0f32).powi((crate::bake::MAX_SCENE_EXTENT / mesh.diagonal()).log2().floor() as i32);
+        let mut big = mesh.clone();
+        crate::verify::shapes::transform(&mut big, scale, Vec3::ZERO);
+        assert!(big.diagonal() > crate::bake::MAX_SCENE_EXTENT / 2.0);
+        let at_limit = bake(&big, &suns, Mode::Open);
+        assert!(unit.masks.iter().any(|&w| w != 0) && unit.masks.iter().any(|&w| w != (1 << 12) - 1));
+        assert_eq!(unit.masks, at_limit.masks);
+        crate::verify::shapes::transform(&mut big, 1e11, Vec3::ZERO);
+        let refused = Scene::build(&big, BuildQuality::Sah).err().expect("refused").to_string();
+        assert!(refused.contains("rescale the model"), "{refused}");
     }
 
     /// A vertex covered by a small overlapping triangle just above it: a ray

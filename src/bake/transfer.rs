@@ -216,6 +216,10 @@ pub fn bake_transfer(mesh: &Mesh, scene: &Scene, surfaces: &Surfaces, params: &B
 /// when bounces follow, or accept that light.
 ///
 /// Precondition: `receivers`, if given, has one entry per triangle.
+///
+/// Errors: bad parameters, or a mesh on which no triangle receives light
+/// (each a window or of zero area: [`NothingToBake`]), whose bake would
+/// store only zeros.
 pub fn bake_transfer_receivers(
     mesh: &Mesh,
     scene: &Scene,
@@ -232,7 +236,7 @@ pub fn bake_transfer_receivers(
     let coeffs = sh::coeff_count(order);
     let channels = params.channel_count(surfaces);
     let vertex_count = mesh.vertex_count();
-    let items = build_items(mesh, surfaces, params, receivers);
+    let items = build_items(mesh, sampled_triangles(mesh, surfaces)?, params, receivers);
     let point_count = items.point_count();
     check_point_count(point_count)?;
     let mut stats = BakeStats {
@@ -395,10 +399,9 @@ pub fn bake_transfer_receivers(
     Ok(TransferResult { order, channels, total, bounces: if params.store_bounces { layers } else { Vec::new() }, stats })
 }
 
-/// Lists the work items: triangles that are neither windows nor degenerate
-/// (interior sampling), or vertices of such triangles (vertex sampling).
-fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams, receivers: Option<&[bool]>) -> Items {
-    let sampled = sampled_triangles(mesh, surfaces);
+/// Lists the work items: the `sampled` triangles (interior sampling), or
+/// their vertices (vertex sampling).
+fn build_items(mesh: &Mesh, sampled: Vec<u32>, params: &BakeParams, receivers: Option<&[bool]>) -> Items {
     let receives = |t: u32| receivers.is_none_or(|r| r[t as usize]);
     match params.sampling {
         Sampling::Vertex => {
@@ -428,11 +431,43 @@ fn build_items(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams, receivers:
     }
 }
 
-/// Triangles that receive samples: neither windows nor degenerate.
-pub(crate) fn sampled_triangles(mesh: &Mesh, surfaces: &Surfaces) -> Vec<u32> {
-    (0..mesh.triangle_count() as u32)
-        .filter(|&t| surfaces.window_transmittance[t as usize].is_none() && triangle_area(mesh, t) > 0.0)
-        .collect()
+/// Triangles that receive samples: neither windows nor degenerate. Refuses
+/// a mesh with none: its bake would store nothing but zeros.
+pub(crate) fn sampled_triangles(mesh: &Mesh, surfaces: &Surfaces) -> Result<Vec<u32>, NothingToBake> {
+    let is_window = |t: u32| surfaces.window_transmittance[t as usize].is_some();
+    let sampled: Vec<u32> = (0..mesh.triangle_count() as u32).filter(|&t| !is_window(t) && triangle_area(mesh, t) > 0.0).collect();
+    if !sampled.is_empty() {
+        return Ok(sampled);
+    }
+    let windows = (0..mesh.triangle_count() as u32).filter(|&t| is_window(t)).count();
+    Err(NothingToBake { triangles: mesh.triangle_count(), windows, degenerate: mesh.triangle_count() - windows })
+}
+
+/// Why a bake would store nothing: no triangle receives light, because
+/// each is a window (light passes through it) or degenerate (zero area).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("nothing to bake: {}", why_nothing_receives(*.triangles, *.windows, *.degenerate))]
+pub struct NothingToBake {
+    pub triangles: usize,
+    pub windows: usize,
+    /// Opaque triangles of zero area.
+    pub degenerate: usize,
+}
+
+/// [`NothingToBake`]'s reason in words, a lone triangle named as such.
+fn why_nothing_receives(triangles: usize, windows: usize, degenerate: usize) -> String {
+    match (triangles, windows, degenerate) {
+        (0, _, _) => "the mesh has no triangles".into(),
+        (1, 1, _) => "the only triangle is a window: no surface receives light".into(),
+        (1, _, _) => "the only triangle is degenerate (zero area)".into(),
+        (n, w, _) if w == n => format!("every triangle is a window ({n} of {n}): no surface receives light"),
+        (n, 0, _) => format!("all {n} triangles are degenerate (zero area)"),
+        (n, w, d) => {
+            let windows = if w == 1 { "is a window" } else { "are windows" };
+            let degenerate = if d == 1 { "is degenerate" } else { "are degenerate" };
+            format!("no triangle receives light: of {n}, {w} {windows} and {d} {degenerate} (zero area)")
+        }
+    }
 }
 
 /// Where interior samples go: `counts[k]` samples in `triangles[k]`, whose
@@ -813,10 +848,65 @@ impl Pass<'_> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use crate::bake::{bake_mesh, BakeError};
+    use crate::verify::shapes;
+
     #[test]
     fn point_counts_past_u32_are_refused_not_wrapped() {
         assert!(super::check_point_count(u32::MAX as u64).is_ok());
         let error = super::check_point_count(u32::MAX as u64 + 1).unwrap_err().to_string();
         assert!(error.contains("4294967296 sample points") && error.contains("samples per vertex"), "{error}");
+    }
+
+    /// A plane of 8 triangles whose first `windows` are windows and whose
+    /// next `degenerate` ones are collapsed to a point.
+    fn plane_with(windows: usize, degenerate: usize) -> (Mesh, Vec<String>) {
+        let mut mesh = shapes::plane_grid(2, 1.0);
+        mesh.groups = vec!["wall".into(), "glass".into()];
+        mesh.tri_group = (0..8).map(|t| u32::from(t < windows)).collect();
+        for t in windows..windows + degenerate {
+            let [a, b, c] = mesh.triangle(t);
+            // A fresh vertex per corner, all at one point: neighbours keep their area.
+            for (k, v) in [a, b, c].into_iter().enumerate() {
+                mesh.positions.push(mesh.positions[a as usize]);
+                mesh.normals.push(mesh.normals[v as usize]);
+                mesh.indices[3 * t + k] = mesh.positions.len() as u32 - 1;
+            }
+        }
+        (mesh, vec!["glass".into()])
+    }
+
+    /// A bake in which no triangle receives light (every one a window or of
+    /// zero area) is refused, saying which; one receiving triangle is enough.
+    #[test]
+    fn a_bake_where_no_triangle_receives_light_is_refused_with_the_reason() {
+        let params = BakeParams { rays: 8, ..BakeParams::default() };
+        let vertex = BakeParams { sampling: Sampling::Vertex, ..params };
+        for (windows, degenerate, reason) in [
+            (8, 0, "nothing to bake: every triangle is a window (8 of 8): no surface receives light"),
+            (0, 8, "nothing to bake: all 8 triangles are degenerate (zero area)"),
+            (3, 5, "nothing to bake: no triangle receives light: of 8, 3 are windows and 5 are degenerate (zero area)"),
+            (7, 1, "of 8, 7 are windows and 1 is degenerate (zero area)"),
+        ] {
+            let (mesh, patterns) = plane_with(windows, degenerate);
+            for params in [params, vertex] {
+                let refused = bake_mesh(&mesh, &params, &patterns).err().expect("refused");
+                let expected = NothingToBake { triangles: 8, windows, degenerate };
+                assert!(matches!(&refused, BakeError::NothingToBake(n) if *n == expected), "{refused:?}");
+                assert!(refused.to_string().contains(reason), "{refused}");
+            }
+        }
+        let (mesh, patterns) = plane_with(4, 3);
+        let result = bake_mesh(&mesh, &params, &patterns).unwrap().0;
+        assert!(result.stats.points > 0 && result.total.iter().any(|&t| t > 0.0));
+    }
+
+    #[test]
+    fn one_or_no_triangle_is_named_plainly() {
+        let message = |triangles, windows, degenerate| NothingToBake { triangles, windows, degenerate }.to_string();
+        assert_eq!(message(0, 0, 0), "nothing to bake: the mesh has no triangles");
+        assert_eq!(message(1, 1, 0), "nothing to bake: the only triangle is a window: no surface receives light");
+        assert_eq!(message(1, 0, 1), "nothing to bake: the only triangle is degenerate (zero area)");
     }
 }

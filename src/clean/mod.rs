@@ -190,6 +190,9 @@ pub enum CleanError {
     /// More vertices or triangles than `u32` indices address.
     #[error("mesh clean-up: {0} elements do not fit u32 indices")]
     TooLarge(usize),
+    /// Coordinates so far apart that the f32 geometry overflows (the bake's limit).
+    #[error("mesh clean-up: {0}")]
+    Extent(#[from] crate::bake::SceneError),
 }
 
 /// Cleans `mesh` (see the module doc for the steps) and reports every repair.
@@ -350,6 +353,9 @@ fn check_input(mesh: &Mesh) -> Result<(), CleanError> {
         return Err(non_finite(v, "position", format!("{:?}", mesh.positions[v])));
     }
     mesh.validate().map_err(CleanError::InvalidMesh)?;
+    // Areas and normals here are f32 like the bake's: past its limit a huge
+    // triangle's area overflows and it would be removed as degenerate.
+    crate::bake::check_extent(mesh)?;
     if let Some(v) = mesh.normals.iter().position(|n| !n.is_finite()) {
         return Err(non_finite(v, "normal", format!("{:?}", mesh.normals[v])));
     }

@@ -171,6 +171,17 @@ fn broken_mesh_is_refused_not_panicked() {
     assert!(matches!(err, CleanError::NonFinite { vertex: 2, attribute: "normal", .. }), "{err:?}");
 }
 
+/// Past the bake's extent limit a triangle's f32 area overflows: the mesh
+/// is refused, not emptied as if every triangle were degenerate.
+#[test]
+fn a_mesh_past_the_extent_limit_is_refused_not_emptied() {
+    let mut mesh = fixtures::fixture_slivers().mesh;
+    mesh.positions.iter_mut().for_each(|p| *p *= 1e20);
+    let err = clean_mesh(&mesh, &CleanParams::default()).unwrap_err();
+    assert!(matches!(err, CleanError::Extent(crate::bake::SceneError::ExtentTooLarge { .. })), "{err:?}");
+    assert!(err.to_string().contains("rescale the model"), "{err}");
+}
+
 #[test]
 fn empty_mesh_cleans_to_empty() {
     let (out, r) = clean_mesh(&Mesh::default(), &CleanParams::default()).unwrap();

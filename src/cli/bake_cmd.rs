@@ -135,7 +135,8 @@ pub const BUNDLE_FORMAT: &[&str] = &["prtb"];
 /// outputs (it lands when the caller commits them); `extra_meta` is merged
 /// into the metadata.
 pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value, staged: &mut Staged) -> anyhow::Result<BakeReport> {
-    let (result, surfaces, build_seconds, cull) = super::with_threads(config.threads, || bake_maybe_culled(mesh, config))??;
+    let (result, surfaces, build_seconds, cull) =
+        super::with_threads(config.threads, || bake_maybe_culled(mesh, config))?.with_context(|| config.input.display().to_string())?;
     if config.params.mode == bake::Mode::Window && surfaces.window_triangle_count() == 0 {
         anyhow::bail!(
             "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
@@ -204,7 +205,7 @@ fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bak
     };
     config.params.check()?;
     let surfaces = bake::Surfaces::resolve(mesh, &config.window_patterns)?;
-    let scene = bake::Scene::build(mesh, bake::BuildQuality::Sah);
+    let scene = bake::Scene::build(mesh, bake::BuildQuality::Sah)?;
     let (visible, report) = bake::cull::visible_triangles(mesh, &scene, &surfaces, view_box, cull_params);
     // Bounces gather from every triangle's previous bounce, so they need the full bake.
     let receivers = (config.params.bounces == 0).then_some(visible.as_slice());

@@ -158,8 +158,9 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
                 config.window_patterns
             );
         }
-        let scene = Scene::build(&mesh, BuildQuality::Sah);
-        let masks = bake::bake_sun_masks(&mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params)?;
+        let in_input = || input.display().to_string();
+        let scene = Scene::build(&mesh, BuildQuality::Sah).with_context(in_input)?;
+        let masks = bake::bake_sun_masks(&mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params).with_context(in_input)?;
         Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks))
     })??;
 
