@@ -49,6 +49,11 @@ pub enum BundleError {
     /// zstd failed, or produced a length other than the declared raw length.
     #[error("section {tag}: decompression failed: {detail}")]
     Decompress { tag: Tag, detail: String },
+    /// The CRC-32 of the section's stored bytes (as in the file) does not match the table (format ≥ 1.1).
+    #[error(
+        "section {tag}: stored-bytes checksum mismatch: stored {stored:#010x}, computed {computed:#010x} (payload corrupted in the file)"
+    )]
+    StoredChecksum { tag: Tag, stored: u32, computed: u32 },
     /// The CRC-32 of the section's raw bytes does not match the table.
     #[error("section {tag}: checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
     SectionChecksum { tag: Tag, stored: u32, computed: u32 },

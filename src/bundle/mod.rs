@@ -2,7 +2,8 @@
 //!
 //! A bundle holds the mesh, its materials, per-vertex SH transfer and sun masks
 //! with per-step sun/sky data, each in its own tagged section, zstd-compressed
-//! per section, CRC-32 per section and over the header and table.
+//! per section, CRC-32 over the header and table and, per section, of the stored
+//! and of the decoded bytes (format 1.1; 1.0 files, with the decoded CRC only, still read).
 //! Little-endian everywhere. The byte layout is specified in docs/bundle-format.md.
 //!
 //! - `container`: header, section table, codecs, checksums (knows no content).
@@ -28,7 +29,9 @@ mod tests;
 use std::fs;
 use std::path::Path;
 
-pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
+pub use container::{
+    Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC, STORED_CRC_SINCE_MINOR,
+};
 pub use error::{BundleError, Tag};
 pub use export_gltf::{
     export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX,
@@ -71,10 +74,14 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
 
 /// Decodes and fully checks a bundle (see "Reader rules" in docs/bundle-format.md).
 ///
+/// The stored-bytes CRC of every section (1.1 files) is checked before anything
+/// is decompressed, so a corrupted section is refused even when this reader
+/// does not know its tag.
 /// Sections with unknown tags are skipped; a file of a later minor version is read
 /// for what this reader knows. Transfer data comes back dequantized to f32.
 pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
     let container = Container::parse(bytes)?;
+    container.check_stored_crcs()?;
     let rules = ReadRules { reject_reserved: container.reject_reserved() };
     let section = |tag: [u8; 4]| container.find(tag).map(|info| container.payload(info)).transpose();
     let required = |tag: [u8; 4]| section(tag)?.ok_or(BundleError::MissingSection(Tag(tag)));

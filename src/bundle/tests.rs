@@ -104,6 +104,80 @@ fn tiny_bundle() -> Bundle {
     }
 }
 
+/// A small bundle with every section, regular enough that zstd shrinks each one:
+/// the content of [`GOLDEN_1_0_ZSTD`].
+fn small_regular_bundle() -> Bundle {
+    let corners: Vec<Vec3> = (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32)).collect();
+    let quads = [[0u32, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let indices: Vec<u32> = quads.iter().flat_map(|q| [q[0], q[1], q[2], q[0], q[2], q[3]]).collect();
+    let mesh = Mesh {
+        normals: corners.iter().map(|p| (*p - Vec3::splat(0.5)).normalize()).collect(),
+        positions: corners,
+        indices,
+        tri_material: vec![0; 12],
+        tri_group: vec![0; 12],
+        materials: vec![Material::opaque("stone", 0.5)],
+        groups: vec!["box".into()],
+        ..Mesh::default()
+    };
+    let transfer = Transfer {
+        order: 2,
+        channels: 1,
+        quantization: Quantization::F16,
+        layers: vec![TransferLayer { kind: LayerKind::Total, data: (0..32).map(|i| [0.5, 0.25, 0.0, -0.25][i % 4]).collect() }],
+    };
+    let step = |k: usize| SunStep {
+        unix_time_utc: 1_782_000_000.0 + 3600.0 * k as f64,
+        direction: [0.0, 1.0, 0.0],
+        elevation_deg: 90.0,
+        azimuth_deg: 0.0,
+        sun_rgb: [1000.0, 900.0, 800.0],
+        night: false,
+        sky_sh: vec![[0.5, 0.5, 0.75]],
+    };
+    let (words_per_vertex, masks) = SunSeries::pack(2, 8, |v, k| (v + k) % 2 == 0);
+    Bundle {
+        meta: serde_json::json!({"tool": "prtbake golden", "note": "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa"}),
+        mesh,
+        transfer: Some(transfer),
+        sun: Some(SunSeries { sky_order: 1, steps: vec![step(0), step(1)], words_per_vertex, masks }),
+    }
+}
+
+/// [`small_regular_bundle`] as a format 1.0 writer (before the stored-bytes CRC)
+/// wrote it with the default options: every section zstd, table word 36 zero.
+/// Kept as bytes so that 1.0 files stay readable whatever the writer does now.
+const GOLDEN_1_0_ZSTD: &str = "
+    50525442 0d0a1a0a 01000000 06000000 78020000 00000000 00000000 cfd62f9a
+    4d455441 01000000 10010000 00000000 34000000 00000000 65000000 00000000
+    64a9e921 00000000 4d455348 01000000 48010000 00000000 7b000000 00000000
+    a4010000 00000000 616c4e29 00000000 4d41544c 01000000 c8010000 00000000
+    2e000000 00000000 30000000 00000000 0f6d4515 00000000 58464552 01000000
+    f8010000 00000000 1f000000 00000000 58000000 00000000 958b9c4f 00000000
+    53554e4d 01000000 18020000 00000000 1e000000 00000000 30000000 00000000
+    90f81a44 00000000 53554e44 01000000 38020000 00000000 3c000000 00000000
+    78000000 00000000 c23c4952 00000000 28b52ffd 20655d01 0044027b 226e6f74
+    65223a22 61222c22 746f6f6c 223a2270 72746261 6b652067 6f6c6465 6e227d01
+    00960012 00000000 28b52ffd 60a4008d 03001403 08000000 0c00803f 803f803f
+    803f3acd 13bf3f3f 02000000 03010000 00040000 00050000 00070601 00040602
+    04060107 071da0a0 304b6b07 70023997 1e81908b e8747107 ee4f7cf5 aceeda3d
+    ec2ef777 4f3cd6fd defa0a99 38768409 4bf5bf6e 20988dff cebad24f 3bc296ca
+    4d3b1900 00000000 28b52ffd 20302d01 00e80100 00000100 3f803f05 00000073
+    746f6e65 00000003 00000062 6f780002 00bb2d0a 50040000 28b52ffd 2058b500
+    00600200 00000138 00340000 00b40300 5d390634 d8705a00 28b52ffd 2030ad00
+    00580200 00000100 00000800 0203002b 212f0b60 00090000 28b52ffd 20789d01
+    00f00200 00000100 60ca8dda 41803fb4 427a4400 00614400 00484400 3f40e4cd
+    0800d8ea 7065b11d 6e334707 03af0cec 32fa0245 00000000";
+
+fn unhex(text: &str) -> Vec<u8> {
+    let digits: Vec<u8> = text.bytes().filter(u8::is_ascii_hexdigit).collect();
+    digits.chunks(2).map(|p| u8::from_str_radix(std::str::from_utf8(p).unwrap(), 16).unwrap()).collect()
+}
+
+fn small_zstd_bytes() -> Vec<u8> {
+    encode_bundle(&small_regular_bundle()).unwrap()
+}
+
 fn tiny_bytes() -> Vec<u8> {
     encode_bundle_with(&tiny_bundle(), EncodeOptions { compression: Compression::None }).unwrap()
 }
@@ -230,8 +304,28 @@ fn write_then_read_file_round_trips_and_errors_name_the_path() {
 /// The worked example of docs/bundle-format.md, byte for byte (32-bit words as
 /// they appear in the file, little-endian): header; table (META, MESH, MATL);
 /// META `{}` + pad; MESH counts, positions, normals, indices, material + pad,
-/// group; MATL counts, material, group name "g"; file padding.
+/// group; MATL counts, material, group name "g"; file padding. Every section is
+/// raw, so each entry's stored-bytes CRC equals its raw CRC.
 const GOLDEN: &str = "
+    50525442 0d0a1a0a 01000100 03000000 38010000 00000000 00000000 9570fc75
+    4d455441 00000000 98000000 00000000 02000000 00000000 02000000 00000000 43bfa6a3 43bfa6a3
+    4d455348 00000000 a0000000 00000000 68000000 00000000 68000000 00000000 a0c289a0 a0c289a0
+    4d41544c 00000000 08010000 00000000 2c000000 00000000 2c000000 00000000 5f6254b3 5f6254b3
+    7b7d0000 00000000
+    03000000 01000000 00000000
+    00000000 00000000 00000000  0000803f 00000000 00000000  00000000 0000803f 00000000
+    00000000 00000000 0000803f  00000000 00000000 0000803f  00000000 00000000 0000803f
+    00000000 01000000 02000000
+    00000000
+    00000000
+    01000000 01000000
+    00000000 0000003f 0000003f 0000003f 0000803f 01000000 6d000000
+    01000000 67000000
+    00000000";
+
+/// The same file as the 1.0 writer wrote it: minor 0, word 36 of each entry
+/// reserved (zero), and so another header CRC.
+const GOLDEN_1_0: &str = "
     50525442 0d0a1a0a 01000000 03000000 38010000 00000000 00000000 95764dad
     4d455441 00000000 98000000 00000000 02000000 00000000 02000000 00000000 43bfa6a3 00000000
     4d455348 00000000 a0000000 00000000 68000000 00000000 68000000 00000000 a0c289a0 00000000
@@ -260,6 +354,38 @@ fn golden_tiny_bundle_bytes() {
     assert_eq!(decode_bundle(&bytes).unwrap(), tiny_bundle());
 }
 
+/// 1.0 files, raw and zstd, still read: no stored-bytes CRC to check, word 36 reserved.
+#[test]
+fn format_1_0_bundles_still_read() {
+    let raw = unhex(GOLDEN_1_0);
+    assert_eq!(decode_bundle(&raw).unwrap(), tiny_bundle());
+    let zstd = unhex(GOLDEN_1_0_ZSTD);
+    assert!(list_sections(&zstd).unwrap().iter().all(|s| s.codec == Codec::Zstd as u32 && s.stored_crc32.is_none()));
+    assert_eq!(decode_bundle(&zstd).unwrap(), small_regular_bundle());
+    // Re-encoding writes the current minor with a stored-bytes CRC on every section.
+    let again = encode_bundle(&decode_bundle(&zstd).unwrap()).unwrap();
+    assert_eq!(u16::from_le_bytes([again[10], again[11]]), FORMAT_MINOR);
+    assert!(list_sections(&again).unwrap().iter().all(|s| s.stored_crc32.is_some()));
+}
+
+/// In a 1.0 file a flip inside a zstd frame header can decode to the same raw
+/// bytes, and nothing covers the stored bytes: such flips are accepted, but
+/// never with changed content (the raw CRC sees to that). 1.1 refuses them all.
+#[test]
+fn bit_flips_of_a_1_0_zstd_bundle_are_refused_or_harmless() {
+    let bytes = unhex(GOLDEN_1_0_ZSTD);
+    let original = decode_bundle(&bytes).unwrap();
+    let mut accepted = 0;
+    for bit in 0..bytes.len() * 8 {
+        if let Ok(decoded) = decode_bundle(&flip_bit(&bytes, bit)) {
+            assert_eq!(decoded, original, "flip of bit {bit} silently changed the content");
+            accepted += 1;
+        }
+    }
+    // docs/bundle-format.md (Compatibility) quotes this count.
+    assert_eq!(accepted, 27, "the 1.0 weakness this test documents");
+}
+
 // ---------------------------------------------------------------- hostile input
 
 #[test]
@@ -276,32 +402,50 @@ fn every_truncation_is_refused() {
     }
 }
 
-#[test]
-fn every_bit_flip_of_the_raw_tiny_bundle_is_refused() {
-    let bytes = tiny_bytes();
+fn flip_bit(bytes: &[u8], bit: usize) -> Vec<u8> {
+    let mut flipped = bytes.to_vec();
+    flipped[bit / 8] ^= 1 << (bit % 8);
+    flipped
+}
+
+/// Every single-bit flip of `bytes` is refused with an error (a panic fails the test).
+fn assert_every_bit_flip_is_refused(bytes: &[u8]) {
     for bit in 0..bytes.len() * 8 {
-        let mut flipped = bytes.clone();
-        flipped[bit / 8] ^= 1 << (bit % 8);
-        assert!(decode_bundle(&flipped).is_err(), "flip of bit {bit} went unnoticed");
+        assert!(decode_bundle(&flip_bit(bytes, bit)).is_err(), "flip of bit {bit} (byte {}) went unnoticed", bit / 8);
     }
 }
 
 #[test]
-fn bit_flips_of_a_compressed_bundle_are_refused_or_harmless() {
+fn every_bit_flip_of_the_raw_tiny_bundle_is_refused() {
+    assert_every_bit_flip_is_refused(&tiny_bytes());
+}
+
+/// The case 1.0 missed: flips in zstd frame headers that decode to the same bytes.
+#[test]
+fn every_bit_flip_of_a_zstd_bundle_is_refused() {
+    let bytes = small_zstd_bytes();
+    assert!(list_sections(&bytes).unwrap().iter().all(|s| s.codec == Codec::Zstd as u32), "every section must be zstd");
+    assert_every_bit_flip_is_refused(&bytes);
+}
+
+#[test]
+fn random_bit_flips_of_a_larger_zstd_bundle_are_refused() {
     let bytes = small_bytes();
-    let original = decode_bundle(&bytes).unwrap();
     let mut rng = Rng(0xf11b_5eed);
-    let mut refused = 0;
     for _ in 0..2000 {
         let bit = rng.below(bytes.len() * 8);
-        let mut flipped = bytes.clone();
-        flipped[bit / 8] ^= 1 << (bit % 8);
-        match decode_bundle(&flipped) {
-            Err(_) => refused += 1,
-            Ok(decoded) => assert_eq!(decoded, original, "flip of bit {bit} silently changed the content"),
-        }
+        assert!(decode_bundle(&flip_bit(&bytes, bit)).is_err(), "flip of bit {bit} went unnoticed");
     }
-    assert!(refused >= 1990, "only {refused} of 2000 flips refused");
+}
+
+/// A stored-bytes CRC mismatch is named as such, before any decompression.
+#[test]
+fn corrupted_stored_bytes_are_named() {
+    let mut bytes = small_zstd_bytes();
+    let mesh = list_sections(&bytes).unwrap().into_iter().find(|s| s.tag == *b"MESH").unwrap();
+    bytes[mesh.offset as usize + 5] ^= 0x10; // inside the zstd frame header
+    let err = decode_bundle(&bytes).unwrap_err();
+    assert!(matches!(err, BundleError::StoredChecksum { tag: Tag(t), .. } if &t == b"MESH"), "{err}");
 }
 
 fn set_u16(bytes: &mut [u8], at: usize, v: u16) {
@@ -317,23 +461,34 @@ fn get_u64(bytes: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap())
 }
 
-/// Recomputes the CRCs of raw-codec sections and of the header, so that a forged
-/// file reaches the section decoders instead of failing on a checksum.
+/// Recomputes the raw CRCs of raw-codec sections, the stored-bytes CRCs (minor ≥ 1)
+/// and the header CRC, so that a forged file reaches the section decoders instead
+/// of failing on a checksum.
 fn reseal(bytes: &mut [u8]) {
     let count = get_u32(bytes, 12) as usize;
+    let has_stored_crc = u16::from_le_bytes([bytes[10], bytes[11]]) >= STORED_CRC_SINCE_MINOR;
     for i in 0..count {
         let entry = HEADER_LEN + i * ENTRY_LEN;
+        let (at, len) = (get_u64(bytes, entry + 8) as usize, get_u64(bytes, entry + 16) as usize);
+        let crc = crc32fast::hash(&bytes[at..at + len]);
         if get_u32(bytes, entry + 4) == 0 {
-            let (at, len) = (get_u64(bytes, entry + 8) as usize, get_u64(bytes, entry + 16) as usize);
-            let crc = crc32fast::hash(&bytes[at..at + len]);
             set_u32(bytes, entry + 32, crc);
         }
+        if has_stored_crc {
+            set_u32(bytes, entry + 36, crc);
+        }
     }
+    let crc = header_crc(bytes);
+    set_u32(bytes, 28, crc);
+}
+
+/// CRC-32 of the header's first 28 bytes and the section table.
+fn header_crc(bytes: &[u8]) -> u32 {
+    let count = get_u32(bytes, 12) as usize;
     let mut h = crc32fast::Hasher::new();
     h.update(&bytes[..28]);
     h.update(&bytes[HEADER_LEN..HEADER_LEN + count * ENTRY_LEN]);
-    let crc = h.finalize();
-    set_u32(bytes, 28, crc);
+    h.finalize()
 }
 
 #[test]
@@ -341,8 +496,8 @@ fn bumped_major_version_is_refused_by_name() {
     let mut bytes = tiny_bytes();
     set_u16(&mut bytes, 8, 2);
     let err = decode_bundle(&bytes).unwrap_err();
-    assert!(matches!(err, BundleError::UnsupportedVersion { major: 2, minor: 0, .. }));
-    assert!(err.to_string().contains("version 2.0"), "{err}");
+    assert!(matches!(err, BundleError::UnsupportedVersion { major: 2, minor: FORMAT_MINOR, .. }));
+    assert!(err.to_string().contains(&format!("version 2.{FORMAT_MINOR}")), "{err}");
     reseal(&mut bytes); // a well-formed v2 header is refused all the same
     assert!(matches!(decode_bundle(&bytes), Err(BundleError::UnsupportedVersion { major: 2, .. })));
 }
@@ -382,16 +537,31 @@ fn unknown_sections_are_skipped_and_later_minors_read() {
     let mut bytes = write_container(&parts, EncodeOptions { compression: Compression::None }).unwrap();
     assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
 
-    // Minor 1 with a header flag and a table reserved field set: read, flags ignored.
-    set_u16(&mut bytes, 10, 1);
+    // A later minor with a header flag set: read, the flag ignored.
+    set_u16(&mut bytes, 10, FORMAT_MINOR + 1);
     set_u32(&mut bytes, 24, 0x8000_0000);
-    set_u32(&mut bytes, HEADER_LEN + 36, 5);
     reseal(&mut bytes);
     assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
-    // The same bits in a minor-0 file are corruption.
-    set_u16(&mut bytes, 10, 0);
+    // The stored-bytes CRC (defined in 1.1) is still checked in a later minor.
+    set_u32(&mut bytes, HEADER_LEN + 36, 5);
+    let mut bad_crc = bytes.clone();
+    let crc = header_crc(&bad_crc);
+    set_u32(&mut bad_crc, 28, crc);
+    assert!(matches!(decode_bundle(&bad_crc), Err(BundleError::StoredChecksum { .. })));
+    // The same flag in a file of this reader's minor is corruption.
+    set_u16(&mut bytes, 10, FORMAT_MINOR);
     reseal(&mut bytes);
     assert!(matches!(decode_bundle(&bytes), Err(BundleError::Layout(_))));
+}
+
+/// In a 1.0 file, word 36 of a table entry is reserved and must be zero.
+#[test]
+fn nonzero_reserved_word_in_a_1_0_table_is_refused() {
+    let mut bytes = unhex(GOLDEN_1_0);
+    set_u32(&mut bytes, HEADER_LEN + 36, 5);
+    reseal(&mut bytes);
+    let err = decode_bundle(&bytes).unwrap_err();
+    assert!(matches!(err, BundleError::Layout(_)) && err.to_string().contains("reserved field is 0x5"), "{err}");
 }
 
 /// Raw bytes of one section of `bundle`, via the real encoder.
