@@ -695,7 +695,13 @@ fn encoder_refuses_bundles_that_would_not_read_back() {
     refuse(b, "values, expected 12 vertices");
     let mut b = good.clone();
     b.transfer.as_mut().unwrap().layers[1].data[5] = f32::NAN;
-    refuse(b, "not finite");
+    refuse(b, "section XFER: layer 1 value 5 (vertex 0) is NaN");
+    let mut b = good.clone();
+    b.mesh.normals[1] = Vec3::new(0.0, f32::INFINITY, 0.0);
+    refuse(b, "section MESH: vertex 1 normal is inf");
+    let mut b = good.clone();
+    b.sun.as_mut().unwrap().steps[2].direction = [0.0, 2.0, 0.0];
+    refuse(b, "section SUND: step 2 sun direction has length 2, not 1");
     let mut b = good.clone();
     b.transfer.as_mut().unwrap().layers[1].data[5] = 1e6;
     refuse(b, "overflows f16");
@@ -773,4 +779,235 @@ fn one_and_1024_steps_round_trip() {
         let s = back.sun.unwrap();
         assert!((0..30).all(|v| (0..steps).all(|k| s.bit(v, k) == sun.bit(v, k))));
     }
+}
+
+// ---------------------------------------------------------------- value ranges
+
+/// Raw bytes of every section of `bundle`, as the writer lays them out.
+fn raw_sections(bundle: &Bundle) -> Vec<([u8; 4], Vec<u8>)> {
+    let bytes = encode_bundle_with(bundle, EncodeOptions { compression: Compression::None }).unwrap();
+    list_sections(&bytes).unwrap().iter().map(|s| (s.tag, bytes[s.offset as usize..(s.offset + s.raw_len) as usize].to_vec())).collect()
+}
+
+/// `bundle` with the bytes of section `tag` at `offset` replaced by `patch`,
+/// laid out again by the container writer, so every CRC is valid: only the
+/// range checks stand between the forged value and the caller.
+fn forged_at(bundle: &Bundle, tag: [u8; 4], offset: usize, patch: &[u8]) -> Vec<u8> {
+    let mut parts = raw_sections(bundle);
+    let raw = &mut parts.iter_mut().find(|(t, _)| *t == tag).unwrap().1;
+    raw[offset..offset + patch.len()].copy_from_slice(patch);
+    write_container(&parts, EncodeOptions::default()).unwrap()
+}
+
+/// [`forged_at`] at the one place section `tag` holds the bytes `marker`.
+fn forged(bundle: &Bundle, tag: [u8; 4], marker: &[u8], patch: &[u8]) -> Vec<u8> {
+    let raw = raw_sections(bundle).into_iter().find(|(t, _)| *t == tag).unwrap().1;
+    let hits: Vec<usize> = raw.windows(marker.len()).enumerate().filter(|(_, w)| *w == marker).map(|(i, _)| i).collect();
+    assert_eq!(hits.len(), 1, "marker {marker:02x?} must occur once in {}", Tag(tag));
+    forged_at(bundle, tag, hits[0], patch)
+}
+
+/// Decoding `bytes` fails with a `BadValue` in section `tag` whose message is `expected`.
+fn assert_bad_value(bytes: &[u8], tag: &[u8; 4], expected: &str) {
+    match decode_bundle(bytes) {
+        Err(BundleError::BadValue { tag: Tag(t), bad }) => {
+            assert_eq!((&t, bad.to_string().as_str()), (tag, expected), "wrong field or section");
+        }
+        other => panic!("expected section {} to fail with \"{expected}\", got {other:?}", Tag(*tag)),
+    }
+}
+
+const MARK: f32 = 0.3217;
+const NAN: f32 = f32::NAN;
+const INF: f32 = f32::INFINITY;
+
+/// A bundle whose `field` holds `MARK` (or a value derived from it), forged to `value`.
+fn forged_field(set: impl FnOnce(&mut Bundle) -> f32, tag: [u8; 4], value: f32) -> Vec<u8> {
+    let mut b = random_bundle(30, 6, 4, Quantization::F32);
+    let stored = set(&mut b);
+    forged(&b, tag, &stored.to_le_bytes(), &value.to_le_bytes())
+}
+
+#[test]
+fn mesh_values_out_of_range_are_refused_by_name() {
+    let position = |b: &mut Bundle| {
+        b.mesh.positions[3].y = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(position, *b"MESH", NAN), b"MESH", "vertex 3 position is NaN");
+    let normal = |b: &mut Bundle| {
+        b.mesh.normals[3] = Vec3::new(MARK, 0.0, 0.5);
+        MARK
+    };
+    assert_bad_value(&forged_field(normal, *b"MESH", NAN), b"MESH", "vertex 3 normal is NaN");
+    let mut b = random_bundle(30, 6, 4, Quantization::F32);
+    b.mesh.normals[3] = Vec3::new(MARK, 0.0, MARK);
+    let zero = forged(&b, *b"MESH", &[MARK.to_le_bytes(), 0f32.to_le_bytes(), MARK.to_le_bytes()].concat(), &[0u8; 12]);
+    assert_bad_value(&zero, b"MESH", "vertex 3 normal is the zero vector (no direction)");
+    let uv = |b: &mut Bundle| {
+        b.mesh.uvs[2].x = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(uv, *b"MESH", INF), b"MESH", "vertex 2 uv is inf");
+    let colour = |b: &mut Bundle| {
+        b.mesh.colors[4][1] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(colour, *b"MESH", NAN), b"MESH", "vertex 4 colour is NaN");
+    assert_bad_value(&forged_field(colour, *b"MESH", -0.5), b"MESH", "vertex 4 colour is -0.5, outside [0, ∞)");
+}
+
+#[test]
+fn material_values_out_of_range_are_refused_by_name() {
+    let albedo = |b: &mut Bundle| {
+        b.mesh.materials[1].albedo[2] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(albedo, *b"MATL", NAN), b"MATL", "material 1 albedo is NaN");
+    assert_bad_value(&forged_field(albedo, *b"MATL", 1.5), b"MATL", "material 1 albedo is 1.5, outside [0, 1]");
+    assert_bad_value(&forged_field(albedo, *b"MATL", -INF), b"MATL", "material 1 albedo is -inf");
+    let transmittance = |b: &mut Bundle| {
+        b.mesh.materials[1].transmittance = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(transmittance, *b"MATL", NAN), b"MATL", "material 1 transmittance is NaN");
+    assert_bad_value(&forged_field(transmittance, *b"MATL", -0.25), b"MATL", "material 1 transmittance is -0.25, outside [0, 1]");
+}
+
+#[test]
+fn sun_values_out_of_range_are_refused_by_name() {
+    let mut b = random_bundle(30, 6, 4, Quantization::F32);
+    b.sun.as_mut().unwrap().steps[5].unix_time_utc = 1_234_567_890.123;
+    let time = forged(&b, *b"SUND", &1_234_567_890.123f64.to_le_bytes(), &f64::NAN.to_le_bytes());
+    assert_bad_value(&time, b"SUND", "step 5 time is NaN");
+
+    let direction = |b: &mut Bundle| {
+        let d = Vec3::new(MARK, 0.8, 0.5).normalize();
+        b.sun.as_mut().unwrap().steps[5].direction = d.to_array();
+        d.x
+    };
+    assert_bad_value(&forged_field(direction, *b"SUND", NAN), b"SUND", "step 5 sun direction is NaN");
+    assert_bad_value(&forged_field(direction, *b"SUND", 3.0), b"SUND", "step 5 sun direction has length 3.1457639, not 1");
+
+    let elevation = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].elevation_deg = 32.17;
+        32.17
+    };
+    assert_bad_value(&forged_field(elevation, *b"SUND", 91.0), b"SUND", "step 5 elevation is 91, outside [-90, 90] degrees");
+    assert_bad_value(&forged_field(elevation, *b"SUND", NAN), b"SUND", "step 5 elevation is NaN");
+    let azimuth = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].azimuth_deg = 321.7;
+        321.7
+    };
+    assert_bad_value(&forged_field(azimuth, *b"SUND", -1.0), b"SUND", "step 5 azimuth is -1, outside [0, 360] degrees");
+    assert_bad_value(&forged_field(azimuth, *b"SUND", INF), b"SUND", "step 5 azimuth is inf");
+    let irradiance = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].sun_rgb[1] = 321.7;
+        321.7
+    };
+    assert_bad_value(&forged_field(irradiance, *b"SUND", -1.0), b"SUND", "step 5 sun irradiance is -1, outside [0, ∞)");
+    assert_bad_value(&forged_field(irradiance, *b"SUND", NAN), b"SUND", "step 5 sun irradiance is NaN");
+    let sky = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].sky_sh[2][1] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(sky, *b"SUND", NAN), b"SUND", "step 5 sky SH is NaN");
+}
+
+#[test]
+fn transfer_values_out_of_range_are_refused_by_name() {
+    let value = |b: &mut Bundle| {
+        b.transfer.as_mut().unwrap().layers[1].data[30] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(value, *b"XFER", NAN), b"XFER", "layer 1 value 30 (vertex 1) is NaN");
+
+    // XFER: 16-byte header, then layer 0: kind and reserved (8 bytes), data.
+    let layer0 = 16 + 8;
+    let f16 = random_bundle(31, 6, 4, Quantization::F16);
+    let nan_f16 = forged_at(&f16, *b"XFER", layer0 + 2 * 3, &0x7e00u16.to_le_bytes());
+    assert_bad_value(&nan_f16, b"XFER", "layer 0 value 3 (vertex 0) is NaN");
+    let mut tinted = random_bundle(32, 6, 4, Quantization::F16Tinted);
+    tinted.transfer.as_mut().unwrap().layers.iter_mut().for_each(|l| l.data.iter_mut().for_each(|v| *v = v.abs() + 0.1));
+    let inf_tint = forged_at(&tinted, *b"XFER", layer0, &0x7c00u16.to_le_bytes()); // vertex 0, channel 0 tint
+    assert_bad_value(&inf_tint, b"XFER", "layer 0 value 0 (vertex 0) is inf");
+
+    // i16: the V per-vertex scales come first; vertex 1's is at layer0 + 4.
+    let i16 = random_bundle(33, 6, 4, Quantization::I16PerVertexScale);
+    let scale = |value: f32| forged_at(&i16, *b"XFER", layer0 + 4, &value.to_le_bytes());
+    assert_bad_value(&scale(NAN), b"XFER", "layer 0 i16 scale of vertex 1 is NaN");
+    assert_bad_value(&scale(-1e-3), b"XFER", "layer 0 i16 scale of vertex 1 is -0.001, outside [0, ∞)");
+    assert_bad_value(&scale(0.0), b"XFER", "layer 0 i16 scale of vertex 1 is 0, outside (0, ∞) for a vertex with non-zero codes");
+    // A scale large enough that the codes overflow f32.
+    assert_bad_value(&scale(f32::MAX), b"XFER", "layer 0 value 27 (vertex 1) is -inf");
+}
+
+/// What the writer does with values a loader can hand over: clamps albedo and
+/// transmittance into [0, 1] and colours to ≥ 0 (the bake uses albedo and
+/// transmittance clamped), replaces a zero normal by the face normal.
+#[test]
+fn writer_stores_values_in_range() {
+    let mut b = tiny_bundle();
+    b.mesh.materials[0].albedo = [1.2, 0.5, -0.1];
+    b.mesh.materials[0].transmittance = 1.5;
+    b.mesh.normals[1] = Vec3::ZERO;
+    b.mesh.colors = vec![[-0.5, 0.25, 2.0]; 3];
+    let back = decode_bundle(&encode_bundle(&b).unwrap()).unwrap();
+    assert_eq!((back.mesh.materials[0].albedo, back.mesh.materials[0].transmittance), ([1.0, 0.5, 0.0], 1.0));
+    assert_eq!(back.mesh.normals, vec![Vec3::Z; 3]);
+    assert_eq!(back.mesh.colors, vec![[0.0, 0.25, 2.0]; 3]);
+}
+
+/// Export refuses a bundle built in memory with a value glTF cannot hold, and
+/// writes nothing (no `null` in JSON, no NaN in the buffers).
+#[test]
+fn export_refuses_out_of_range_values() {
+    let dir = std::env::temp_dir().join(format!("prtb-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("out.glb");
+    let mut b = random_bundle(34, 6, 4, Quantization::F32);
+    b.mesh.materials[1].albedo[0] = f32::NAN;
+    let err = export_glb(&path, &b, None).unwrap_err().to_string();
+    assert!(err.contains("section MATL: material 1 albedo is NaN"), "{err}");
+    assert!(!path.exists());
+
+    // Finite bounce layers whose sum overflows f32.
+    let mut b = random_bundle(34, 6, 4, Quantization::F32);
+    let t = b.transfer.as_mut().unwrap();
+    t.layers = vec![
+        TransferLayer { kind: LayerKind::Bounce(0), data: vec![3e38; 162] },
+        TransferLayer { kind: LayerKind::Bounce(1), data: vec![3e38; 162] },
+    ];
+    let err = export_glb(&path, &b, None).unwrap_err().to_string();
+    assert!(err.contains("transfer total value 0 (vertex 0) is inf"), "{err}");
+    assert!(!path.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The 1.0 writer did not clamp: a 1.0 file's out-of-range albedo, transmittance,
+/// colours and zero normals read as the 1.1 writer would store them; NaN is refused.
+#[test]
+fn format_1_0_values_are_brought_into_range_but_nan_is_refused() {
+    // GOLDEN_1_0: normal 1 at 0xdc, albedo at 0x114, transmittance at 0x120.
+    let mut bytes = unhex(GOLDEN_1_0);
+    bytes[0x114..0x118].copy_from_slice(&1.25f32.to_le_bytes());
+    bytes[0x120..0x124].copy_from_slice(&(-0.5f32).to_le_bytes());
+    bytes[0xdc..0xe8].fill(0);
+    reseal(&mut bytes);
+    let b = decode_bundle(&bytes).unwrap();
+    assert_eq!((b.mesh.materials[0].albedo, b.mesh.materials[0].transmittance), ([1.0, 0.5, 0.5], 0.0));
+    assert_eq!(b.mesh.normals, vec![Vec3::Z; 3]);
+    // Adding a sun series writes the current minor, with the values as decoded.
+    let sun = random_sun(&mut Rng(3), 3, 2);
+    let with_sun = decode_bundle(&encode_with_sun(&bytes, &serde_json::json!({}), &sun).unwrap()).unwrap();
+    assert_eq!((with_sun.mesh, with_sun.sun), (b.mesh, Some(sun)));
+
+    bytes[0x118..0x11c].copy_from_slice(&f32::NAN.to_le_bytes());
+    reseal(&mut bytes);
+    assert_bad_value(&bytes, b"MATL", "material 0 albedo is NaN");
+    // The same out-of-range values in a file of the current minor are refused.
+    let mut current = unhex(GOLDEN);
+    current[0x114..0x118].copy_from_slice(&1.25f32.to_le_bytes());
+    reseal(&mut current);
+    assert_bad_value(&current, b"MATL", "material 0 albedo is 1.25, outside [0, 1]");
 }
