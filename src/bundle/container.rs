@@ -9,8 +9,10 @@
 //!
 //! The layout is canonical: payloads follow the table in table order, each at the
 //! first 8-aligned offset after the previous one, and the file ends at the 8-aligned
-//! end of the last payload. Every byte is then covered by a CRC (header, table,
-//! payloads) or must be zero (padding), so any corruption is detected.
+//! end of the last payload. Every byte is then covered by a CRC or must be zero
+//! (padding). Since format 1.1 each payload has two CRCs: one of its stored
+//! bytes, so a flip in a zstd frame header that decodes to the same bytes is
+//! still caught, and one of its raw bytes, so a codec bug is caught too.
 
 use std::borrow::Cow;
 use std::collections::HashSet;
@@ -24,8 +26,11 @@ use super::error::{BundleError, Tag};
 pub const MAGIC: [u8; 8] = *b"PRTB\r\n\x1a\n";
 /// Major version written and read; a different major may change any layout.
 pub const FORMAT_MAJOR: u16 = 1;
-/// Minor version written; minors only add sections and ignorable flag bits.
-pub const FORMAT_MINOR: u16 = 0;
+/// Minor version written; minors only add sections and ignorable fields.
+/// 1.1 gave the table entry's reserved word a meaning: the stored-bytes CRC.
+pub const FORMAT_MINOR: u16 = 1;
+/// First minor whose table entries carry `stored_crc32` (offset 36; reserved in 1.0).
+pub const STORED_CRC_SINCE_MINOR: u16 = 1;
 /// Size of the fixed file header.
 pub const HEADER_LEN: usize = 32;
 /// Size of one section-table entry.
@@ -81,6 +86,9 @@ pub struct SectionInfo {
     pub raw_len: u64,
     /// CRC-32 (IEEE) of the raw (decompressed) bytes.
     pub crc32: u32,
+    /// CRC-32 (IEEE) of the stored bytes as they lie in the file; `None` in
+    /// 1.0 files, whose table has a reserved zero word there.
+    pub stored_crc32: Option<u32>,
 }
 
 impl SectionInfo {
@@ -207,13 +215,15 @@ impl<'a> Container<'a> {
                 stored_len: read_u64(entry, 16),
                 raw_len: read_u64(entry, 24),
                 crc32: read_u32(entry, 32),
+                stored_crc32: (minor >= STORED_CRC_SINCE_MINOR).then(|| read_u32(entry, 36)),
             };
-            let reserved = read_u32(entry, 36);
             let tag = Tag(info.tag);
             if !info.tag.iter().all(|&b| is_tag_byte(b)) {
                 return Err(BundleError::Layout(format!("section {i} has a non-ASCII tag \"{tag}\"")));
             }
-            if reject_reserved && reserved != 0 {
+            // In 1.0 files word 36 is reserved: zero, like every reserved field of a known minor.
+            let reserved = read_u32(entry, 36);
+            if reject_reserved && info.stored_crc32.is_none() && reserved != 0 {
                 return Err(BundleError::Layout(format!("section {tag}: reserved field is {reserved:#x}, must be 0")));
             }
             if !seen_tags.insert(info.tag) {
@@ -262,15 +272,38 @@ impl<'a> Container<'a> {
         self.sections.iter().find(|s| s.tag == tag)
     }
 
-    /// The raw bytes of a section: decompressed (at most `raw_len` bytes are ever
-    /// produced), length-checked and CRC-checked.
-    pub(crate) fn payload(&self, info: &SectionInfo) -> Result<Cow<'a, [u8]>, BundleError> {
-        let tag = Tag(info.tag);
-        let stored = usize::try_from(info.offset)
+    /// The stored bytes of a section, exactly as they lie in the file.
+    fn stored_bytes(&self, info: &SectionInfo) -> Result<&'a [u8], BundleError> {
+        usize::try_from(info.offset)
             .ok()
             .zip(usize::try_from(info.stored_len).ok())
             .and_then(|(at, len)| self.bytes.get(at..at.checked_add(len)?))
-            .ok_or_else(|| BundleError::Layout(format!("section {tag} lies outside the file")))?;
+            .ok_or_else(|| BundleError::Layout(format!("section {} lies outside the file", Tag(info.tag))))
+    }
+
+    /// Checks the stored-bytes CRC of a section (files of minor ≥ 1; 1.0 files have none).
+    fn check_stored_crc(&self, info: &SectionInfo) -> Result<&'a [u8], BundleError> {
+        let stored = self.stored_bytes(info)?;
+        if let Some(expected) = info.stored_crc32 {
+            let computed = crc32fast::hash(stored);
+            if computed != expected {
+                return Err(BundleError::StoredChecksum { tag: Tag(info.tag), stored: expected, computed });
+            }
+        }
+        Ok(stored)
+    }
+
+    /// Checks the stored-bytes CRC of every section, known to this reader or not,
+    /// before anything is decompressed: in a 1.1 file no corrupted byte goes unseen.
+    pub(crate) fn check_stored_crcs(&self) -> Result<(), BundleError> {
+        self.sections.iter().try_for_each(|info| self.check_stored_crc(info).map(|_| ()))
+    }
+
+    /// The raw bytes of a section: stored-CRC-checked (1.1), decompressed (at most
+    /// `raw_len` bytes are ever produced), length-checked and raw-CRC-checked.
+    pub(crate) fn payload(&self, info: &SectionInfo) -> Result<Cow<'a, [u8]>, BundleError> {
+        let tag = Tag(info.tag);
+        let stored = self.check_stored_crc(info)?;
         let raw: Cow<'a, [u8]> = match info.codec {
             0 => Cow::Borrowed(stored),
             1 => Cow::Owned(decompress_capped(stored, info.raw_len, tag)?),
@@ -344,7 +377,7 @@ pub(crate) fn write_container(sections: &[([u8; 4], Vec<u8>)], options: EncodeOp
         put_u64(&mut table, stored.len() as u64);
         put_u64(&mut table, raw.len() as u64);
         put_u32(&mut table, crc32fast::hash(raw));
-        put_u32(&mut table, 0);
+        put_u32(&mut table, crc32fast::hash(&stored));
         body.extend_from_slice(&stored);
         pad_to(&mut body, ALIGN as usize);
     }
@@ -356,7 +389,7 @@ pub(crate) fn write_container(sections: &[([u8; 4], Vec<u8>)], options: EncodeOp
     put_u16(&mut out, FORMAT_MINOR);
     put_u32(&mut out, section_count);
     put_u64(&mut out, total_len);
-    put_u32(&mut out, 0); // flags: none defined in 1.0
+    put_u32(&mut out, 0); // flags: none defined in 1.x
     let mut hasher = crc32fast::Hasher::new();
     hasher.update(&out);
     hasher.update(&table);

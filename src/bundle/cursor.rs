@@ -21,6 +21,11 @@ impl<'a> Cursor<'a> {
         BundleError::malformed(self.tag, detail)
     }
 
+    /// The section being read.
+    pub(crate) fn tag(&self) -> [u8; 4] {
+        self.tag
+    }
+
     pub(crate) fn remaining(&self) -> usize {
         self.bytes.len() - self.pos
     }

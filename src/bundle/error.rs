@@ -3,6 +3,8 @@
 use std::fmt;
 use std::path::PathBuf;
 
+use super::values::BadValue;
+
 /// A four-byte section tag (`b"MESH"`), shown as ASCII with escapes for other bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Tag(pub [u8; 4]);
@@ -49,9 +51,17 @@ pub enum BundleError {
     /// zstd failed, or produced a length other than the declared raw length.
     #[error("section {tag}: decompression failed: {detail}")]
     Decompress { tag: Tag, detail: String },
+    /// The CRC-32 of the section's stored bytes (as in the file) does not match the table (format ≥ 1.1).
+    #[error(
+        "section {tag}: stored-bytes checksum mismatch: stored {stored:#010x}, computed {computed:#010x} (payload corrupted in the file)"
+    )]
+    StoredChecksum { tag: Tag, stored: u32, computed: u32 },
     /// The CRC-32 of the section's raw bytes does not match the table.
     #[error("section {tag}: checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
     SectionChecksum { tag: Tag, stored: u32, computed: u32 },
+    /// A decoded float lies outside its meaning range (NaN albedo, zero normal, …).
+    #[error("section {tag}: {bad}")]
+    BadValue { tag: Tag, bad: BadValue },
     /// The section's raw bytes do not describe valid content.
     #[error("section {tag}: {detail}")]
     Malformed { tag: Tag, detail: String },
@@ -69,6 +79,16 @@ pub enum BundleError {
 impl BundleError {
     pub(crate) fn malformed(tag: [u8; 4], detail: impl Into<String>) -> BundleError {
         BundleError::Malformed { tag: Tag(tag), detail: detail.into() }
+    }
+
+    /// A decoded value out of range in section `tag`.
+    pub(crate) fn bad_value(tag: [u8; 4]) -> impl FnOnce(BadValue) -> BundleError {
+        move |bad| BundleError::BadValue { tag: Tag(tag), bad }
+    }
+
+    /// The encoder was handed a value the decoder would refuse.
+    pub(crate) fn invalid_value(tag: [u8; 4]) -> impl FnOnce(BadValue) -> BundleError {
+        move |bad| BundleError::Invalid(format!("section {}: {bad}", Tag(tag)))
     }
 
     /// The error without its [`BundleError::InFile`] wrapper, for matching on the kind.

@@ -15,6 +15,7 @@ use std::path::Path;
 
 use serde_json::{json, Value};
 
+use super::values::check_bundle;
 use super::{Bundle, LayerKind};
 use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, MeshError};
 
@@ -57,12 +58,15 @@ pub fn transfer_attributes(values: &[f32], per_vertex: usize, vertex_count: usiz
 /// Writes `bundle` as GLB at `path` with `_PRT_…` attributes.
 ///
 /// `layer`: which transfer layer to write; `None` writes the total (the `Total`
-/// layer, or the sum of the stored bounces). Errors when the layer is absent or
-/// the mesh cannot be written (see [`write_glb_with`]).
+/// layer, or the sum of the stored bounces). Errors when the layer is absent,
+/// when a value is out of its range (NaN, albedo above 1, …: glTF has no NaN, and
+/// JSON would get `null`), or when the mesh cannot be written (see [`write_glb_with`]).
 pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Result<GltfExportReport, MeshError> {
     let mesh = &bundle.mesh;
     let vertex_count = mesh.vertex_count();
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
+    // Decoded bundles passed these checks already; bundles built in memory did not.
+    check_bundle(bundle).map_err(|e| invalid(e.to_string()))?;
     let mut attributes = Vec::new();
     let mut layer_name = "none".to_string();
     let mut transfer_meta = Value::Null;
@@ -76,6 +80,10 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
             Some(LayerKind::Bounce(b)) => format!("bounce {b}"),
             _ => "total".into(),
         };
+        if let Some(j) = values.iter().position(|v| !v.is_finite()) {
+            let vertex = j / per_vertex.max(1);
+            return Err(invalid(format!("transfer {layer_name} value {j} (vertex {vertex}) is {}: the bounces sum past f32", values[j])));
+        }
         attributes.extend(transfer_attributes(&values, per_vertex, vertex_count));
         transfer_meta = json!({
             "order": t.order, "channels": t.channels, "values_per_vertex": per_vertex, "layer": layer_name,

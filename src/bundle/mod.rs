@@ -2,7 +2,8 @@
 //!
 //! A bundle holds the mesh, its materials, per-vertex SH transfer and sun masks
 //! with per-step sun/sky data, each in its own tagged section, zstd-compressed
-//! per section, CRC-32 per section and over the header and table.
+//! per section, CRC-32 over the header and table and, per section, of the stored
+//! and of the decoded bytes (format 1.1; 1.0 files, with the decoded CRC only, still read).
 //! Little-endian everywhere. The byte layout is specified in docs/bundle-format.md.
 //!
 //! - `container`: header, section table, codecs, checksums (knows no content).
@@ -21,19 +22,25 @@ mod export_gltf;
 mod quantize;
 mod sections;
 mod types;
+mod values;
 
+#[cfg(test)]
+mod fuzz_tests;
 #[cfg(test)]
 mod tests;
 
 use std::path::Path;
 
-pub use container::{Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC};
+pub use container::{
+    Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC, STORED_CRC_SINCE_MINOR,
+};
 pub use error::{BundleError, Tag};
 pub use export_gltf::{
     export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX,
 };
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
 pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};
 use sections::{ReadRules, MATL, MESH, META, SUND, SUNM, XFER};
@@ -43,8 +50,13 @@ use sections::{ReadRules, MATL, MESH, META, SUND, SUNM, XFER};
 /// Deterministic: the same bundle gives the same bytes (fixed level, single-threaded
 /// zstd, no timestamps). Errors with [`BundleError::Invalid`] when the bundle would
 /// not read back: mesh invariants ([`crate::mesh::Mesh::validate`]), transfer or mask
-/// lengths that do not match the vertex count, non-finite transfer or sun values,
+/// lengths that do not match the vertex count, non-finite values anywhere, sun
+/// values out of range (direction not unit, elevation, azimuth, negative irradiance),
 /// f16 overflow, duplicate layer kinds, mask bits past the last step.
+///
+/// Three kinds of loader output are stored in range instead (as the bake uses
+/// them): albedo and transmittance clamped into [0, 1], negative colour channels
+/// as 0, zero normals replaced by the vertex's face normal.
 pub fn encode_bundle(b: &Bundle) -> Result<Vec<u8>, BundleError> {
     encode_bundle_with(b, EncodeOptions::default())
 }
@@ -70,16 +82,23 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
 
 /// Decodes and fully checks a bundle (see "Reader rules" in docs/bundle-format.md).
 ///
+/// The stored-bytes CRC of every section (1.1 files) is checked before anything
+/// is decompressed, so a corrupted section is refused even when this reader
+/// does not know its tag.
 /// Sections with unknown tags are skipped; a file of a later minor version is read
 /// for what this reader knows. Transfer data comes back dequantized to f32.
 pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
     let container = Container::parse(bytes)?;
-    let rules = ReadRules { reject_reserved: container.reject_reserved() };
+    container.check_stored_crcs()?;
+    let rules = ReadRules {
+        reject_reserved: container.reject_reserved(),
+        bring_legacy_values_into_range: container.minor < values::RANGES_CHECKED_SINCE_MINOR,
+    };
     let section = |tag: [u8; 4]| container.find(tag).map(|info| container.payload(info)).transpose();
     let required = |tag: [u8; 4]| section(tag)?.ok_or(BundleError::MissingSection(Tag(tag)));
 
     let meta = sections::decode_meta(&required(META)?)?;
-    let (materials, groups) = sections::decode_materials(&required(MATL)?)?;
+    let (materials, groups) = sections::decode_materials(&required(MATL)?, rules)?;
     let mut mesh = sections::decode_mesh(&required(MESH)?, rules)?;
     mesh.materials = materials;
     mesh.groups = groups;
@@ -109,7 +128,8 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
 /// Re-encodes the bundle `original` with new metadata and a new sun series,
 /// copying every other section's raw payload verbatim (MESH, MATL, XFER and
 /// sections this reader does not know), so the transfer stays bit-identical
-/// whatever its quantization. Sections keep their order; META is replaced in
+/// whatever its quantization. (From a 1.0 original, MESH and MATL are written
+/// as decoded, in range; the result is a file of the current minor.) Sections keep their order; META is replaced in
 /// place, SUNM and SUND are replaced or appended.
 ///
 /// `original` is fully decoded first (every check of [`decode_bundle`]); the
@@ -120,11 +140,16 @@ pub fn encode_with_sun(original: &[u8], meta: &serde_json::Value, sun: &SunSerie
     let vertex_count = decoded.mesh.vertex_count();
     let sun_masks = sections::encode_sun_masks(sun, vertex_count)?;
     let sun_data = sections::encode_sun_data(sun)?;
+    // A 1.0 file's mesh and materials may hold values its writer did not bring
+    // into range (the decoder did): those two are stored as decoded.
+    let legacy_values = container.minor < values::RANGES_CHECKED_SINCE_MINOR;
     let mut parts = Vec::with_capacity(container.sections.len() + 2);
     for info in &container.sections {
         match info.tag {
             META => parts.push((META, sections::encode_meta(meta)?)),
             SUNM | SUND => {}
+            MESH if legacy_values => parts.push((MESH, sections::encode_mesh(&decoded.mesh)?)),
+            MATL if legacy_values => parts.push((MATL, sections::encode_materials(&decoded.mesh.materials, &decoded.mesh.groups)?)),
             tag => parts.push((tag, container.payload(info)?.into_owned())),
         }
     }

@@ -17,6 +17,7 @@ use half::f16;
 use super::cursor::{pad_to, put_f32, put_u16, Cursor};
 use super::error::BundleError;
 use super::types::Quantization;
+use super::values::check_i16_scale;
 
 /// Largest magnitude of an i16 code; −32768 is never written, so the range is symmetric.
 const I16_MAX: f64 = 32767.0;
@@ -126,14 +127,16 @@ pub(crate) fn layer_bytes(vertex_count: u64, stride: u64, channels: u64, q: Quan
     raw.checked_add(3).map(|n| n / 4 * 4)
 }
 
-/// Reads one layer written by [`encode_layer`] and dequantizes it. Refuses
-/// non-finite values, negative or non-finite scales and the i16 code −32768.
+/// Reads layer number `layer`, written by [`encode_layer`], and dequantizes it.
+/// Refuses i16 scales out of range and the i16 code −32768; the caller checks
+/// that the values are finite (`values::check_layer`).
 pub(crate) fn decode_layer(
     cur: &mut Cursor,
     vertex_count: u64,
     stride: u64,
     channels: u64,
     q: Quantization,
+    layer: usize,
 ) -> Result<Vec<f32>, BundleError> {
     let values = vertex_count.checked_mul(stride).ok_or_else(|| cur.error("transfer size overflows"))?;
     let data = match q {
@@ -155,21 +158,18 @@ pub(crate) fn decode_layer(
         Quantization::F16 => cur.u16s(values, "f16 transfer values")?.into_iter().map(|b| f16::from_bits(b).to_f32()).collect(),
         Quantization::I16PerVertexScale => {
             let scales = cur.f32s(vertex_count, "i16 per-vertex scales")?;
-            if let Some(v) = scales.iter().position(|s| !(s.is_finite() && *s >= 0.0)) {
-                return Err(cur.error(format!("vertex {v} has an invalid i16 scale {}", scales[v])));
-            }
             let codes = cur.u16s(values, "i16 transfer values")?;
             if codes.iter().any(|&c| c as i16 == i16::MIN) {
                 return Err(cur.error("i16 code -32768 is reserved"));
+            }
+            for (v, (&scale, vertex_codes)) in scales.iter().zip(codes.chunks(stride.max(1) as usize)).enumerate() {
+                check_i16_scale(layer, v, scale, vertex_codes).map_err(BundleError::bad_value(cur.tag()))?;
             }
             let per_vertex_scale = scales.iter().flat_map(|&s| std::iter::repeat(s).take(stride as usize));
             codes.iter().zip(per_vertex_scale).map(|(&c, s)| dequantize_i16(c as i16, s)).collect()
         }
     };
     cur.padding(4, "transfer layer")?;
-    if let Some(i) = data.iter().position(|v: &f32| !v.is_finite()) {
-        return Err(cur.error(format!("transfer value {i} is not finite ({})", data[i])));
-    }
     Ok(data)
 }
 
@@ -267,7 +267,7 @@ mod tests {
             let mut bytes = Vec::new();
             encode_layer(&data, 12, 3, q, &mut bytes);
             assert_eq!(bytes.len() as u64, layer_bytes(40, 12, 3, q).unwrap());
-            let back = decode_layer(&mut Cursor::new(&bytes, *b"XFER"), 40, 12, 3, q).unwrap();
+            let back = decode_layer(&mut Cursor::new(&bytes, *b"XFER"), 40, 12, 3, q, 0).unwrap();
             assert_eq!(back, round_trip(&data, 12, 3, q), "{q:?}");
             let measured = data.iter().zip(&back).map(|(a, b)| (*a as f64 - *b as f64).abs()).fold(0.0, f64::max);
             let (max_abs, rms) = quantization_error(&data, 3, 2, q);

@@ -11,6 +11,7 @@ use super::cursor::{pad_to, put_f32, put_f64, put_u16, put_u32, Cursor};
 use super::error::BundleError;
 use super::quantize::{decode_layer, encode_layer, layer_bytes};
 use super::types::{LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
 pub(crate) const META: [u8; 4] = *b"META";
@@ -26,10 +27,15 @@ const STEP_NIGHT: u32 = 1;
 /// Fixed part of one SUND step record: f64 time, f32 × 3 dir, elev, azim, f32 × 3 rgb, u32 flags.
 const SUN_STEP_FIXED: u64 = 8 + 12 + 4 + 4 + 12 + 4;
 
-/// How strict to be with reserved fields (see `Container::reject_reserved`).
+/// How a file's minor version changes the checks.
 #[derive(Clone, Copy)]
 pub(crate) struct ReadRules {
+    /// Reserved fields must be zero (see `Container::reject_reserved`).
     pub reject_reserved: bool,
+    /// A 1.0 file: albedo, transmittance, colours and normals are brought into
+    /// range as the 1.1 writer stores them, instead of refused (the 1.0 writer
+    /// did not clamp them). Non-finite values are refused all the same.
+    pub bring_legacy_values_into_range: bool,
 }
 
 fn invalid(what: impl Into<String>) -> BundleError {
@@ -75,17 +81,30 @@ pub(crate) fn decode_meta(raw: &[u8]) -> Result<serde_json::Value, BundleError> 
 
 /// MESH: u32 V, u32 T, u32 flags, positions f32×3×V, normals f32×3×V, [uvs f32×2×V],
 /// [colors f32×3×V], indices u32×3×T, tri_material u16×T (pad 4), tri_group u32×T.
+///
+/// Zero normals are replaced and negative colour channels stored as 0 (see
+/// `values`), so the section always passes the decoder's range checks.
 pub(crate) fn encode_mesh(mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
     let v = count_u32(mesh.vertex_count(), "vertex count")?;
     let t = count_u32(mesh.triangle_count(), "triangle count")?;
-    let flags = if mesh.uvs.is_empty() { 0 } else { MESH_HAS_UVS } | if mesh.colors.is_empty() { 0 } else { MESH_HAS_COLORS };
+    values::check_positions(&mesh.positions).map_err(BundleError::invalid_value(MESH))?;
+    let normals = values::normals_for_writing(mesh).map_err(BundleError::invalid_value(MESH))?;
+    values::check_uvs(&mesh.uvs).map_err(BundleError::invalid_value(MESH))?;
+    let colors: Vec<[f32; 3]> = mesh
+        .colors
+        .iter()
+        .enumerate()
+        .map(|(v, &c)| values::colour_for_writing(v, c))
+        .collect::<Result<_, _>>()
+        .map_err(BundleError::invalid_value(MESH))?;
+    let flags = if mesh.uvs.is_empty() { 0 } else { MESH_HAS_UVS } | if colors.is_empty() { 0 } else { MESH_HAS_COLORS };
     let mut out = Vec::new();
     put_u32(&mut out, v);
     put_u32(&mut out, t);
     put_u32(&mut out, flags);
-    mesh.positions.iter().chain(&mesh.normals).for_each(|p| p.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
+    mesh.positions.iter().chain(normals.iter()).for_each(|p| p.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
     mesh.uvs.iter().for_each(|uv| uv.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
-    mesh.colors.iter().for_each(|c| c.iter().for_each(|&x| put_f32(&mut out, x)));
+    colors.iter().for_each(|c| c.iter().for_each(|&x| put_f32(&mut out, x)));
     mesh.indices.iter().for_each(|&i| put_u32(&mut out, i));
     mesh.tri_material.iter().for_each(|&m| put_u16(&mut out, m));
     pad_to(&mut out, 4);
@@ -124,7 +143,12 @@ pub(crate) fn decode_mesh(raw: &[u8], rules: ReadRules) -> Result<Mesh, BundleEr
     cur.padding(4, "triangle materials")?;
     let tri_group = cur.u32s(t, "triangle groups")?;
     cur.finish()?;
-    Ok(Mesh { positions, normals, uvs, colors, indices, tri_material, tri_group, materials: Vec::new(), groups: Vec::new() })
+    let mut mesh = Mesh { positions, normals, uvs, colors, indices, tri_material, tri_group, materials: Vec::new(), groups: Vec::new() };
+    if rules.bring_legacy_values_into_range {
+        mesh = values::legacy_mesh_in_range(mesh).map_err(BundleError::bad_value(MESH))?;
+    }
+    values::check_mesh(&mesh).map_err(BundleError::bad_value(MESH))?;
+    Ok(mesh)
 }
 
 // ---------------------------------------------------------------- MATL
@@ -154,11 +178,14 @@ fn read_name(cur: &mut Cursor, what: &str) -> Result<String, BundleError> {
 
 /// MATL: u32 material_count, u32 group_count; per material u32 role, f32×3 albedo,
 /// f32 transmittance, name; per group a name. A name is u32 byte length, UTF-8, pad 4.
+///
+/// Albedo and transmittance are stored clamped into [0, 1] (see `values`).
 pub(crate) fn encode_materials(materials: &[Material], groups: &[String]) -> Result<Vec<u8>, BundleError> {
     let mut out = Vec::new();
     put_u32(&mut out, count_u32(materials.len(), "material count")?);
     put_u32(&mut out, count_u32(groups.len(), "group count")?);
-    for m in materials {
+    for (i, m) in materials.iter().enumerate() {
+        let m = values::material_for_writing(i, m).map_err(BundleError::invalid_value(MATL))?;
         put_u32(&mut out, role_code(m.role));
         m.albedo.iter().for_each(|&a| put_f32(&mut out, a));
         put_f32(&mut out, m.transmittance);
@@ -170,7 +197,7 @@ pub(crate) fn encode_materials(materials: &[Material], groups: &[String]) -> Res
     Ok(out)
 }
 
-pub(crate) fn decode_materials(raw: &[u8]) -> Result<(Vec<Material>, Vec<String>), BundleError> {
+pub(crate) fn decode_materials(raw: &[u8], rules: ReadRules) -> Result<(Vec<Material>, Vec<String>), BundleError> {
     let mut cur = Cursor::new(raw, MATL);
     let material_count = cur.u32("material count")? as u64;
     let group_count = cur.u32("group count")? as u64;
@@ -193,7 +220,12 @@ pub(crate) fn decode_materials(raw: &[u8]) -> Result<(Vec<Material>, Vec<String>
         let albedo = [cur.f32("albedo")?, cur.f32("albedo")?, cur.f32("albedo")?];
         let transmittance = cur.f32("transmittance")?;
         let name = read_name(&mut cur, "material name")?;
-        materials.push(Material { name, albedo, role, transmittance });
+        let mut material = Material { name, albedo, role, transmittance };
+        if rules.bring_legacy_values_into_range {
+            material = values::material_for_writing(i as usize, &material).map_err(BundleError::bad_value(MATL))?;
+        }
+        values::check_material(i as usize, &material).map_err(BundleError::bad_value(MATL))?;
+        materials.push(material);
     }
     let mut groups = Vec::with_capacity(group_count as usize);
     for _ in 0..group_count {
@@ -234,9 +266,7 @@ pub(crate) fn encode_transfer(t: &Transfer, vertex_count: usize) -> Result<Vec<u
                 layer.data.len()
             )));
         }
-        if let Some(j) = layer.data.iter().position(|v| !v.is_finite()) {
-            return Err(invalid(format!("transfer layer {i} value {j} is not finite ({})", layer.data[j])));
-        }
+        values::check_layer(i, &layer.data, stride).map_err(BundleError::invalid_value(XFER))?;
         if matches!(t.quantization, Quantization::F16 | Quantization::F16Tinted) {
             if let Some(j) = layer.data.iter().position(|v| !half::f16::from_f32(*v).is_finite()) {
                 return Err(invalid(format!("transfer layer {i} value {j} ({}) overflows f16", layer.data[j])));
@@ -278,7 +308,8 @@ pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules)
         if layers.iter().any(|l| l.kind == kind) {
             return Err(cur.error(format!("layer kind {kind:?} appears twice")));
         }
-        let data = decode_layer(&mut cur, v, stride, channels as u64, quantization)?;
+        let data = decode_layer(&mut cur, v, stride, channels as u64, quantization, i as usize)?;
+        values::check_layer(i as usize, &data, stride).map_err(BundleError::bad_value(XFER))?;
         layers.push(TransferLayer { kind, data });
     }
     cur.finish()?;
@@ -364,10 +395,7 @@ pub(crate) fn encode_sun_data(sun: &SunSeries) -> Result<Vec<u8>, BundleError> {
         if Some(s.sky_sh.len()) != coeffs {
             return Err(invalid(format!("sun step {k} has {} sky coefficients for sky order {}", s.sky_sh.len(), sun.sky_order)));
         }
-        let floats = s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).chain(s.sky_sh.iter().flatten());
-        if !s.unix_time_utc.is_finite() || floats.clone().any(|x| !x.is_finite()) {
-            return Err(invalid(format!("sun step {k} has a non-finite value")));
-        }
+        values::check_sun_step(k, s).map_err(BundleError::invalid_value(SUND))?;
         put_f64(&mut out, s.unix_time_utc);
         s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).for_each(|&x| put_f32(&mut out, x));
         put_u32(&mut out, if s.night { STEP_NIGHT } else { 0 });
@@ -396,10 +424,7 @@ pub(crate) fn decode_sun_data(raw: &[u8], rules: ReadRules) -> Result<(u32, Vec<
         }
         let sky = cur.f32s(3 * coeffs, "sky SH")?;
         cur.padding(8, "step record")?;
-        if !unix_time_utc.is_finite() || fixed.iter().chain(&sky).any(|x| !x.is_finite()) {
-            return Err(cur.error(format!("step {k} has a non-finite value")));
-        }
-        steps.push(SunStep {
+        let step = SunStep {
             unix_time_utc,
             direction: [fixed[0], fixed[1], fixed[2]],
             elevation_deg: fixed[3],
@@ -407,7 +432,9 @@ pub(crate) fn decode_sun_data(raw: &[u8], rules: ReadRules) -> Result<(u32, Vec<
             sun_rgb: [fixed[5], fixed[6], fixed[7]],
             night: flags & STEP_NIGHT != 0,
             sky_sh: sky.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-        });
+        };
+        values::check_sun_step(k as usize, &step).map_err(BundleError::bad_value(SUND))?;
+        steps.push(step);
     }
     cur.finish()?;
     Ok((sky_order, steps))

@@ -1,5 +1,6 @@
 //! Whole-bundle tests: round trips, determinism, golden bytes, and hostile input
-//! (truncation at every length, bit flips, bumped versions, forged counts, fuzz).
+//! (truncation at every length, bit flips, bumped versions, forged counts, forged
+//! values). The fuzz test, built on the helpers here, is `fuzz_tests.rs`.
 
 use glam::{Vec2, Vec3};
 
@@ -8,27 +9,27 @@ use super::*;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
 /// xorshift64*: deterministic test randomness without a dependency.
-struct Rng(u64);
+pub(super) struct Rng(pub(super) u64);
 impl Rng {
-    fn next(&mut self) -> u64 {
+    pub(super) fn next(&mut self) -> u64 {
         self.0 ^= self.0 >> 12;
         self.0 ^= self.0 << 25;
         self.0 ^= self.0 >> 27;
         self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
     }
-    fn unit(&mut self) -> f32 {
+    pub(super) fn unit(&mut self) -> f32 {
         (self.next() >> 40) as f32 / (1u64 << 24) as f32
     }
-    fn signed(&mut self) -> f32 {
+    pub(super) fn signed(&mut self) -> f32 {
         self.unit() * 2.0 - 1.0
     }
-    fn below(&mut self, n: usize) -> usize {
+    pub(super) fn below(&mut self, n: usize) -> usize {
         (self.next() % n as u64) as usize
     }
 }
 
 /// A random mesh with every optional attribute.
-fn random_mesh(rng: &mut Rng, vertices: usize, triangles: usize) -> Mesh {
+pub(super) fn random_mesh(rng: &mut Rng, vertices: usize, triangles: usize) -> Mesh {
     let v3 = |rng: &mut Rng| Vec3::new(rng.signed(), rng.signed(), rng.signed());
     Mesh {
         positions: (0..vertices).map(|_| v3(rng) * 10.0).collect(),
@@ -46,14 +47,14 @@ fn random_mesh(rng: &mut Rng, vertices: usize, triangles: usize) -> Mesh {
     }
 }
 
-fn random_transfer(rng: &mut Rng, vertices: usize, quantization: Quantization) -> Transfer {
+pub(super) fn random_transfer(rng: &mut Rng, vertices: usize, quantization: Quantization) -> Transfer {
     let (order, channels) = (3u32, 3u32);
     let n = vertices * (channels * order * order) as usize;
     let layer = |rng: &mut Rng, kind| TransferLayer { kind, data: (0..n).map(|_| rng.signed() * 0.9).collect() };
     Transfer { order, channels, quantization, layers: vec![layer(rng, LayerKind::Bounce(0)), layer(rng, LayerKind::Total)] }
 }
 
-fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> SunSeries {
+pub(super) fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> SunSeries {
     let sky_order = 3;
     let steps = (0..step_count)
         .map(|k| SunStep {
@@ -86,7 +87,7 @@ fn random_bundle(seed: u64, vertices: usize, triangles: usize, quantization: Qua
 }
 
 /// The smallest bundle: one triangle, META `{}`, no transfer or sun, every section raw.
-fn tiny_bundle() -> Bundle {
+pub(super) fn tiny_bundle() -> Bundle {
     Bundle {
         meta: serde_json::json!({}),
         mesh: Mesh {
@@ -102,6 +103,80 @@ fn tiny_bundle() -> Bundle {
         transfer: None,
         sun: None,
     }
+}
+
+/// A small bundle with every section, regular enough that zstd shrinks each one:
+/// the content of [`GOLDEN_1_0_ZSTD`].
+pub(super) fn small_regular_bundle() -> Bundle {
+    let corners: Vec<Vec3> = (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32)).collect();
+    let quads = [[0u32, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let indices: Vec<u32> = quads.iter().flat_map(|q| [q[0], q[1], q[2], q[0], q[2], q[3]]).collect();
+    let mesh = Mesh {
+        normals: corners.iter().map(|p| (*p - Vec3::splat(0.5)).normalize()).collect(),
+        positions: corners,
+        indices,
+        tri_material: vec![0; 12],
+        tri_group: vec![0; 12],
+        materials: vec![Material::opaque("stone", 0.5)],
+        groups: vec!["box".into()],
+        ..Mesh::default()
+    };
+    let transfer = Transfer {
+        order: 2,
+        channels: 1,
+        quantization: Quantization::F16,
+        layers: vec![TransferLayer { kind: LayerKind::Total, data: (0..32).map(|i| [0.5, 0.25, 0.0, -0.25][i % 4]).collect() }],
+    };
+    let step = |k: usize| SunStep {
+        unix_time_utc: 1_782_000_000.0 + 3600.0 * k as f64,
+        direction: [0.0, 1.0, 0.0],
+        elevation_deg: 90.0,
+        azimuth_deg: 0.0,
+        sun_rgb: [1000.0, 900.0, 800.0],
+        night: false,
+        sky_sh: vec![[0.5, 0.5, 0.75]],
+    };
+    let (words_per_vertex, masks) = SunSeries::pack(2, 8, |v, k| (v + k) % 2 == 0);
+    Bundle {
+        meta: serde_json::json!({"tool": "prtbake golden", "note": "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa"}),
+        mesh,
+        transfer: Some(transfer),
+        sun: Some(SunSeries { sky_order: 1, steps: vec![step(0), step(1)], words_per_vertex, masks }),
+    }
+}
+
+/// [`small_regular_bundle`] as a format 1.0 writer (before the stored-bytes CRC)
+/// wrote it with the default options: every section zstd, table word 36 zero.
+/// Kept as bytes so that 1.0 files stay readable whatever the writer does now.
+const GOLDEN_1_0_ZSTD: &str = "
+    50525442 0d0a1a0a 01000000 06000000 78020000 00000000 00000000 cfd62f9a
+    4d455441 01000000 10010000 00000000 34000000 00000000 65000000 00000000
+    64a9e921 00000000 4d455348 01000000 48010000 00000000 7b000000 00000000
+    a4010000 00000000 616c4e29 00000000 4d41544c 01000000 c8010000 00000000
+    2e000000 00000000 30000000 00000000 0f6d4515 00000000 58464552 01000000
+    f8010000 00000000 1f000000 00000000 58000000 00000000 958b9c4f 00000000
+    53554e4d 01000000 18020000 00000000 1e000000 00000000 30000000 00000000
+    90f81a44 00000000 53554e44 01000000 38020000 00000000 3c000000 00000000
+    78000000 00000000 c23c4952 00000000 28b52ffd 20655d01 0044027b 226e6f74
+    65223a22 61222c22 746f6f6c 223a2270 72746261 6b652067 6f6c6465 6e227d01
+    00960012 00000000 28b52ffd 60a4008d 03001403 08000000 0c00803f 803f803f
+    803f3acd 13bf3f3f 02000000 03010000 00040000 00050000 00070601 00040602
+    04060107 071da0a0 304b6b07 70023997 1e81908b e8747107 ee4f7cf5 aceeda3d
+    ec2ef777 4f3cd6fd defa0a99 38768409 4bf5bf6e 20988dff cebad24f 3bc296ca
+    4d3b1900 00000000 28b52ffd 20302d01 00e80100 00000100 3f803f05 00000073
+    746f6e65 00000003 00000062 6f780002 00bb2d0a 50040000 28b52ffd 2058b500
+    00600200 00000138 00340000 00b40300 5d390634 d8705a00 28b52ffd 2030ad00
+    00580200 00000100 00000800 0203002b 212f0b60 00090000 28b52ffd 20789d01
+    00f00200 00000100 60ca8dda 41803fb4 427a4400 00614400 00484400 3f40e4cd
+    0800d8ea 7065b11d 6e334707 03af0cec 32fa0245 00000000";
+
+fn unhex(text: &str) -> Vec<u8> {
+    let digits: Vec<u8> = text.bytes().filter(u8::is_ascii_hexdigit).collect();
+    digits.chunks(2).map(|p| u8::from_str_radix(std::str::from_utf8(p).unwrap(), 16).unwrap()).collect()
+}
+
+pub(super) fn small_zstd_bytes() -> Vec<u8> {
+    encode_bundle(&small_regular_bundle()).unwrap()
 }
 
 fn tiny_bytes() -> Vec<u8> {
@@ -230,8 +305,28 @@ fn write_then_read_file_round_trips_and_errors_name_the_path() {
 /// The worked example of docs/bundle-format.md, byte for byte (32-bit words as
 /// they appear in the file, little-endian): header; table (META, MESH, MATL);
 /// META `{}` + pad; MESH counts, positions, normals, indices, material + pad,
-/// group; MATL counts, material, group name "g"; file padding.
+/// group; MATL counts, material, group name "g"; file padding. Every section is
+/// raw, so each entry's stored-bytes CRC equals its raw CRC.
 const GOLDEN: &str = "
+    50525442 0d0a1a0a 01000100 03000000 38010000 00000000 00000000 9570fc75
+    4d455441 00000000 98000000 00000000 02000000 00000000 02000000 00000000 43bfa6a3 43bfa6a3
+    4d455348 00000000 a0000000 00000000 68000000 00000000 68000000 00000000 a0c289a0 a0c289a0
+    4d41544c 00000000 08010000 00000000 2c000000 00000000 2c000000 00000000 5f6254b3 5f6254b3
+    7b7d0000 00000000
+    03000000 01000000 00000000
+    00000000 00000000 00000000  0000803f 00000000 00000000  00000000 0000803f 00000000
+    00000000 00000000 0000803f  00000000 00000000 0000803f  00000000 00000000 0000803f
+    00000000 01000000 02000000
+    00000000
+    00000000
+    01000000 01000000
+    00000000 0000003f 0000003f 0000003f 0000803f 01000000 6d000000
+    01000000 67000000
+    00000000";
+
+/// The same file as the 1.0 writer wrote it: minor 0, word 36 of each entry
+/// reserved (zero), and so another header CRC.
+const GOLDEN_1_0: &str = "
     50525442 0d0a1a0a 01000000 03000000 38010000 00000000 00000000 95764dad
     4d455441 00000000 98000000 00000000 02000000 00000000 02000000 00000000 43bfa6a3 00000000
     4d455348 00000000 a0000000 00000000 68000000 00000000 68000000 00000000 a0c289a0 00000000
@@ -260,6 +355,38 @@ fn golden_tiny_bundle_bytes() {
     assert_eq!(decode_bundle(&bytes).unwrap(), tiny_bundle());
 }
 
+/// 1.0 files, raw and zstd, still read: no stored-bytes CRC to check, word 36 reserved.
+#[test]
+fn format_1_0_bundles_still_read() {
+    let raw = unhex(GOLDEN_1_0);
+    assert_eq!(decode_bundle(&raw).unwrap(), tiny_bundle());
+    let zstd = unhex(GOLDEN_1_0_ZSTD);
+    assert!(list_sections(&zstd).unwrap().iter().all(|s| s.codec == Codec::Zstd as u32 && s.stored_crc32.is_none()));
+    assert_eq!(decode_bundle(&zstd).unwrap(), small_regular_bundle());
+    // Re-encoding writes the current minor with a stored-bytes CRC on every section.
+    let again = encode_bundle(&decode_bundle(&zstd).unwrap()).unwrap();
+    assert_eq!(u16::from_le_bytes([again[10], again[11]]), FORMAT_MINOR);
+    assert!(list_sections(&again).unwrap().iter().all(|s| s.stored_crc32.is_some()));
+}
+
+/// In a 1.0 file a flip inside a zstd frame header can decode to the same raw
+/// bytes, and nothing covers the stored bytes: such flips are accepted, but
+/// never with changed content (the raw CRC sees to that). 1.1 refuses them all.
+#[test]
+fn bit_flips_of_a_1_0_zstd_bundle_are_refused_or_harmless() {
+    let bytes = unhex(GOLDEN_1_0_ZSTD);
+    let original = decode_bundle(&bytes).unwrap();
+    let mut accepted = 0;
+    for bit in 0..bytes.len() * 8 {
+        if let Ok(decoded) = decode_bundle(&flip_bit(&bytes, bit)) {
+            assert_eq!(decoded, original, "flip of bit {bit} silently changed the content");
+            accepted += 1;
+        }
+    }
+    // docs/bundle-format.md (Compatibility) quotes this count.
+    assert_eq!(accepted, 27, "the 1.0 weakness this test documents");
+}
+
 // ---------------------------------------------------------------- hostile input
 
 #[test]
@@ -276,64 +403,93 @@ fn every_truncation_is_refused() {
     }
 }
 
-#[test]
-fn every_bit_flip_of_the_raw_tiny_bundle_is_refused() {
-    let bytes = tiny_bytes();
+fn flip_bit(bytes: &[u8], bit: usize) -> Vec<u8> {
+    let mut flipped = bytes.to_vec();
+    flipped[bit / 8] ^= 1 << (bit % 8);
+    flipped
+}
+
+/// Every single-bit flip of `bytes` is refused with an error (a panic fails the test).
+fn assert_every_bit_flip_is_refused(bytes: &[u8]) {
     for bit in 0..bytes.len() * 8 {
-        let mut flipped = bytes.clone();
-        flipped[bit / 8] ^= 1 << (bit % 8);
-        assert!(decode_bundle(&flipped).is_err(), "flip of bit {bit} went unnoticed");
+        assert!(decode_bundle(&flip_bit(bytes, bit)).is_err(), "flip of bit {bit} (byte {}) went unnoticed", bit / 8);
     }
 }
 
 #[test]
-fn bit_flips_of_a_compressed_bundle_are_refused_or_harmless() {
+fn every_bit_flip_of_the_raw_tiny_bundle_is_refused() {
+    assert_every_bit_flip_is_refused(&tiny_bytes());
+}
+
+/// The case 1.0 missed: flips in zstd frame headers that decode to the same bytes.
+#[test]
+fn every_bit_flip_of_a_zstd_bundle_is_refused() {
+    let bytes = small_zstd_bytes();
+    assert!(list_sections(&bytes).unwrap().iter().all(|s| s.codec == Codec::Zstd as u32), "every section must be zstd");
+    assert_every_bit_flip_is_refused(&bytes);
+}
+
+#[test]
+fn random_bit_flips_of_a_larger_zstd_bundle_are_refused() {
     let bytes = small_bytes();
-    let original = decode_bundle(&bytes).unwrap();
     let mut rng = Rng(0xf11b_5eed);
-    let mut refused = 0;
     for _ in 0..2000 {
         let bit = rng.below(bytes.len() * 8);
-        let mut flipped = bytes.clone();
-        flipped[bit / 8] ^= 1 << (bit % 8);
-        match decode_bundle(&flipped) {
-            Err(_) => refused += 1,
-            Ok(decoded) => assert_eq!(decoded, original, "flip of bit {bit} silently changed the content"),
-        }
+        assert!(decode_bundle(&flip_bit(&bytes, bit)).is_err(), "flip of bit {bit} went unnoticed");
     }
-    assert!(refused >= 1990, "only {refused} of 2000 flips refused");
+}
+
+/// A stored-bytes CRC mismatch is named as such, before any decompression.
+#[test]
+fn corrupted_stored_bytes_are_named() {
+    let mut bytes = small_zstd_bytes();
+    let mesh = list_sections(&bytes).unwrap().into_iter().find(|s| s.tag == *b"MESH").unwrap();
+    bytes[mesh.offset as usize + 5] ^= 0x10; // inside the zstd frame header
+    let err = decode_bundle(&bytes).unwrap_err();
+    assert!(matches!(err, BundleError::StoredChecksum { tag: Tag(t), .. } if &t == b"MESH"), "{err}");
 }
 
 fn set_u16(bytes: &mut [u8], at: usize, v: u16) {
     bytes[at..at + 2].copy_from_slice(&v.to_le_bytes());
 }
-fn set_u32(bytes: &mut [u8], at: usize, v: u32) {
+pub(super) fn set_u32(bytes: &mut [u8], at: usize, v: u32) {
     bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
 }
-fn get_u32(bytes: &[u8], at: usize) -> u32 {
+pub(super) fn get_u32(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
 }
-fn get_u64(bytes: &[u8], at: usize) -> u64 {
+pub(super) fn get_u64(bytes: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap())
 }
 
-/// Recomputes the CRCs of raw-codec sections and of the header, so that a forged
-/// file reaches the section decoders instead of failing on a checksum.
+/// Recomputes the raw CRCs of raw-codec sections, the stored-bytes CRCs (minor ≥ 1)
+/// and the header CRC, so that a forged file reaches the section decoders instead
+/// of failing on a checksum.
 fn reseal(bytes: &mut [u8]) {
     let count = get_u32(bytes, 12) as usize;
+    let has_stored_crc = u16::from_le_bytes([bytes[10], bytes[11]]) >= STORED_CRC_SINCE_MINOR;
     for i in 0..count {
         let entry = HEADER_LEN + i * ENTRY_LEN;
+        let (at, len) = (get_u64(bytes, entry + 8) as usize, get_u64(bytes, entry + 16) as usize);
+        let crc = crc32fast::hash(&bytes[at..at + len]);
         if get_u32(bytes, entry + 4) == 0 {
-            let (at, len) = (get_u64(bytes, entry + 8) as usize, get_u64(bytes, entry + 16) as usize);
-            let crc = crc32fast::hash(&bytes[at..at + len]);
             set_u32(bytes, entry + 32, crc);
         }
+        if has_stored_crc {
+            set_u32(bytes, entry + 36, crc);
+        }
     }
+    let crc = header_crc(bytes);
+    set_u32(bytes, 28, crc);
+}
+
+/// CRC-32 of the header's first 28 bytes and the section table.
+pub(super) fn header_crc(bytes: &[u8]) -> u32 {
+    let count = get_u32(bytes, 12) as usize;
     let mut h = crc32fast::Hasher::new();
     h.update(&bytes[..28]);
     h.update(&bytes[HEADER_LEN..HEADER_LEN + count * ENTRY_LEN]);
-    let crc = h.finalize();
-    set_u32(bytes, 28, crc);
+    h.finalize()
 }
 
 #[test]
@@ -341,8 +497,8 @@ fn bumped_major_version_is_refused_by_name() {
     let mut bytes = tiny_bytes();
     set_u16(&mut bytes, 8, 2);
     let err = decode_bundle(&bytes).unwrap_err();
-    assert!(matches!(err, BundleError::UnsupportedVersion { major: 2, minor: 0, .. }));
-    assert!(err.to_string().contains("version 2.0"), "{err}");
+    assert!(matches!(err, BundleError::UnsupportedVersion { major: 2, minor: FORMAT_MINOR, .. }));
+    assert!(err.to_string().contains(&format!("version 2.{FORMAT_MINOR}")), "{err}");
     reseal(&mut bytes); // a well-formed v2 header is refused all the same
     assert!(matches!(decode_bundle(&bytes), Err(BundleError::UnsupportedVersion { major: 2, .. })));
 }
@@ -382,16 +538,31 @@ fn unknown_sections_are_skipped_and_later_minors_read() {
     let mut bytes = write_container(&parts, EncodeOptions { compression: Compression::None }).unwrap();
     assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
 
-    // Minor 1 with a header flag and a table reserved field set: read, flags ignored.
-    set_u16(&mut bytes, 10, 1);
+    // A later minor with a header flag set: read, the flag ignored.
+    set_u16(&mut bytes, 10, FORMAT_MINOR + 1);
     set_u32(&mut bytes, 24, 0x8000_0000);
-    set_u32(&mut bytes, HEADER_LEN + 36, 5);
     reseal(&mut bytes);
     assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
-    // The same bits in a minor-0 file are corruption.
-    set_u16(&mut bytes, 10, 0);
+    // The stored-bytes CRC (defined in 1.1) is still checked in a later minor.
+    set_u32(&mut bytes, HEADER_LEN + 36, 5);
+    let mut bad_crc = bytes.clone();
+    let crc = header_crc(&bad_crc);
+    set_u32(&mut bad_crc, 28, crc);
+    assert!(matches!(decode_bundle(&bad_crc), Err(BundleError::StoredChecksum { .. })));
+    // The same flag in a file of this reader's minor is corruption.
+    set_u16(&mut bytes, 10, FORMAT_MINOR);
     reseal(&mut bytes);
     assert!(matches!(decode_bundle(&bytes), Err(BundleError::Layout(_))));
+}
+
+/// In a 1.0 file, word 36 of a table entry is reserved and must be zero.
+#[test]
+fn nonzero_reserved_word_in_a_1_0_table_is_refused() {
+    let mut bytes = unhex(GOLDEN_1_0);
+    set_u32(&mut bytes, HEADER_LEN + 36, 5);
+    reseal(&mut bytes);
+    let err = decode_bundle(&bytes).unwrap_err();
+    assert!(matches!(err, BundleError::Layout(_)) && err.to_string().contains("reserved field is 0x5"), "{err}");
 }
 
 /// Raw bytes of one section of `bundle`, via the real encoder.
@@ -469,51 +640,6 @@ fn forged_counts_are_refused_before_allocation() {
 }
 
 #[test]
-fn resealed_random_mutations_never_panic() {
-    // Bit flips die on CRCs; here the CRCs are recomputed so the section
-    // decoders themselves see hostile bytes.
-    let bytes =
-        encode_bundle_with(&random_bundle(8, 12, 10, Quantization::I16PerVertexScale), EncodeOptions { compression: Compression::None })
-            .unwrap();
-    let payload_start = HEADER_LEN + 6 * ENTRY_LEN;
-    let mut rng = Rng(0xdead_beef);
-    let mut accepted = 0;
-    for _ in 0..3000 {
-        let mut forged = bytes.clone();
-        for _ in 0..1 + rng.below(4) {
-            let at = payload_start + rng.below(bytes.len() - payload_start);
-            forged[at] = match rng.below(3) {
-                0 => forged[at] ^ (1 << rng.below(8)),
-                1 => 0xff,
-                _ => rng.next() as u8,
-            };
-        }
-        reseal(&mut forged);
-        if decode_bundle(&forged).is_ok() {
-            accepted += 1; // e.g. a changed position: still a valid bundle
-        }
-    }
-    assert!(accepted < 3000);
-}
-
-#[test]
-fn random_byte_strings_never_panic() {
-    let mut rng = Rng(42);
-    let valid = tiny_bytes();
-    for i in 0..20_000 {
-        let len = rng.below(400);
-        let mut bytes: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
-        if i % 2 == 0 {
-            // Keep a valid magic and version so the table parser is exercised too.
-            let keep = len.min(12);
-            bytes[..keep].copy_from_slice(&valid[..keep]);
-        }
-        assert!(decode_bundle(&bytes).is_err());
-        let _ = list_sections(&bytes);
-    }
-}
-
-#[test]
 fn encoder_refuses_bundles_that_would_not_read_back() {
     let good = random_bundle(10, 12, 10, Quantization::F16);
     let refuse = |b: Bundle, needle: &str| {
@@ -525,7 +651,13 @@ fn encoder_refuses_bundles_that_would_not_read_back() {
     refuse(b, "values, expected 12 vertices");
     let mut b = good.clone();
     b.transfer.as_mut().unwrap().layers[1].data[5] = f32::NAN;
-    refuse(b, "not finite");
+    refuse(b, "section XFER: layer 1 value 5 (vertex 0) is NaN");
+    let mut b = good.clone();
+    b.mesh.normals[1] = Vec3::new(0.0, f32::INFINITY, 0.0);
+    refuse(b, "section MESH: vertex 1 normal is inf");
+    let mut b = good.clone();
+    b.sun.as_mut().unwrap().steps[2].direction = [0.0, 2.0, 0.0];
+    refuse(b, "section SUND: step 2 sun direction has length 2, not 1");
     let mut b = good.clone();
     b.transfer.as_mut().unwrap().layers[1].data[5] = 1e6;
     refuse(b, "overflows f16");
@@ -603,4 +735,235 @@ fn one_and_1024_steps_round_trip() {
         let s = back.sun.unwrap();
         assert!((0..30).all(|v| (0..steps).all(|k| s.bit(v, k) == sun.bit(v, k))));
     }
+}
+
+// ---------------------------------------------------------------- value ranges
+
+/// Raw bytes of every section of `bundle`, as the writer lays them out.
+pub(super) fn raw_sections(bundle: &Bundle) -> Vec<([u8; 4], Vec<u8>)> {
+    let bytes = encode_bundle_with(bundle, EncodeOptions { compression: Compression::None }).unwrap();
+    list_sections(&bytes).unwrap().iter().map(|s| (s.tag, bytes[s.offset as usize..(s.offset + s.raw_len) as usize].to_vec())).collect()
+}
+
+/// `bundle` with the bytes of section `tag` at `offset` replaced by `patch`,
+/// laid out again by the container writer, so every CRC is valid: only the
+/// range checks stand between the forged value and the caller.
+fn forged_at(bundle: &Bundle, tag: [u8; 4], offset: usize, patch: &[u8]) -> Vec<u8> {
+    let mut parts = raw_sections(bundle);
+    let raw = &mut parts.iter_mut().find(|(t, _)| *t == tag).unwrap().1;
+    raw[offset..offset + patch.len()].copy_from_slice(patch);
+    write_container(&parts, EncodeOptions::default()).unwrap()
+}
+
+/// [`forged_at`] at the one place section `tag` holds the bytes `marker`.
+fn forged(bundle: &Bundle, tag: [u8; 4], marker: &[u8], patch: &[u8]) -> Vec<u8> {
+    let raw = raw_sections(bundle).into_iter().find(|(t, _)| *t == tag).unwrap().1;
+    let hits: Vec<usize> = raw.windows(marker.len()).enumerate().filter(|(_, w)| *w == marker).map(|(i, _)| i).collect();
+    assert_eq!(hits.len(), 1, "marker {marker:02x?} must occur once in {}", Tag(tag));
+    forged_at(bundle, tag, hits[0], patch)
+}
+
+/// Decoding `bytes` fails with a `BadValue` in section `tag` whose message is `expected`.
+fn assert_bad_value(bytes: &[u8], tag: &[u8; 4], expected: &str) {
+    match decode_bundle(bytes) {
+        Err(BundleError::BadValue { tag: Tag(t), bad }) => {
+            assert_eq!((&t, bad.to_string().as_str()), (tag, expected), "wrong field or section");
+        }
+        other => panic!("expected section {} to fail with \"{expected}\", got {other:?}", Tag(*tag)),
+    }
+}
+
+const MARK: f32 = 0.3217;
+const NAN: f32 = f32::NAN;
+const INF: f32 = f32::INFINITY;
+
+/// A bundle whose `field` holds `MARK` (or a value derived from it), forged to `value`.
+fn forged_field(set: impl FnOnce(&mut Bundle) -> f32, tag: [u8; 4], value: f32) -> Vec<u8> {
+    let mut b = random_bundle(30, 6, 4, Quantization::F32);
+    let stored = set(&mut b);
+    forged(&b, tag, &stored.to_le_bytes(), &value.to_le_bytes())
+}
+
+#[test]
+fn mesh_values_out_of_range_are_refused_by_name() {
+    let position = |b: &mut Bundle| {
+        b.mesh.positions[3].y = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(position, *b"MESH", NAN), b"MESH", "vertex 3 position is NaN");
+    let normal = |b: &mut Bundle| {
+        b.mesh.normals[3] = Vec3::new(MARK, 0.0, 0.5);
+        MARK
+    };
+    assert_bad_value(&forged_field(normal, *b"MESH", NAN), b"MESH", "vertex 3 normal is NaN");
+    let mut b = random_bundle(30, 6, 4, Quantization::F32);
+    b.mesh.normals[3] = Vec3::new(MARK, 0.0, MARK);
+    let zero = forged(&b, *b"MESH", &[MARK.to_le_bytes(), 0f32.to_le_bytes(), MARK.to_le_bytes()].concat(), &[0u8; 12]);
+    assert_bad_value(&zero, b"MESH", "vertex 3 normal is the zero vector (no direction)");
+    let uv = |b: &mut Bundle| {
+        b.mesh.uvs[2].x = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(uv, *b"MESH", INF), b"MESH", "vertex 2 uv is inf");
+    let colour = |b: &mut Bundle| {
+        b.mesh.colors[4][1] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(colour, *b"MESH", NAN), b"MESH", "vertex 4 colour is NaN");
+    assert_bad_value(&forged_field(colour, *b"MESH", -0.5), b"MESH", "vertex 4 colour is -0.5, outside [0, ∞)");
+}
+
+#[test]
+fn material_values_out_of_range_are_refused_by_name() {
+    let albedo = |b: &mut Bundle| {
+        b.mesh.materials[1].albedo[2] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(albedo, *b"MATL", NAN), b"MATL", "material 1 albedo is NaN");
+    assert_bad_value(&forged_field(albedo, *b"MATL", 1.5), b"MATL", "material 1 albedo is 1.5, outside [0, 1]");
+    assert_bad_value(&forged_field(albedo, *b"MATL", -INF), b"MATL", "material 1 albedo is -inf");
+    let transmittance = |b: &mut Bundle| {
+        b.mesh.materials[1].transmittance = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(transmittance, *b"MATL", NAN), b"MATL", "material 1 transmittance is NaN");
+    assert_bad_value(&forged_field(transmittance, *b"MATL", -0.25), b"MATL", "material 1 transmittance is -0.25, outside [0, 1]");
+}
+
+#[test]
+fn sun_values_out_of_range_are_refused_by_name() {
+    let mut b = random_bundle(30, 6, 4, Quantization::F32);
+    b.sun.as_mut().unwrap().steps[5].unix_time_utc = 1_234_567_890.123;
+    let time = forged(&b, *b"SUND", &1_234_567_890.123f64.to_le_bytes(), &f64::NAN.to_le_bytes());
+    assert_bad_value(&time, b"SUND", "step 5 time is NaN");
+
+    let direction = |b: &mut Bundle| {
+        let d = Vec3::new(MARK, 0.8, 0.5).normalize();
+        b.sun.as_mut().unwrap().steps[5].direction = d.to_array();
+        d.x
+    };
+    assert_bad_value(&forged_field(direction, *b"SUND", NAN), b"SUND", "step 5 sun direction is NaN");
+    assert_bad_value(&forged_field(direction, *b"SUND", 3.0), b"SUND", "step 5 sun direction has length 3.1457639, not 1");
+
+    let elevation = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].elevation_deg = 32.17;
+        32.17
+    };
+    assert_bad_value(&forged_field(elevation, *b"SUND", 91.0), b"SUND", "step 5 elevation is 91, outside [-90, 90] degrees");
+    assert_bad_value(&forged_field(elevation, *b"SUND", NAN), b"SUND", "step 5 elevation is NaN");
+    let azimuth = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].azimuth_deg = 321.7;
+        321.7
+    };
+    assert_bad_value(&forged_field(azimuth, *b"SUND", -1.0), b"SUND", "step 5 azimuth is -1, outside [0, 360] degrees");
+    assert_bad_value(&forged_field(azimuth, *b"SUND", INF), b"SUND", "step 5 azimuth is inf");
+    let irradiance = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].sun_rgb[1] = 321.7;
+        321.7
+    };
+    assert_bad_value(&forged_field(irradiance, *b"SUND", -1.0), b"SUND", "step 5 sun irradiance is -1, outside [0, ∞)");
+    assert_bad_value(&forged_field(irradiance, *b"SUND", NAN), b"SUND", "step 5 sun irradiance is NaN");
+    let sky = |b: &mut Bundle| {
+        b.sun.as_mut().unwrap().steps[5].sky_sh[2][1] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(sky, *b"SUND", NAN), b"SUND", "step 5 sky SH is NaN");
+}
+
+#[test]
+fn transfer_values_out_of_range_are_refused_by_name() {
+    let value = |b: &mut Bundle| {
+        b.transfer.as_mut().unwrap().layers[1].data[30] = MARK;
+        MARK
+    };
+    assert_bad_value(&forged_field(value, *b"XFER", NAN), b"XFER", "layer 1 value 30 (vertex 1) is NaN");
+
+    // XFER: 16-byte header, then layer 0: kind and reserved (8 bytes), data.
+    let layer0 = 16 + 8;
+    let f16 = random_bundle(31, 6, 4, Quantization::F16);
+    let nan_f16 = forged_at(&f16, *b"XFER", layer0 + 2 * 3, &0x7e00u16.to_le_bytes());
+    assert_bad_value(&nan_f16, b"XFER", "layer 0 value 3 (vertex 0) is NaN");
+    let mut tinted = random_bundle(32, 6, 4, Quantization::F16Tinted);
+    tinted.transfer.as_mut().unwrap().layers.iter_mut().for_each(|l| l.data.iter_mut().for_each(|v| *v = v.abs() + 0.1));
+    let inf_tint = forged_at(&tinted, *b"XFER", layer0, &0x7c00u16.to_le_bytes()); // vertex 0, channel 0 tint
+    assert_bad_value(&inf_tint, b"XFER", "layer 0 value 0 (vertex 0) is inf");
+
+    // i16: the V per-vertex scales come first; vertex 1's is at layer0 + 4.
+    let i16 = random_bundle(33, 6, 4, Quantization::I16PerVertexScale);
+    let scale = |value: f32| forged_at(&i16, *b"XFER", layer0 + 4, &value.to_le_bytes());
+    assert_bad_value(&scale(NAN), b"XFER", "layer 0 i16 scale of vertex 1 is NaN");
+    assert_bad_value(&scale(-1e-3), b"XFER", "layer 0 i16 scale of vertex 1 is -0.001, outside [0, ∞)");
+    assert_bad_value(&scale(0.0), b"XFER", "layer 0 i16 scale of vertex 1 is 0, outside (0, ∞) for a vertex with non-zero codes");
+    // A scale large enough that the codes overflow f32.
+    assert_bad_value(&scale(f32::MAX), b"XFER", "layer 0 value 27 (vertex 1) is -inf");
+}
+
+/// What the writer does with values a loader can hand over: clamps albedo and
+/// transmittance into [0, 1] and colours to ≥ 0 (the bake uses albedo and
+/// transmittance clamped), replaces a zero normal by the face normal.
+#[test]
+fn writer_stores_values_in_range() {
+    let mut b = tiny_bundle();
+    b.mesh.materials[0].albedo = [1.2, 0.5, -0.1];
+    b.mesh.materials[0].transmittance = 1.5;
+    b.mesh.normals[1] = Vec3::ZERO;
+    b.mesh.colors = vec![[-0.5, 0.25, 2.0]; 3];
+    let back = decode_bundle(&encode_bundle(&b).unwrap()).unwrap();
+    assert_eq!((back.mesh.materials[0].albedo, back.mesh.materials[0].transmittance), ([1.0, 0.5, 0.0], 1.0));
+    assert_eq!(back.mesh.normals, vec![Vec3::Z; 3]);
+    assert_eq!(back.mesh.colors, vec![[0.0, 0.25, 2.0]; 3]);
+}
+
+/// Export refuses a bundle built in memory with a value glTF cannot hold, and
+/// writes nothing (no `null` in JSON, no NaN in the buffers).
+#[test]
+fn export_refuses_out_of_range_values() {
+    let dir = std::env::temp_dir().join(format!("prtb-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("out.glb");
+    let mut b = random_bundle(34, 6, 4, Quantization::F32);
+    b.mesh.materials[1].albedo[0] = f32::NAN;
+    let err = export_glb(&path, &b, None).unwrap_err().to_string();
+    assert!(err.contains("section MATL: material 1 albedo is NaN"), "{err}");
+    assert!(!path.exists());
+
+    // Finite bounce layers whose sum overflows f32.
+    let mut b = random_bundle(34, 6, 4, Quantization::F32);
+    let t = b.transfer.as_mut().unwrap();
+    t.layers = vec![
+        TransferLayer { kind: LayerKind::Bounce(0), data: vec![3e38; 162] },
+        TransferLayer { kind: LayerKind::Bounce(1), data: vec![3e38; 162] },
+    ];
+    let err = export_glb(&path, &b, None).unwrap_err().to_string();
+    assert!(err.contains("transfer total value 0 (vertex 0) is inf"), "{err}");
+    assert!(!path.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The 1.0 writer did not clamp: a 1.0 file's out-of-range albedo, transmittance,
+/// colours and zero normals read as the 1.1 writer would store them; NaN is refused.
+#[test]
+fn format_1_0_values_are_brought_into_range_but_nan_is_refused() {
+    // GOLDEN_1_0: normal 1 at 0xdc, albedo at 0x114, transmittance at 0x120.
+    let mut bytes = unhex(GOLDEN_1_0);
+    bytes[0x114..0x118].copy_from_slice(&1.25f32.to_le_bytes());
+    bytes[0x120..0x124].copy_from_slice(&(-0.5f32).to_le_bytes());
+    bytes[0xdc..0xe8].fill(0);
+    reseal(&mut bytes);
+    let b = decode_bundle(&bytes).unwrap();
+    assert_eq!((b.mesh.materials[0].albedo, b.mesh.materials[0].transmittance), ([1.0, 0.5, 0.5], 0.0));
+    assert_eq!(b.mesh.normals, vec![Vec3::Z; 3]);
+    // Adding a sun series writes the current minor, with the values as decoded.
+    let sun = random_sun(&mut Rng(3), 3, 2);
+    let with_sun = decode_bundle(&encode_with_sun(&bytes, &serde_json::json!({}), &sun).unwrap()).unwrap();
+    assert_eq!((with_sun.mesh, with_sun.sun), (b.mesh, Some(sun)));
+
+    bytes[0x118..0x11c].copy_from_slice(&f32::NAN.to_le_bytes());
+    reseal(&mut bytes);
+    assert_bad_value(&bytes, b"MATL", "material 0 albedo is NaN");
+    // The same out-of-range values in a file of the current minor are refused.
+    let mut current = unhex(GOLDEN);
+    current[0x114..0x118].copy_from_slice(&1.25f32.to_le_bytes());
+    reseal(&mut current);
+    assert_bad_value(&current, b"MATL", "material 0 albedo is 1.25, outside [0, 1]");
 }
