@@ -7,6 +7,7 @@ mod clean_props;
 mod cli;
 mod export;
 mod safety;
+mod shards;
 mod stability;
 mod storage;
 mod sun;

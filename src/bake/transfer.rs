@@ -129,12 +129,31 @@ impl Items {
             Items::Vertex { vertices } => vertices.len() as u64,
         }
     }
+    /// Sample points of each item, in item order (what a shard's share is measured in).
+    pub(crate) fn points_per_item(&self) -> Vec<u32> {
+        match self {
+            Items::Interior { counts, .. } => counts.clone(),
+            Items::Vertex { vertices } => vec![1; vertices.len()],
+        }
+    }
     /// The vertices item `item`'s corners add to (a vertex item: itself, thrice).
     fn corner_vertices(&self, mesh: &Mesh, item: usize) -> [u32; 3] {
         match self {
             Items::Interior { triangles, .. } => mesh.triangle(triangles[item] as usize),
             Items::Vertex { vertices } => [vertices[item]; 3],
         }
+    }
+    /// The first item that adds to each vertex (`u32::MAX`: none): a range
+    /// of items holds a vertex's first sums exactly when it holds this item.
+    pub(crate) fn first_items(&self, mesh: &Mesh) -> Vec<u32> {
+        let mut first = vec![u32::MAX; mesh.vertex_count()];
+        for item in 0..self.len() {
+            for &v in &self.corner_vertices(mesh, item)[..self.corners()] {
+                let slot = &mut first[v as usize];
+                *slot = (*slot).min(item as u32);
+            }
+        }
+        first
     }
 }
 
@@ -474,7 +493,12 @@ pub(crate) fn normalise_source_into(source: &mut SourceRows, sums: &[f32], weigh
         source.rows = RowBuffer::zeroed(weights.len() * stride);
     }
     source.channels = pass_channels;
-    source.rows.as_mut_slice().par_chunks_mut(stride).zip(sums.par_chunks(stride).zip(weights.par_iter())).for_each(|(dst, (src, &w))| {
+    normalise_rows(source.rows.as_mut_slice(), sums, weights, stride);
+}
+
+/// `dst` = each vertex's row of `sums` over its weight, zero where it has none.
+pub(crate) fn normalise_rows(dst: &mut [f32], sums: &[f32], weights: &[f32], stride: usize) {
+    dst.par_chunks_mut(stride).zip(sums.par_chunks(stride).zip(weights.par_iter())).for_each(|(dst, (src, &w))| {
         dst.iter_mut().zip(src).for_each(|(d, s)| *d = if w > 0.0 { s / w } else { 0.0 });
     });
 }
