@@ -274,6 +274,9 @@ struct SunArgs {
     /// Trace without the shadow cache (for measurement; the masks are the same).
     #[arg(long)]
     no_shadow_cache: bool,
+    /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -685,6 +688,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     };
     params.check()?;
     Ok(cli::sun_cmd::SunConfig {
+        shard: a.shard.as_deref().map(prtbake::bake::shards::Shard::parse).transpose()?,
         input: a.input,
         output: a.output,
         up,

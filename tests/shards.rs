@@ -107,6 +107,47 @@ fn sharded_transfer_merges_into_the_single_process_bundle() {
     }
 }
 
+#[test]
+fn sharded_sun_merges_into_the_single_process_bundle() {
+    let dir = Scratch::new("shards-sun");
+    let mesh = write_cabin(&dir);
+    let args = ["--window", "glass", "--steps", "24", "--seed", "3", "--quiet"];
+    let single = dir.path("single.prtb");
+    let mut a = vec!["sun", s(&mesh), "-o", s(&single)];
+    a.extend(args);
+    run(&a);
+    let expected = std::fs::read(&single).unwrap();
+    for n in [1u32, 2, 3, 7] {
+        let part = |k: u32| dir.path(&format!("sun-{n}-{k}.prtp"));
+        for k in shuffled(n, 7) {
+            let (shard, threads) = (format!("{k}/{n}"), (1 + k % 2).to_string());
+            let p = part(k);
+            let mut a = vec!["sun", s(&mesh), "-o", s(&p), "--shard", &shard, "--threads", &threads];
+            a.extend(args);
+            run(&a);
+        }
+        let merged = dir.path(&format!("sun-{n}.prtb"));
+        let parts: Vec<PathBuf> = shuffled(n, 8).into_iter().map(part).collect();
+        let mut a = vec!["merge", "-o", s(&merged)];
+        a.extend(parts.iter().map(|p| s(p)));
+        run(&a);
+        assert!(std::fs::read(&merged).unwrap() == expected, "{n} sun shards: the merged bundle differs from the single-process one");
+    }
+    // A part of another day, or another seed, is named; so is a missing one.
+    let foreign = dir.path("sun-foreign.prtp");
+    let mut a = vec!["sun", s(&mesh), "-o", s(&foreign), "--shard", "1/3"];
+    a.extend(args);
+    a.extend(["--turbidity", "4"]);
+    run(&a);
+    let parts = [dir.path("sun-3-0.prtp"), foreign.clone(), dir.path("sun-3-2.prtp")];
+    let e = refused(&merge(&[&parts[0], &parts[1], &parts[2]], &dir.path("x.prtb")));
+    assert!(e.contains(&format!("{}: day and sky", foreign.display())), "{e}");
+    let e = refused(&merge(&[&parts[0], &parts[2]], &dir.path("x.prtb")));
+    assert!(e.contains("missing part(s) of 3 shards: 1 (given: 0, 2)"), "{e}");
+    let e = refused(&merge(&[&parts[0], &dir.path("sun-2-1.prtp"), &parts[2]], &dir.path("x.prtb")));
+    assert!(e.contains("sun-2-1.prtp: is one of 2 shards, not of 3"), "{e}");
+}
+
 /// A re-run shard writes the same bytes; a merge refuses a missing, a
 /// repeated and a foreign part, naming it, and writes nothing.
 #[test]

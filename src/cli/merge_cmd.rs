@@ -11,8 +11,10 @@ use serde_json::json;
 
 use super::bake_cmd::{encode_transfer_bundle, StorageRequest};
 use super::shard_cmd::{decode, read_shard_file};
+use super::sun_cmd::sun_stats_meta;
 use super::Output;
-use crate::bake::shards::{self, FileKind, LayerFile, MeshId, ShardError, TransferMerge, TransferPart};
+use crate::bake::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
+use crate::bake::Surfaces;
 use crate::bundle;
 use crate::files::Staged;
 
@@ -38,10 +40,12 @@ pub fn run(config: &MergeConfig) -> anyhow::Result<()> {
     inputs.extend(config.layer.as_deref());
     super::check_outputs(&inputs, &[Output::new(&config.output, MERGE_FORMATS)], config.force)?;
     let mut transfer: Vec<(PathBuf, TransferPart)> = Vec::new();
+    let mut sun: Vec<(PathBuf, SunPart)> = Vec::new();
     for path in &config.parts {
         let bytes = read_shard_file(path)?;
         match FileKind::of(&bytes) {
             Ok(FileKind::TransferPart) => transfer.push((path.clone(), decode(path, &bytes, TransferPart::decode)?)),
+            Ok(FileKind::SunPart) => sun.push((path.clone(), decode(path, &bytes, SunPart::decode)?)),
             Ok(other) => {
                 return Err(ShardError::Malformed {
                     path: path.clone(),
@@ -55,7 +59,18 @@ pub fn run(config: &MergeConfig) -> anyhow::Result<()> {
             Err(problem) => return Err(ShardError::Malformed { path: path.clone(), problem }.into()),
         }
     }
-    merge_transfer(config, &transfer)
+    if let (Some((t, _)), Some((s, _))) = (transfer.first(), sun.first()) {
+        return Err(ShardError::Mismatch {
+            path: s.clone(),
+            problem: format!("is a sun part, but {} is a transfer part: merge one bake at a time", t.display()),
+        }
+        .into());
+    }
+    if sun.is_empty() {
+        merge_transfer(config, &transfer)
+    } else {
+        merge_sun(config, &sun)
+    }
 }
 
 fn has_extension(path: &Path, extension: &str) -> bool {
@@ -117,6 +132,43 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
     };
     staged.commit().with_context(|| format!("cannot write {}", output.display()))?;
     report(config, parts.len(), summary)
+}
+
+fn merge_sun(config: &MergeConfig, parts: &[(PathBuf, SunPart)]) -> anyhow::Result<()> {
+    let output = &config.output;
+    if config.layer.is_some() {
+        anyhow::bail!("--layer: sun parts are merged in one round, without a layer");
+    }
+    if !has_extension(output, "prtb") {
+        anyhow::bail!("{}: sun parts merge into a bundle; name the output .prtb", output.display());
+    }
+    let merged = shards::merge_sun_parts(parts)?;
+    let frame_path = parts.iter().find(|(_, p)| p.shard == 0).map_or(&parts[0].0, |(path, _)| path);
+    let frame_error = |problem: String| ShardError::Malformed { path: frame_path.clone(), problem };
+    let b = bundle::decode_bundle(&merged.frame).map_err(|e| frame_error(format!("its bundle frame does not decode: {e}")))?;
+    let mut series = b.sun.ok_or_else(|| frame_error("its bundle frame has no sun sections".into()))?;
+    if MeshId::of(&b.mesh) != merged.identity.mesh || series.steps.len() != merged.key.steps as usize {
+        return Err(frame_error("its bundle frame holds another mesh or day than the parts baked".into()).into());
+    }
+    let surfaces = Surfaces::resolve(&b.mesh, &merged.key.window_patterns)?;
+    let suns = crate::sky::day_directions(&series.steps);
+    let masks = super::with_threads(config.threads, || {
+        crate::bake::sun::sun_masks_from_bits(&b.mesh, &surfaces, &suns, &merged.key.params, &merged.bits, merged.rays)
+    })??;
+    let mut meta = b.meta;
+    let sun_meta =
+        meta.get_mut("sun").and_then(|s| s.as_object_mut()).ok_or_else(|| frame_error("its frame's META has no sun object".into()))?;
+    sun_meta.insert("stats".into(), sun_stats_meta(&masks.stats));
+    series.words_per_vertex = masks.words_per_vertex;
+    series.masks = masks.masks;
+    let encoded = bundle::encode_with_sun(&merged.frame, &meta, &series).with_context(|| format!("cannot encode {}", output.display()))?;
+    crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
+    let s = &masks.stats;
+    report(
+        config,
+        parts.len(),
+        json!({ "kind": "sun bundle", "vertices": s.vertices, "points": s.points, "steps": s.steps, "rays": s.rays }),
+    )
 }
 
 fn report(config: &MergeConfig, parts: usize, summary: serde_json::Value) -> anyhow::Result<()> {

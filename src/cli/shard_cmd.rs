@@ -1,5 +1,6 @@
-//! `prtbake bake MESH --shard K/N [--round R --layer PREV.prtl] -o PART.prtp`:
-//! one shard's part of a sharded bake, merged by `prtbake merge` (docs/scale.md).
+//! `prtbake bake MESH --shard K/N [--round R --layer PREV.prtl] -o PART.prtp`
+//! and `prtbake sun INPUT --shard K/N -o PART.prtp`: one shard's part of a
+//! sharded bake, merged by `prtbake merge` (docs/scale.md).
 //!
 //! A shard loads the mesh exactly as a whole bake does and writes its part
 //! (and in round 0 its hit records) through `files::Staged`, so a failed or
@@ -11,11 +12,13 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::bake_cmd::{bundle_meta, check_windows, load_for_bake, BakeConfig};
+use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
 use super::Output;
-use crate::bake::shards::{self, HitFile, LayerFile, RoundInput, Shard, TransferKey};
-use crate::bake::{BuildQuality, Scene};
-use crate::bundle::{self, Bundle};
+use crate::bake::shards::{self, FileKind, HitFile, LayerFile, RoundInput, Shard, SunKey, TransferKey};
+use crate::bake::{BuildQuality, Scene, SunStats};
+use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::files::{read_limited, Limit, Staged};
+use crate::sky;
 
 /// Extensions of a part, a hit-record file and a merged layer.
 pub const PART_FORMAT: &[&str] = &["prtp"];
@@ -163,6 +166,91 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
         config.output.display(),
         size(&config.output),
         hits_written.map(|p| format!(" and {} ({} bytes)", p.display(), size(p))).unwrap_or_default()
+    );
+    Ok(())
+}
+
+/// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
+/// metadata without its stats: what every shard of one sun bake must share.
+fn day_crc(steps: &[SunStep], meta_without_stats: &serde_json::Value) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    for s in steps {
+        h.update(&s.unix_time_utc.to_le_bytes());
+        let floats = s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).chain(s.sky_sh.iter().flatten());
+        for f in floats {
+            h.update(&f.to_le_bytes());
+        }
+        h.update(&[s.night as u8]);
+        h.update(&(s.sky_sh.len() as u64).to_le_bytes());
+    }
+    h.update(&serde_json::to_vec(meta_without_stats).unwrap_or_default());
+    h.finalize()
+}
+
+/// The stats a sun part's frame carries until the merge counts them: only the step count is known.
+fn placeholder_stats(steps: &[SunStep]) -> SunStats {
+    SunStats { steps: steps.len() as u64, ..SunStats::default() }
+}
+
+/// Traces one shard's sun samples into a part and prints what it wrote.
+pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
+    let input = load_sun_input(config, PART_FORMAT, false)?;
+    let started = std::time::Instant::now();
+    let (part, steps) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+        let steps = day_steps(config, &input)?;
+        let surfaces = sun_surfaces(config, &input.mesh)?;
+        let scene = Scene::build(&input.mesh, BuildQuality::Sah);
+        let mut meta = sun_meta(config, &input.frame, &placeholder_stats(&steps), input.was_bundle());
+        if let Some(m) = meta.as_object_mut() {
+            m.remove("stats");
+        }
+        let key = SunKey {
+            params: config.params,
+            window_patterns: config.window_patterns.clone(),
+            steps: steps.len() as u32,
+            day_crc: day_crc(&steps, &meta),
+        };
+        let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &sky::day_directions(&steps), &key, config.params.quiet, shard)?;
+        Ok((part, steps))
+    })??;
+    let mut part = part;
+    if shard.index == 0 {
+        // The merge fills in the masks and the stats; everything else is the bundle a whole bake writes.
+        let words = part.words;
+        let series = SunSeries {
+            sky_order: config.sky_order as u32,
+            steps,
+            words_per_vertex: words,
+            masks: vec![0; input.mesh.vertex_count() * words as usize],
+        };
+        let meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());
+        part.frame = encode_sun_output(&input, meta, &series, &config.output)?;
+    }
+    crate::files::write_atomic_with(&config.output, |w| part.write_to(w).map(drop))
+        .with_context(|| format!("cannot write {}", config.output.display()))?;
+    let bytes = std::fs::metadata(&config.output).map(|m| m.len()).unwrap_or(0);
+    let seconds = started.elapsed().as_secs_f64();
+    if config.json {
+        return super::print_json(&json!({
+            "output": super::json_path(&config.output),
+            "part_bytes": bytes,
+            "kind": FileKind::SunPart.name(),
+            "shard": shard.to_string(),
+            "items": [part.items.start, part.items.end],
+            "item_count": part.item_count,
+            "points": [part.points.start, part.points.end],
+            "rays": part.rays,
+            "seconds": seconds,
+        }));
+    }
+    println!(
+        "sun shard {shard}: items {}..{} of {}, {} points, {} rays in {seconds:.2}s; wrote {} ({bytes} bytes)",
+        part.items.start,
+        part.items.end,
+        part.item_count,
+        part.points.end - part.points.start,
+        part.rays,
+        config.output.display()
     );
     Ok(())
 }

@@ -1,5 +1,5 @@
 //! The shard files as structs ⇄ bytes (layouts in docs/scale.md): transfer
-//! parts, hit records and merged layers. Writers stream through
+//! parts, hit records, merged layers and sun parts. Writers stream through
 //! [`codec::Writer`]; decoders check every count against the bytes present
 //! and every index against the mesh, and return an error, never panic.
 
@@ -390,6 +390,74 @@ impl LayerFile {
     }
 }
 
+/// One shard's sun bits (`PRTS`, `.prtp`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunPart {
+    pub identity: Identity,
+    pub shard: u32,
+    pub items: Range<u32>,
+    pub item_count: u32,
+    pub points: Range<u64>,
+    pub point_count: u64,
+    /// Mask words per sample.
+    pub words: u32,
+    pub rays: u64,
+    /// `words` per point of `points`, in point order.
+    pub bits: Vec<u32>,
+    /// Shard 0: the output bundle as the single process writes it, with its
+    /// masks zero and its statistics to be filled in (empty otherwise).
+    pub frame: Vec<u8>,
+}
+
+impl SunPart {
+    pub fn write_to<W: Write>(&self, out: W) -> std::io::Result<u32> {
+        let mut w = Writer::new(out, FileKind::SunPart)?;
+        self.identity.write(&mut w)?;
+        for v in [self.shard, self.items.start, self.items.end, self.item_count] {
+            w.u32(v)?;
+        }
+        for v in [self.points.start, self.points.end, self.point_count] {
+            w.u64(v)?;
+        }
+        w.u32(self.words)?;
+        w.u64(self.rays)?;
+        w.u32s(&self.bits)?;
+        w.blob(&self.frame)?;
+        w.finish()
+    }
+
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        let _ = self.write_to(&mut out);
+        out
+    }
+
+    pub fn decode(bytes: &[u8]) -> Result<SunPart, String> {
+        let (mut r, _) = codec::open(bytes, FileKind::SunPart)?;
+        let identity = Identity::read(&mut r)?;
+        let shard = identity.read_shard(&mut r)?;
+        let items = read_range32(&mut r, "item range", u32::MAX)?;
+        let item_count = r.u32("item count")?;
+        if items.end > item_count {
+            return Err(format!("item range {items:?} is past the {item_count} items"));
+        }
+        let points = read_range64(&mut r, "point range", u64::MAX)?;
+        let point_count = r.u64("point count")?;
+        if points.end > point_count {
+            return Err(format!("point range {points:?} is past the {point_count} points"));
+        }
+        let words = r.u32("words per sample")?;
+        if words == 0 || words as usize > crate::bake::sun::MAX_SUN_STEPS.div_ceil(32) {
+            return Err(format!("{words} mask words per sample"));
+        }
+        let rays = r.u64("rays")?;
+        let bits = r.u32s((points.end - points.start).saturating_mul(words as u64), "sample bits")?;
+        let frame = r.blob("bundle frame")?.to_vec();
+        r.finish()?;
+        Ok(SunPart { identity, shard, items, item_count, points, point_count, words, rays, bits, frame })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -450,18 +518,32 @@ mod tests {
             total: vec![0.5; 15],
             layers: vec![vec![0.25; 15], vec![0.25; 15]],
         };
+        let sun = SunPart {
+            identity: identity(),
+            shard: 0,
+            items: 0..1,
+            item_count: 3,
+            points: 0..3,
+            point_count: 9,
+            words: 2,
+            rays: 40,
+            bits: vec![1, 2, 3, 4, 5, 6],
+            frame: vec![9; 7],
+        };
         let mut hit_bytes = Vec::new();
         hits.write_to(&mut hit_bytes).unwrap();
         let mut layer_bytes = Vec::new();
         let crc = layer.write_to(&mut layer_bytes).unwrap();
-        let files: [(Vec<u8>, fn(&[u8]) -> bool); 3] = [
+        let files: [(Vec<u8>, fn(&[u8]) -> bool); 4] = [
             (part().to_bytes(), |b| TransferPart::decode(b).is_ok_and(|p| p == part())),
             (hit_bytes, |b| HitFile::decode(b).is_ok()),
             (layer_bytes.clone(), |b| LayerFile::decode(b).is_ok()),
+            (sun.to_bytes(), |b| SunPart::decode(b).is_ok()),
         ];
         assert_eq!(LayerFile::decode(&layer_bytes).unwrap(), (layer, crc));
         assert_eq!(HitFile::decode(&files[1].0).unwrap(), hits);
         assert!(hits.is_rejected(1) && !hits.is_rejected(0));
+        assert_eq!(SunPart::decode(&files[3].0).unwrap(), sun);
         for (bytes, decodes) in &files {
             assert!(decodes(bytes));
             for len in 0..bytes.len() {

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use super::codec::FileKind;
-use super::files::{Identity, LayerFile, TransferPart};
+use super::files::{Identity, LayerFile, SunPart, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
@@ -317,6 +317,47 @@ fn check_layer(
         ));
     }
     Ok(())
+}
+
+/// Every sun part of one bake put together: all samples' bits in sample
+/// order, the rays traced, and shard 0's frame.
+pub struct MergedSun {
+    pub key: SunKey,
+    pub identity: Identity,
+    pub bits: Vec<u32>,
+    pub rays: u64,
+    pub frame: Vec<u8>,
+}
+
+/// Checks and concatenates the parts of a sharded sun bake.
+pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardError> {
+    let heads: Vec<PartHead> = parts
+        .iter()
+        .map(|(path, p)| PartHead {
+            path,
+            identity: &p.identity,
+            shard: p.shard,
+            round: 0,
+            items: p.items.clone(),
+            item_count: p.item_count,
+            points: p.points.clone(),
+            point_count: p.point_count,
+        })
+        .collect();
+    let order = check_together(&heads, FileKind::SunPart)?;
+    let (first_path, first) = &parts[order[0]];
+    let key = SunKey::decode(&first.identity.key).map_err(|e| ShardError::malformed(first_path, format!("parameter block: {e}")))?;
+    if let Some((path, _)) = parts.iter().find(|(_, p)| p.words != first.words) {
+        return Err(ShardError::mismatch(path, format!("holds another number of steps than {}", first_path.display())));
+    }
+    if first.frame.is_empty() {
+        return Err(ShardError::mismatch(first_path, "is shard 0 but carries no bundle frame"));
+    }
+    let mut bits = Vec::with_capacity(first.point_count as usize * first.words as usize);
+    for &i in &order {
+        bits.extend_from_slice(&parts[i].1.bits);
+    }
+    Ok(MergedSun { key, identity: first.identity.clone(), bits, rays: parts.iter().map(|(_, p)| p.rays).sum(), frame: first.frame.clone() })
 }
 
 #[cfg(test)]

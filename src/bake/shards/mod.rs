@@ -16,13 +16,13 @@
 //! Round 0 traces and keeps its hit records in its own file; each merge but
 //! the last writes one layer file (the normalised previous bounce, weights
 //! and running total); later rounds gather from their hit records and that
-//! layer; the last merge gives the bundle.
+//! layer; the last merge gives the bundle. Sun masks take one round.
 //!
 //! - [`codec`]: the byte layout shared by every shard file (magic, version,
 //!   CRC-32 trailer) and bounded little-endian reads.
 //! - [`key`]: the parameters every part of one bake must share.
-//! - [`files`]: transfer parts, hit records and layers as structs ⇄ bytes.
-//! - [`round`]: one shard of a transfer round (no I/O).
+//! - [`files`]: transfer parts, hit records, layers and sun parts as structs ⇄ bytes.
+//! - [`round`]: one shard of a transfer or sun round (no I/O).
 //! - [`merge`]: the checks that parts belong together, and their merge.
 
 pub mod codec;
@@ -37,10 +37,10 @@ use std::path::PathBuf;
 use crate::mesh::Mesh;
 
 pub use codec::FileKind;
-pub use files::{HitFile, Identity, LayerFile, TransferPart};
+pub use files::{HitFile, Identity, LayerFile, SunPart, TransferPart};
 pub use key::{SunKey, TransferKey};
-pub use merge::{merge_transfer, TransferMerge};
-pub use round::{bake_transfer_shard, RoundInput, RoundOutput};
+pub use merge::{merge_sun_parts, merge_transfer, MergedSun, TransferMerge};
+pub use round::{bake_sun_shard, bake_transfer_shard, RoundInput, RoundOutput};
 
 /// Most shards of one bake.
 pub const MAX_SHARDS: u32 = 100_000;

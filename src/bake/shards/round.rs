@@ -4,12 +4,15 @@
 use std::path::Path;
 use std::time::Instant;
 
-use super::files::{HitFile, Identity, LayerFile, TransferPart, VertexRows};
-use super::key::TransferKey;
+use glam::Vec3;
+
+use super::files::{HitFile, Identity, LayerFile, SunPart, TransferPart, VertexRows};
+use super::key::{SunKey, TransferKey};
 use super::merge::identity_difference;
 use super::{split_by_cost, MeshId, Shard, ShardError};
 use crate::bake::gather::RowBuffer;
 use crate::bake::progress::Progress;
+use crate::bake::sun::SunPlan;
 use crate::bake::transfer::{run_range, HitRecords, Plan, SourceRows};
 use crate::bake::{BakeError, Scene, Surfaces};
 use crate::mesh::Mesh;
@@ -182,4 +185,39 @@ fn check_inputs(
         return Err(ShardError::mismatch(input.layer_path, "holds rows of another size than this bake's"));
     }
     Ok(())
+}
+
+/// Traces shard `shard`'s samples toward every day step of `suns` (see
+/// [`crate::bake::bake_sun_masks`]); the caller adds the frame to shard 0's part.
+pub fn bake_sun_shard(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    suns: &[Option<Vec3>],
+    key: &SunKey,
+    quiet: bool,
+    shard: Shard,
+) -> Result<SunPart, ShardError> {
+    if key.steps as usize != suns.len() {
+        return Err(BakeError::Params(format!("{} sun steps, but the key says {}", suns.len(), key.steps)).into());
+    }
+    let params = crate::bake::SunParams { quiet, ..key.params };
+    let plan = SunPlan::new(mesh, surfaces, suns, &params)?;
+    let day_steps = suns.iter().filter(|s| s.is_some()).count().max(1) as u64;
+    let costs: Vec<u64> = plan.points_per_item().iter().map(|&p| p as u64 * day_steps).collect();
+    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+    let first_point = |item: usize| plan.layout.first_sample.get(item).map_or(plan.layout.sample_count(), |&f| f as u64);
+    let (bits, rays) = plan.trace_items(scene, surfaces, range.clone());
+    Ok(SunPart {
+        identity: Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() },
+        shard: shard.index,
+        items: range.start as u32..range.end as u32,
+        item_count: costs.len() as u32,
+        points: first_point(range.start)..first_point(range.end),
+        point_count: plan.layout.sample_count(),
+        words: plan.words as u32,
+        rays,
+        bits,
+        frame: Vec::new(),
+    })
 }
