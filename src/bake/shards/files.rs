@@ -289,6 +289,11 @@ impl HitFile {
         let rejected = r.u32s(count.div_ceil(32), "rejected points")?;
         let records = r.u64s(count.saturating_mul(rays as u64), "hit records")?;
         r.finish()?;
+        // The gather indexes the hit triangle's corners: a record past the mesh would read out of bounds.
+        let triangles = identity.mesh.triangles;
+        if let Some(i) = records.iter().position(|&h| h != crate::bake::gather::NO_HIT && h >> 32 >= triangles) {
+            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", records[i] >> 32));
+        }
         Ok(HitFile { identity, shard, items, points, rays, rejected, records })
     }
 }
@@ -574,6 +579,11 @@ mod tests {
         p.coeffs = 5;
         p.opened.rows.push(0.0);
         assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("5 coefficients"));
+        let mut hits = Vec::new();
+        HitFile { identity: identity(), shard: 0, items: 0..1, points: 0..1, rays: 2, rejected: vec![0], records: vec![u64::MAX, 3 << 32] }
+            .write_to(&mut hits)
+            .unwrap();
+        assert!(HitFile::decode(&hits).unwrap_err().contains("names triangle 3 of a mesh of 3"));
         let big = codec::to_vec(FileKind::Hits, |w| {
             identity().write(w)?;
             for v in [0u32, 0, 1] {

@@ -245,6 +245,9 @@ impl SunKey {
             };
             params.check().map_err(|e| e.to_string())?;
             let steps = r.u32("steps")?;
+            if steps == 0 || steps as usize > crate::bake::sun::MAX_SUN_STEPS {
+                return Err(format!("{steps} steps, outside 1..={}", crate::bake::sun::MAX_SUN_STEPS));
+            }
             let day_crc = r.u32("day CRC")?;
             Ok(SunKey { params, window_patterns: read_patterns(r)?, steps, day_crc })
         })

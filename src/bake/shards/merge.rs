@@ -178,6 +178,12 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     let key = TransferKey::decode(&first.identity.key).map_err(|e| ShardError::malformed(first_path, format!("parameter block: {e}")))?;
     let params = &key.params;
     let round = reference.round;
+    if reference.coeffs as usize != crate::sh::coeff_count(params.order) {
+        return Err(ShardError::mismatch(
+            first_path,
+            format!("holds {} coefficients, but order {} has {}", reference.coeffs, params.order, crate::sh::coeff_count(params.order)),
+        ));
+    }
     if round > params.bounces {
         return Err(ShardError::mismatch(first_path, format!("is round {round} of a bake of {} bounce(s)", params.bounces)));
     }
@@ -203,10 +209,11 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     let vertex_count = first.identity.mesh.vertices as usize;
     let (pass_channels, channels, coeffs) = (reference.pass_channels as usize, reference.channels as usize, reference.coeffs as usize);
     let stride = pass_channels * coeffs;
-    let mut sums = vec![0.0f32; vertex_count * stride];
+    // The vertex count comes from the parts' identity: allocate without aborting when it lies.
+    let mut sums = zeroed(vertex_count * stride, first_path)?;
     let mut weights = match &previous {
         Some(layer) => layer.weights.clone(),
-        None => vec![0.0f32; vertex_count],
+        None => zeroed(vertex_count, first_path)?,
     };
     let mut opened = vec![false; vertex_count];
     for &i in &order {
@@ -284,6 +291,15 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key })
 }
 
+/// `len` zeros, or an error naming `path` when they cannot be allocated.
+fn zeroed(len: usize, path: &Path) -> Result<Vec<f32>, ShardError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len)
+        .map_err(|_| ShardError::mismatch(path, format!("claims a mesh whose sums ({len} floats) do not fit in memory")))?;
+    v.resize(len, 0.0);
+    Ok(v)
+}
+
 /// The layer given to a merge must be the one every part gathered from.
 fn check_layer(
     path: &Path,
@@ -347,8 +363,19 @@ pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardE
     let order = check_together(&heads, FileKind::SunPart)?;
     let (first_path, first) = &parts[order[0]];
     let key = SunKey::decode(&first.identity.key).map_err(|e| ShardError::malformed(first_path, format!("parameter block: {e}")))?;
-    if let Some((path, _)) = parts.iter().find(|(_, p)| p.words != first.words) {
-        return Err(ShardError::mismatch(path, format!("holds another number of steps than {}", first_path.display())));
+    let words = key.steps.div_ceil(32);
+    if let Some((path, _)) = parts.iter().find(|(_, p)| p.words != words) {
+        return Err(ShardError::mismatch(
+            path,
+            format!("holds {} mask words per point, not the {words} of {} steps", first.words, key.steps),
+        ));
+    }
+    // The vote counts each set bit's step: a bit past the last step would count a step that does not exist.
+    let last_word_mask = if key.steps % 32 == 0 { u32::MAX } else { (1u32 << (key.steps % 32)) - 1 };
+    for (path, part) in parts {
+        if part.bits.chunks_exact(words as usize).any(|point| point[point.len() - 1] & !last_word_mask != 0) {
+            return Err(ShardError::mismatch(path, format!("has bits set past the last of its {} steps", key.steps)));
+        }
     }
     if first.frame.is_empty() {
         return Err(ShardError::mismatch(first_path, "is shard 0 but carries no bundle frame"));
@@ -363,6 +390,30 @@ pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardE
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Sun bits past the last step would make the vote count a step that
+    /// does not exist: a part with one is refused, not merged.
+    #[test]
+    fn sun_bits_past_the_last_step_are_refused() {
+        use crate::bake::shards::{Identity, MeshId};
+        let key = SunKey { params: crate::bake::SunParams::default(), window_patterns: Vec::new(), steps: 5, day_crc: 7 };
+        let identity = Identity { mesh: MeshId { crc: 1, vertices: 3, triangles: 1 }, shards: 1, key: key.encode() };
+        let part = |bits: Vec<u32>| SunPart {
+            identity: identity.clone(),
+            shard: 0,
+            items: 0..1,
+            item_count: 1,
+            points: 0..2,
+            point_count: 2,
+            words: 1,
+            rays: 10,
+            bits,
+            frame: vec![1],
+        };
+        assert!(merge_sun_parts(&[(PathBuf::from("ok.prtp"), part(vec![0b11111, 0b1]))]).is_ok());
+        let e = merge_sun_parts(&[(PathBuf::from("bad.prtp"), part(vec![0b1, 0b100000]))]).err().unwrap().to_string();
+        assert!(e.contains("bad.prtp: has bits set past the last of its 5 steps"), "{e}");
+    }
 
     #[test]
     fn index_lists_are_short() {
