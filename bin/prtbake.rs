@@ -127,6 +127,20 @@ struct BakeArgs {
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
+    /// Bake only shard K of N (K in 0..N): its share of the items, into a part (-o PART.prtp)
+    /// that `prtbake merge` joins with the others, round by round (docs/scale.md).
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+    /// With --shard: the round, i.e. the bounce baked (0..=--bounces) [default: 0].
+    #[arg(long, requires = "shard")]
+    round: Option<u32>,
+    /// With --shard --round R ≥ 1: the merged layer of round R − 1 (.prtl) to gather from.
+    #[arg(long, value_name = "FILE.prtl", requires = "shard")]
+    layer: Option<PathBuf>,
+    /// With --shard: the folder of this shard's hit records (hits-K-of-N.prth), written by
+    /// round 0 and read by later rounds [default: the part's folder].
+    #[arg(long, value_name = "DIR", requires = "shard")]
+    shard_dir: Option<PathBuf>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -260,6 +274,9 @@ struct SunArgs {
     /// Trace without the shadow cache (for measurement; the masks are the same).
     #[arg(long)]
     no_shadow_cache: bool,
+    /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -410,6 +427,27 @@ enum Command {
     /// Relight a bundle interactively (wgpu), or headlessly into a PNG with --screenshot.
     #[command(allow_negative_numbers = true)]
     View(ViewArgs),
+    /// Join the parts of one round of a sharded bake (bake/sun --shard) into the next round's
+    /// layer (.prtl) or, after the last round, the bundle (.prtb), byte-identical to one process.
+    #[command(allow_negative_numbers = true)]
+    Merge {
+        /// Every part of the round (.prtp), in any order.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// The layer (.prtl) or bundle (.prtb) to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Rounds ≥ 1: the merged layer of the round before, which the parts gathered from.
+        #[arg(long, value_name = "FILE.prtl")]
+        layer: Option<PathBuf>,
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Replace the output even if it is read-only.
+        #[arg(long)]
+        force: bool,
+        #[arg(long)]
+        json: bool,
+    },
     /// Write the bundle's mesh as GLB with transfer and sun masks as _PRT_ vertex attributes.
     #[command(allow_negative_numbers = true)]
     Export {
@@ -493,7 +531,17 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         Some(QuantizeArg::F16Tinted) => Some(Quantization::F16Tinted),
         Some(QuantizeArg::Auto) => None,
     };
+    let shard = match &a.shard {
+        Some(text) => Some(cli::shard_cmd::ShardRun {
+            shard: prtbake::bake::shards::Shard::parse(text)?,
+            round: a.round.unwrap_or(0),
+            layer: a.layer,
+            shard_dir: a.shard_dir,
+        }),
+        None => None,
+    };
     Ok(cli::bake_cmd::BakeConfig {
+        shard,
         input: a.mesh,
         output: a.output,
         up: up_axis(a.up),
@@ -640,6 +688,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     };
     params.check()?;
     Ok(cli::sun_cmd::SunConfig {
+        shard: a.shard.as_deref().map(prtbake::bake::shards::Shard::parse).transpose()?,
         input: a.input,
         output: a.output,
         up,
@@ -668,6 +717,9 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),
+        Command::Merge { parts, output, layer, threads, force, json } => {
+            cli::merge_cmd::run(&cli::merge_cmd::MergeConfig { parts, output, layer, threads, json, force }).map(|_| Outcome::Ok)
+        }
         Command::Export { bundle, output, layer, json, force } => {
             cli::export_cmd::run(&bundle, &output, cli::export_cmd::parse_layer(&layer)?, json, force).map(|_| Outcome::Ok)
         }

@@ -8,6 +8,7 @@ mod cli;
 mod export;
 mod hostile_bake;
 mod safety;
+mod shards;
 mod stability;
 mod storage;
 mod sun;

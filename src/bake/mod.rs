@@ -12,6 +12,7 @@ pub mod queries;
 pub mod sah;
 pub mod sampling;
 pub mod scene;
+pub mod shards;
 pub mod sun;
 pub mod surfaces;
 pub mod transfer;

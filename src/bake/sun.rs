@@ -169,98 +169,202 @@ pub fn bake_sun_masks(
     suns: &[Option<Vec3>],
     params: &SunParams,
 ) -> Result<SunMasks, BakeError> {
-    params.check()?;
-    if suns.is_empty() || suns.len() > MAX_SUN_STEPS {
-        return Err(BakeError::Params(format!("{} sun steps, allowed 1..={MAX_SUN_STEPS}", suns.len())));
-    }
-    let suns: Vec<Option<Vec3>> = suns
-        .iter()
-        .enumerate()
-        .map(|(k, s)| match s {
-            None => Ok(None),
-            Some(d) => d
-                .try_normalize()
-                .map(Some)
-                .ok_or_else(|| BakeError::Params(format!("sun direction of step {k} is {d:?}, not a usable direction"))),
-        })
-        .collect::<Result<_, _>>()?;
     let started = Instant::now();
-    let words = suns.len().div_ceil(32);
-    let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces)?, params.samples_per_vertex, params.max_per_triangle);
-    super::transfer::check_point_count(layout.sample_count())?;
-    let point_count = layout.sample_count() as usize;
-    let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
+    let plan = SunPlan::new(mesh, surfaces, suns, params)?;
+    let (sample_bits, rays) = plan.trace_items(scene, surfaces, 0..plan.layout.triangles.len());
+    plan.masks_from_bits(&sample_bits, rays, started)
+}
 
-    // Trace: one bit per (sample, step), each task writing its own slice.
-    let mut sample_bits = vec![0u32; point_count * words];
-    let tracer = Tracer { mesh, scene, surfaces, params, layout: &layout, suns: &suns, words };
-    let progress = Progress::start("sun".into(), point_count as u64 * day_steps, params.quiet);
-    let mut tasks = Vec::new();
-    let mut rest: &mut [u32] = &mut sample_bits;
-    for start in (0..layout.triangles.len()).step_by(TRIANGLES_PER_TASK) {
-        let end = (start + TRIANGLES_PER_TASK).min(layout.triangles.len());
-        let samples = layout.counts[start..end].iter().map(|&c| c as usize).sum::<usize>();
-        let (mine, others) = rest.split_at_mut(samples * words);
-        rest = others;
-        tasks.push((start, end, mine));
+/// The masks of a sharded sun bake from its shards' sample bits put end to
+/// end (`bake::shards::merge_sun_parts`): the vote a whole bake runs, with
+/// the stats of a bake that traced `rays`.
+pub fn sun_masks_from_bits(
+    mesh: &Mesh,
+    surfaces: &Surfaces,
+    suns: &[Option<Vec3>],
+    params: &SunParams,
+    sample_bits: &[u32],
+    rays: u64,
+) -> Result<SunMasks, BakeError> {
+    SunPlan::new(mesh, surfaces, suns, params)?.masks_from_bits(sample_bits, rays, Instant::now())
+}
+
+/// What a sun bake's tracing and voting share: the checked day and where
+/// the samples go. A whole bake and each of its shards (`bake::shards`)
+/// build it the same way.
+pub(crate) struct SunPlan<'a> {
+    mesh: &'a Mesh,
+    params: &'a SunParams,
+    /// Unit directions toward the sun, `None` at night.
+    suns: Vec<Option<Vec3>>,
+    pub(crate) layout: InteriorLayout,
+    /// Mask words per sample and per vertex.
+    pub(crate) words: usize,
+}
+
+impl<'a> SunPlan<'a> {
+    /// Checks the parameters and the day (see [`bake_sun_masks`]) and places the samples.
+    pub(crate) fn new(mesh: &'a Mesh, surfaces: &Surfaces, suns: &[Option<Vec3>], params: &'a SunParams) -> Result<SunPlan<'a>, BakeError> {
+        params.check()?;
+        if suns.is_empty() || suns.len() > MAX_SUN_STEPS {
+            return Err(BakeError::Params(format!("{} sun steps, allowed 1..={MAX_SUN_STEPS}", suns.len())));
+        }
+        let suns: Vec<Option<Vec3>> = suns
+            .iter()
+            .enumerate()
+            .map(|(k, s)| match s {
+                None => Ok(None),
+                Some(d) => d
+                    .try_normalize()
+                    .map(Some)
+                    .ok_or_else(|| BakeError::Params(format!("sun direction of step {k} is {d:?}, not a usable direction"))),
+            })
+            .collect::<Result<_, _>>()?;
+        let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces)?, params.samples_per_vertex, params.max_per_triangle);
+        super::transfer::check_point_count(layout.sample_count())?;
+        Ok(SunPlan { mesh, params, words: suns.len().div_ceil(32), suns, layout })
     }
-    let rays: u64 = tasks
-        .into_par_iter()
-        .map(|(start, end, out)| {
-            let rays = tracer.trace_task(start, end, out);
-            progress.add(layout.counts[start..end].iter().map(|&c| c as u64).sum::<u64>() * day_steps);
-            rays
-        })
-        .sum();
-    drop(progress);
 
-    // Vote: each vertex sums its samples' weights in adjacency order.
-    let adjacency = VertexAdjacency::build(mesh, &layout);
-    let vertex_count = mesh.vertex_count();
-    let mut masks = vec![0u32; vertex_count * words];
-    let without: u64 = masks
-        .par_chunks_mut(VERTICES_PER_TASK * words)
-        .enumerate()
-        .map(|(chunk, out)| {
-            let first = chunk * VERTICES_PER_TASK;
-            let mut lit_weight = vec![0.0f32; suns.len()];
-            let mut without = 0u64;
-            for (local, vertex_words) in out.chunks_exact_mut(words).enumerate() {
-                let v = first + local;
-                let total = tracer.vote(v, &adjacency, &sample_bits, &mut lit_weight);
-                if total <= 0.0 {
-                    without += 1;
-                    continue;
+    fn day_steps(&self) -> u64 {
+        self.suns.iter().filter(|s| s.is_some()).count() as u64
+    }
+
+    /// Sample points of each layout item, in item order (what a shard's share is measured in).
+    pub(crate) fn points_per_item(&self) -> &[u32] {
+        &self.layout.counts
+    }
+
+    /// Traces the samples of the layout items in `range` toward every day
+    /// step: `words` bits per sample, in sample order, each task writing its
+    /// own slice. Returns the bits and the rays traced.
+    pub(crate) fn trace_items(&self, scene: &Scene, surfaces: &Surfaces, range: std::ops::Range<usize>) -> (Vec<u32>, u64) {
+        let layout = &self.layout;
+        let words = self.words;
+        let day_steps = self.day_steps();
+        let first_point = |item: usize| layout.first_sample.get(item).map_or(layout.sample_count() as usize, |&f| f as usize);
+        let mut sample_bits = vec![0u32; (first_point(range.end) - first_point(range.start)) * words];
+        let tracer = Tracer { mesh: self.mesh, scene, surfaces, params: self.params, layout, suns: &self.suns, words };
+        let points: u64 = layout.counts[range.clone()].iter().map(|&c| c as u64).sum();
+        let progress = Progress::start("sun".into(), points * day_steps, self.params.quiet);
+        let mut tasks = Vec::new();
+        let mut rest: &mut [u32] = &mut sample_bits;
+        for start in range.clone().step_by(TRIANGLES_PER_TASK) {
+            let end = (start + TRIANGLES_PER_TASK).min(range.end);
+            let samples = layout.counts[start..end].iter().map(|&c| c as usize).sum::<usize>();
+            let (mine, others) = rest.split_at_mut(samples * words);
+            rest = others;
+            tasks.push((start, end, mine));
+        }
+        let rays: u64 = tasks
+            .into_par_iter()
+            .map(|(start, end, out)| {
+                let rays = tracer.trace_task(start, end, out);
+                progress.add(layout.counts[start..end].iter().map(|&c| c as u64).sum::<u64>() * day_steps);
+                rays
+            })
+            .sum();
+        drop(progress);
+        (sample_bits, rays)
+    }
+
+    /// The masks from every sample's bits (all items' samples, in sample
+    /// order: a whole bake's, or its shards' put end to end), with the
+    /// stats of a bake that traced `rays` and started at `started`.
+    pub(crate) fn masks_from_bits(&self, sample_bits: &[u32], rays: u64, started: Instant) -> Result<SunMasks, BakeError> {
+        let (words, mesh, params) = (self.words, self.mesh, self.params);
+        let point_count = self.layout.sample_count() as usize;
+        if sample_bits.len() != point_count * words {
+            return Err(BakeError::Params(format!(
+                "{} sample words, but {point_count} samples of {words} word(s) are baked",
+                sample_bits.len()
+            )));
+        }
+        // Vote: each vertex sums its samples' weights in adjacency order.
+        let adjacency = VertexAdjacency::build(mesh, &self.layout);
+        let vertex_count = mesh.vertex_count();
+        let mut masks = vec![0u32; vertex_count * words];
+        let without: u64 = masks
+            .par_chunks_mut(VERTICES_PER_TASK * words)
+            .enumerate()
+            .map(|(chunk, out)| {
+                let first = chunk * VERTICES_PER_TASK;
+                let mut lit_weight = vec![0.0f32; self.suns.len()];
+                let mut without = 0u64;
+                for (local, vertex_words) in out.chunks_exact_mut(words).enumerate() {
+                    let v = first + local;
+                    let total = self.vote(v, &adjacency, sample_bits, &mut lit_weight);
+                    if total <= 0.0 {
+                        without += 1;
+                        continue;
+                    }
+                    let normal = mesh.normals[v];
+                    for (k, sun) in self.suns.iter().enumerate() {
+                        let Some(s) = sun else { continue };
+                        let facing = params.mode == Mode::Window || normal.dot(*s) > 0.0;
+                        if facing && 2.0 * lit_weight[k] > total {
+                            vertex_words[k / 32] |= 1 << (k % 32);
+                        }
+                    }
                 }
-                let normal = mesh.normals[v];
-                for (k, sun) in suns.iter().enumerate() {
-                    let Some(s) = sun else { continue };
-                    let facing = params.mode == Mode::Window || normal.dot(*s) > 0.0;
-                    if facing && 2.0 * lit_weight[k] > total {
-                        vertex_words[k / 32] |= 1 << (k % 32);
+                without
+            })
+            .sum();
+
+        let lit_vertices =
+            (0..self.suns.len()).map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64).collect();
+        let seconds = started.elapsed().as_secs_f64();
+        let stats = SunStats {
+            triangles: mesh.triangle_count() as u64,
+            vertices: vertex_count as u64,
+            points: point_count as u64,
+            steps: self.suns.len() as u64,
+            day_steps: self.day_steps(),
+            vertices_without_samples: without,
+            lit_vertices,
+            rays,
+            seconds,
+            rays_per_second: rays as f64 / seconds.max(1e-9),
+        };
+        Ok(SunMasks { words_per_vertex: words as u32, masks, stats })
+    }
+
+    /// Barycentrics of sample `s` of layout item `item`.
+    #[inline]
+    fn barycentrics(&self, item: usize, s: u32) -> [f32; 3] {
+        sample_barycentrics(self.params, &self.layout, item, s)
+    }
+
+    /// Sums, for vertex `v`, the barycentric weight of its samples that see
+    /// the sun at each step into `lit_weight` (overwritten); returns the total weight.
+    fn vote(&self, v: usize, adjacency: &VertexAdjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
+        lit_weight.fill(0.0);
+        let mut total = 0.0f32;
+        let range = adjacency.offsets[v] as usize..adjacency.offsets[v + 1] as usize;
+        for &(item, corner) in &adjacency.entries[range] {
+            let item = item as usize;
+            let first = self.layout.first_sample[item] as usize;
+            for s in 0..self.layout.counts[item] {
+                let w = self.barycentrics(item, s)[corner as usize];
+                total += w;
+                let bits = &sample_bits[(first + s as usize) * self.words..][..self.words];
+                for (word_index, &word) in bits.iter().enumerate() {
+                    let mut word = word;
+                    while word != 0 {
+                        let bit = word.trailing_zeros() as usize;
+                        lit_weight[word_index * 32 + bit] += w;
+                        word &= word - 1;
                     }
                 }
             }
-            without
-        })
-        .sum();
+        }
+        total
+    }
+}
 
-    let lit_vertices =
-        (0..suns.len()).map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64).collect();
-    let seconds = started.elapsed().as_secs_f64();
-    let stats = SunStats {
-        triangles: mesh.triangle_count() as u64,
-        vertices: vertex_count as u64,
-        points: point_count as u64,
-        steps: suns.len() as u64,
-        day_steps,
-        vertices_without_samples: without,
-        lit_vertices,
-        rays,
-        seconds,
-        rays_per_second: rays as f64 / seconds.max(1e-9),
-    };
-    Ok(SunMasks { words_per_vertex: words as u32, masks, stats })
+/// Barycentrics of sample `s` of layout item `item`: the transfer bake's points.
+#[inline]
+fn sample_barycentrics(params: &SunParams, layout: &InteriorLayout, item: usize, s: u32) -> [f32; 3] {
+    triangle_sample(DirectionPattern::Sobol, params.seed, layout.triangles[item], s, layout.counts[item])
 }
 
 /// For each vertex, the (layout item, corner) pairs of the sampled triangles around it, in item order.
@@ -295,7 +399,7 @@ impl VertexAdjacency {
     }
 }
 
-/// Shared read-only state of the tracing and voting passes.
+/// Shared read-only state of the tracing pass.
 struct Tracer<'a> {
     mesh: &'a Mesh,
     scene: &'a Scene,
@@ -310,8 +414,7 @@ impl Tracer<'_> {
     /// Barycentrics of sample `s` of layout item `item`.
     #[inline]
     fn barycentrics(&self, item: usize, s: u32) -> [f32; 3] {
-        let t = self.layout.triangles[item];
-        triangle_sample(DirectionPattern::Sobol, self.params.seed, t, s, self.layout.counts[item])
+        sample_barycentrics(self.params, self.layout, item, s)
     }
 
     /// Traces the samples of layout items `start..end` at every day step into
@@ -391,32 +494,6 @@ impl Tracer<'_> {
                 (lit, true)
             }
         }
-    }
-
-    /// Sums, for vertex `v`, the barycentric weight of its samples that see
-    /// the sun at each step into `lit_weight` (overwritten); returns the total weight.
-    fn vote(&self, v: usize, adjacency: &VertexAdjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
-        lit_weight.fill(0.0);
-        let mut total = 0.0f32;
-        let range = adjacency.offsets[v] as usize..adjacency.offsets[v + 1] as usize;
-        for &(item, corner) in &adjacency.entries[range] {
-            let item = item as usize;
-            let first = self.layout.first_sample[item] as usize;
-            for s in 0..self.layout.counts[item] {
-                let w = self.barycentrics(item, s)[corner as usize];
-                total += w;
-                let bits = &sample_bits[(first + s as usize) * self.words..][..self.words];
-                for (word_index, &word) in bits.iter().enumerate() {
-                    let mut word = word;
-                    while word != 0 {
-                        let bit = word.trailing_zeros() as usize;
-                        lit_weight[word_index * 32 + bit] += w;
-                        word &= word - 1;
-                    }
-                }
-            }
-        }
-        total
     }
 }
 

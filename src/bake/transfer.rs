@@ -86,8 +86,9 @@ struct Point {
     seed: u32,
 }
 
-/// The work items of a bake and how their points map to vertices.
-enum Items {
+/// The work items of a bake and how their points map to vertices. Their
+/// order is the order every sum runs in, whole bake or shards.
+pub(crate) enum Items {
     /// Triangles with `counts[k]` samples each; `first_sample[k]` is the global index of the first.
     Interior {
         triangles: Vec<u32>,
@@ -100,7 +101,7 @@ enum Items {
 }
 
 impl Items {
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         match self {
             Items::Interior { triangles, .. } => triangles.len(),
             Items::Vertex { vertices } => vertices.len(),
@@ -113,7 +114,7 @@ impl Items {
         }
     }
     /// Global index of the first point of `item` (`len()`: the point count).
-    fn first_point(&self, item: usize) -> usize {
+    pub(crate) fn first_point(&self, item: usize) -> usize {
         match self {
             Items::Interior { first_sample, .. } => match first_sample.get(item) {
                 Some(&first) => first as usize,
@@ -122,16 +123,43 @@ impl Items {
             Items::Vertex { .. } => item,
         }
     }
-    fn point_count(&self) -> u64 {
+    pub(crate) fn point_count(&self) -> u64 {
         match self {
             Items::Interior { counts, .. } => counts.iter().map(|&c| c as u64).sum(),
             Items::Vertex { vertices } => vertices.len() as u64,
         }
     }
+    /// Sample points of each item, in item order (what a shard's share is measured in).
+    pub(crate) fn points_per_item(&self) -> Vec<u32> {
+        match self {
+            Items::Interior { counts, .. } => counts.clone(),
+            Items::Vertex { vertices } => vec![1; vertices.len()],
+        }
+    }
+    /// The vertices item `item`'s corners add to (a vertex item: itself, thrice).
+    fn corner_vertices(&self, mesh: &Mesh, item: usize) -> [u32; 3] {
+        match self {
+            Items::Interior { triangles, .. } => mesh.triangle(triangles[item] as usize),
+            Items::Vertex { vertices } => [vertices[item]; 3],
+        }
+    }
+    /// The first item that adds to each vertex (`u32::MAX`: none): a range
+    /// of items holds a vertex's first sums exactly when it holds this item.
+    pub(crate) fn first_items(&self, mesh: &Mesh) -> Vec<u32> {
+        let mut first = vec![u32::MAX; mesh.vertex_count()];
+        for item in 0..self.len() {
+            for &v in &self.corner_vertices(mesh, item)[..self.corners()] {
+                let slot = &mut first[v as usize];
+                *slot = (*slot).min(item as u32);
+            }
+        }
+        first
+    }
 }
 
 /// Shared read-only state of a pass.
-struct Pass<'a> {
+pub(crate) struct Pass<'a> {
+    bounce: u32,
     mesh: &'a Mesh,
     scene: &'a Scene,
     surfaces: &'a Surfaces,
@@ -147,7 +175,7 @@ struct Pass<'a> {
     /// Bounce 0 records every ray's hit here (when bounces follow and it fits
     /// the budget); bounces ≥ 1 then gather from it instead of re-tracing:
     /// the rays are the same, only the values at their ends change.
-    hit_cache: Option<&'a [u64]>,
+    hit_cache: Option<HitRecords<'a>>,
     record_hits: bool,
     /// Window triangles to sample directly for bounce 0 (window mode).
     windows: Option<&'a WindowLights>,
@@ -192,13 +220,292 @@ impl WindowLights {
 struct TaskOutput {
     sums: Vec<f32>,
     weights: Vec<f32>,
-    rejected: Vec<(u32, bool)>,
+    /// Global indices of the points found inside geometry.
+    rejected: Vec<u32>,
     /// Rays evaluated (traced or gathered from the cache).
     rays: u64,
     /// Rays actually traced through the BVH.
     traced: u64,
     /// Hit records of this task's points, in point order (bounce 0 with caching).
     hits: Vec<u64>,
+}
+
+/// Bounce 0's hit records of the points from `first_point` on (a whole
+/// bake's, or one shard's).
+#[derive(Clone, Copy)]
+pub(crate) struct HitRecords<'a> {
+    pub(crate) records: &'a [u64],
+    pub(crate) first_point: u64,
+}
+
+/// The previous bounce per vertex in line-aligned rows, what the next
+/// bounce gathers from. After bounce 0 it is colourless (one row serves
+/// every channel, a third of the bytes of its widened copy).
+pub(crate) struct SourceRows {
+    pub(crate) rows: RowBuffer,
+    /// 1 after bounce 0, else the bake's channels.
+    pub(crate) channels: usize,
+}
+
+impl SourceRows {
+    pub(crate) fn empty() -> SourceRows {
+        SourceRows { rows: RowBuffer::zeroed(0), channels: 1 }
+    }
+}
+
+/// What every pass of a bake shares: the items, sizes, the albedo bounces
+/// reflect with and the window lights. A whole bake and each of its shards
+/// (`bake::shards`) build it the same way, so they see the same items.
+pub(crate) struct Plan<'a> {
+    pub(crate) mesh: &'a Mesh,
+    scene: &'a Scene,
+    surfaces: &'a Surfaces,
+    pub(crate) params: &'a BakeParams,
+    pub(crate) items: Items,
+    pub(crate) coeffs: usize,
+    /// Channels of the result (bounce 0 is traced colourless, then widened).
+    pub(crate) channels: usize,
+    /// Albedo at hit points, per channel count.
+    bounce_albedo: Vec<[f32; 3]>,
+    windows: Option<WindowLights>,
+}
+
+impl<'a> Plan<'a> {
+    /// Checks the parameters and lists the items (`receivers`: see [`bake_transfer_receivers`]).
+    pub(crate) fn new(
+        mesh: &'a Mesh,
+        scene: &'a Scene,
+        surfaces: &'a Surfaces,
+        params: &'a BakeParams,
+        receivers: Option<&[bool]>,
+    ) -> Result<Plan<'a>, BakeError> {
+        params.check()?;
+        if receivers.is_some_and(|r| r.len() != mesh.triangle_count()) {
+            return Err(BakeError::Params("receiver flags do not match the triangle count".into()));
+        }
+        let items = build_items(mesh, sampled_triangles(mesh, surfaces)?, params, receivers);
+        check_point_count(items.point_count())?;
+        let channels = params.channel_count(surfaces);
+        let bounce_albedo: Vec<[f32; 3]> =
+            if channels == 1 { surfaces.albedo.iter().map(|a| [(a[0] + a[1] + a[2]) / 3.0; 3]).collect() } else { surfaces.albedo.clone() };
+        let windows = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(mesh, surfaces) } else { None };
+        Ok(Plan { mesh, scene, surfaces, params, items, coeffs: sh::coeff_count(params.order), channels, bounce_albedo, windows })
+    }
+
+    /// The counts every bake of this plan reports, before any ray.
+    pub(crate) fn base_stats(&self) -> BakeStats {
+        BakeStats {
+            triangles: self.mesh.triangle_count() as u64,
+            vertices: self.mesh.vertex_count() as u64,
+            window_triangles: self.surfaces.window_triangle_count() as u64,
+            points: self.items.point_count(),
+            batching: self.scene.batching(),
+            ..BakeStats::default()
+        }
+    }
+
+    /// Channels bounce `bounce` is traced in: bounce 0's transfer is colourless.
+    pub(crate) fn pass_channels(&self, bounce: u32) -> usize {
+        if bounce == 0 {
+            1
+        } else {
+            self.channels
+        }
+    }
+
+    /// A pass of `bounce`: bounces ≥ 1 gather from `source` (at `cached`
+    /// hits, or at re-traced ones); bounce 0 records its hits when `record_hits`.
+    pub(crate) fn pass<'p>(
+        &'p self,
+        bounce: u32,
+        source: &'p SourceRows,
+        rejected: &'p [bool],
+        cached: Option<HitRecords<'p>>,
+        record_hits: bool,
+    ) -> Pass<'p> {
+        let gather = (bounce > 0).then(|| {
+            Gather::new(&self.mesh.indices, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels)
+        });
+        Pass {
+            bounce,
+            mesh: self.mesh,
+            scene: self.scene,
+            surfaces: self.surfaces,
+            params: self.params,
+            items: &self.items,
+            coeffs: self.coeffs,
+            channels: self.pass_channels(bounce),
+            gather,
+            rejected,
+            reject_distance: self.params.inside_distance * self.scene.diagonal,
+            hit_cache: if bounce > 0 { cached } else { None },
+            record_hits: bounce == 0 && record_hits,
+            windows: self.windows.as_ref(),
+        }
+    }
+}
+
+/// Contributions of a range of items to vertices whose first item lies
+/// before the range, in item and corner order: added after the earlier
+/// ranges' sums, they keep each vertex's sum order that of a whole bake.
+#[derive(Default)]
+pub(crate) struct LateSums {
+    pub(crate) vertices: Vec<u32>,
+    /// One row per entry of `vertices`.
+    pub(crate) rows: Vec<f32>,
+    /// One weight per entry (bounce 0), else empty.
+    pub(crate) weights: Vec<f32>,
+}
+
+/// One bounce's sums over a range of items (a whole bake is one range).
+pub(crate) struct RangeSums {
+    /// `[vertex][channel][coeff]` for every vertex; filled for the vertices
+    /// whose first item is in the range (all of them in a whole bake).
+    pub(crate) sums: Vec<f32>,
+    /// Bounce 0: each vertex's barycentric weight, as `sums`.
+    pub(crate) weights: Vec<f32>,
+    pub(crate) late: LateSums,
+    /// Global indices of the points found inside geometry (bounce 0).
+    pub(crate) rejected: Vec<u32>,
+    pub(crate) rays: u64,
+    pub(crate) traced: u64,
+    /// Bounce 0's hit records of the range's points, in point order, when recorded.
+    pub(crate) hits: Vec<u64>,
+}
+
+/// Adds `row` to `target`, element by element: the one place per-item sums
+/// meet, so whole bakes and merged shards add in the same order.
+#[inline]
+pub(crate) fn add_row(target: &mut [f32], row: &[f32]) {
+    target.iter_mut().zip(row).for_each(|(t, s)| *t += s);
+}
+
+/// (a) and (b): evaluates every point of the items in `range` for `pass`'s
+/// bounce, in tasks of [`ITEMS_PER_TASK`] items, and adds each item's corner
+/// sums to its vertices in item order. `first_items` (see
+/// [`Items::first_items`]) is given for a range that is not the whole bake:
+/// contributions to vertices first touched before it go to
+/// [`RangeSums::late`] instead.
+pub(crate) fn run_range(pass: &Pass, range: std::ops::Range<usize>, first_items: Option<&[u32]>, progress: &Progress) -> RangeSums {
+    let items = pass.items;
+    let stride = pass.channels * pass.coeffs;
+    let vertex_count = pass.mesh.vertex_count();
+    // Every point of bounce 0 records one hit per ray, at `point · rays`.
+    // Each task copies its points' records to their place, so the 8 bytes
+    // a ray of fresh pages fault in on every thread, not in the merge.
+    let record_count = |points: usize| if pass.record_hits { points * pass.params.rays as usize } else { 0 };
+    let mut hits: Vec<u64> = vec![0; record_count(items.first_point(range.end) - items.first_point(range.start))];
+    let mut unfilled_hits = hits.as_mut_slice();
+    let mut out = RangeSums {
+        sums: vec![0.0; vertex_count * stride],
+        weights: vec![0.0; vertex_count],
+        late: LateSums::default(),
+        rejected: Vec::new(),
+        rays: 0,
+        traced: 0,
+        hits: Vec::new(),
+    };
+    for merge_start in range.clone().step_by(ITEMS_PER_MERGE) {
+        let merge_end = (merge_start + ITEMS_PER_MERGE).min(range.end);
+        let tasks: Vec<(usize, &mut [u64])> = (merge_start..merge_end)
+            .step_by(ITEMS_PER_TASK)
+            .map(|task_start| {
+                let task_end = (task_start + ITEMS_PER_TASK).min(merge_end);
+                let points = items.first_point(task_end) - items.first_point(task_start);
+                let (hits, rest) = std::mem::take(&mut unfilled_hits).split_at_mut(record_count(points));
+                unfilled_hits = rest;
+                (task_start, hits)
+            })
+            .collect();
+        let outputs: Vec<TaskOutput> = tasks
+            .into_par_iter()
+            .map(|(task_start, hits)| {
+                let mut out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(merge_end));
+                hits.copy_from_slice(&out.hits);
+                // Freed now, not after the merge: a merge's records would otherwise be held twice.
+                out.hits = Vec::new();
+                progress.add(out.rays);
+                out
+            })
+            .collect();
+        // In item order: the only place results meet, so the sum order is fixed.
+        for (task_index, task) in outputs.into_iter().enumerate() {
+            out.add_task(pass, merge_start + task_index * ITEMS_PER_TASK, task, first_items.map(|f| (f, range.start)));
+        }
+    }
+    out.hits = hits;
+    out
+}
+
+impl RangeSums {
+    /// Adds one task's item sums, in item and corner order. `late_before`:
+    /// vertices whose first item is before this item index go to `late`.
+    fn add_task(&mut self, pass: &Pass, task_start: usize, task: TaskOutput, late_before: Option<(&[u32], usize)>) {
+        self.rays += task.rays;
+        self.traced += task.traced;
+        self.rejected.extend(task.rejected);
+        let corners = pass.items.corners();
+        let stride = pass.channels * pass.coeffs;
+        let with_weights = pass.bounce == 0;
+        for (local, corner_sums) in task.sums.chunks_exact(corners * stride).enumerate() {
+            let vertices = pass.items.corner_vertices(pass.mesh, task_start + local);
+            for (corner, sums) in corner_sums.chunks_exact(stride).enumerate() {
+                let v = vertices[corner] as usize;
+                let weight = task.weights[local * corners + corner];
+                if late_before.is_some_and(|(first, start)| (first[v] as usize) < start) {
+                    self.late.vertices.push(v as u32);
+                    self.late.rows.extend_from_slice(sums);
+                    if with_weights {
+                        self.late.weights.push(weight);
+                    }
+                    continue;
+                }
+                if with_weights {
+                    self.weights[v] += weight;
+                }
+                add_row(&mut self.sums[v * stride..(v + 1) * stride], sums);
+            }
+        }
+    }
+}
+
+/// (c) A bounce's layer: each vertex's sums over its weight, bounce 0
+/// widened to all `channels`; zero where a vertex has no weight.
+pub(crate) fn normalised_layer(sums: &[f32], weights: &[f32], pass_channels: usize, channels: usize, coeffs: usize) -> Vec<f32> {
+    let stride = pass_channels * coeffs;
+    let mut layer = vec![0.0f32; weights.len() * channels * coeffs];
+    layer.par_chunks_mut(channels * coeffs).zip(sums.par_chunks(stride).zip(weights.par_iter())).for_each(|(dst, (src, &w))| {
+        if w > 0.0 {
+            for (c, dst) in dst.chunks_exact_mut(coeffs).enumerate() {
+                let source_channel = if pass_channels == 1 { 0 } else { c };
+                dst.iter_mut().zip(&src[source_channel * coeffs..][..coeffs]).for_each(|(d, s)| *d = s / w);
+            }
+        }
+    });
+    layer
+}
+
+/// (c) The next bounce's gather rows: the same quotients as
+/// [`normalised_layer`], unwidened, into `source` (reusing its buffer).
+pub(crate) fn normalise_source_into(source: &mut SourceRows, sums: &[f32], weights: &[f32], pass_channels: usize, coeffs: usize) {
+    let stride = pass_channels * coeffs;
+    if source.rows.len() != weights.len() * stride {
+        source.rows = RowBuffer::zeroed(weights.len() * stride);
+    }
+    source.channels = pass_channels;
+    normalise_rows(source.rows.as_mut_slice(), sums, weights, stride);
+}
+
+/// `dst` = each vertex's row of `sums` over its weight, zero where it has none.
+pub(crate) fn normalise_rows(dst: &mut [f32], sums: &[f32], weights: &[f32], stride: usize) {
+    dst.par_chunks_mut(stride).zip(sums.par_chunks(stride).zip(weights.par_iter())).for_each(|(dst, (src, &w))| {
+        dst.iter_mut().zip(src).for_each(|(d, s)| *d = if w > 0.0 { s / w } else { 0.0 });
+    });
+}
+
+/// Adds a bounce's layer to the running total (bounce order, as a whole bake).
+pub(crate) fn add_layer(total: &mut [f32], layer: &[f32]) {
+    total.iter_mut().zip(layer).for_each(|(t, l)| *t += l);
 }
 
 /// Bakes transfer for every vertex. Runs on the current rayon pool.
@@ -227,43 +534,13 @@ pub fn bake_transfer_receivers(
     params: &BakeParams,
     receivers: Option<&[bool]>,
 ) -> Result<TransferResult, BakeError> {
-    params.check()?;
-    if receivers.is_some_and(|r| r.len() != mesh.triangle_count()) {
-        return Err(BakeError::Params("receiver flags do not match the triangle count".into()));
-    }
     let started = Instant::now();
-    let order = params.order;
-    let coeffs = sh::coeff_count(order);
-    let channels = params.channel_count(surfaces);
-    let vertex_count = mesh.vertex_count();
-    let items = build_items(mesh, sampled_triangles(mesh, surfaces)?, params, receivers);
-    let point_count = items.point_count();
-    check_point_count(point_count)?;
-    let mut stats = BakeStats {
-        triangles: mesh.triangle_count() as u64,
-        vertices: vertex_count as u64,
-        window_triangles: surfaces.window_triangle_count() as u64,
-        points: point_count,
-        batching: scene.batching(),
-        ..BakeStats::default()
-    };
-
-    // Albedo at hit points, per channel count.
-    let bounce_albedo: Vec<[f32; 3]> =
-        if channels == 1 { surfaces.albedo.iter().map(|a| [(a[0] + a[1] + a[2]) / 3.0; 3]).collect() } else { surfaces.albedo.clone() };
-    let mut rejected = vec![false; point_count as usize];
+    let plan = Plan::new(mesh, scene, surfaces, params, receivers)?;
+    let (coeffs, channels) = (plan.coeffs, plan.channels);
+    let point_count = plan.items.point_count();
+    let mut stats = plan.base_stats();
     let cache_bytes = point_count * params.rays as u64 * 8;
     let use_cache = params.bounces > 0 && cache_bytes <= params.hit_cache_bytes;
-    let mut hit_cache: Vec<u64> = Vec::new();
-    let window_lights = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(mesh, surfaces) } else { None };
-    let mut vertex_weight = vec![0.0f32; vertex_count];
-    let mut layers: Vec<Vec<f32>> = Vec::new();
-    // The previous bounce per vertex in line-aligned rows, for the next
-    // bounce's gathers. After bounce 0 it is colourless (one row serves every
-    // channel, a third of the bytes of its widened copy).
-    let mut source = RowBuffer::zeroed(0);
-    let mut source_channels = 1;
-
     if !params.quiet {
         if params.bounces > 0 && !use_cache {
             eprintln!(
@@ -276,114 +553,41 @@ pub fn bake_transfer_receivers(
         let Batching { closest_hit, occlusion } = scene.batching();
         eprintln!("rays: closest hit {closest_hit}, occlusion {occlusion} (the faster on this scene's probe rays)");
     }
+    let mut rejected = vec![false; point_count as usize];
+    let mut hit_cache: Vec<u64> = Vec::new();
+    let mut vertex_weight: Vec<f32> = Vec::new();
+    let mut source = SourceRows::empty();
+    let mut layers: Vec<Vec<f32>> = Vec::new();
+    let mut total = vec![0.0f32; mesh.vertex_count() * channels * coeffs];
     for bounce in 0..=params.bounces {
         let phase_start = Instant::now();
-        let pass_channels = if bounce == 0 { 1 } else { channels };
-        let label = format!("bounce {}/{}", bounce, params.bounces);
-        let progress = Progress::start(label, point_count * params.rays as u64, params.quiet);
-        let pass = Pass {
-            mesh,
-            scene,
-            surfaces,
-            params,
-            items: &items,
-            coeffs,
-            channels: pass_channels,
-            gather: (bounce > 0).then(|| Gather::new(&mesh.indices, &bounce_albedo, source.as_slice(), coeffs, source_channels, channels)),
-            rejected: &rejected,
-            reject_distance: params.inside_distance * scene.diagonal,
-            hit_cache: (use_cache && bounce > 0).then_some(hit_cache.as_slice()),
-            record_hits: use_cache && bounce == 0,
-            windows: window_lights.as_ref(),
-        };
-        let mut accumulated = vec![0.0f32; vertex_count * pass_channels * coeffs];
-        let mut new_rejections = Vec::new();
-        let mut rays = 0u64;
-        let mut traced = 0u64;
-        // Every point of bounce 0 records one hit per ray, at `point · rays`.
-        // Each task copies its points' records to their place, so the 8 bytes
-        // a ray of fresh pages fault in on every thread, not in the merge.
-        let record_count = |points: usize| if pass.record_hits { points * params.rays as usize } else { 0 };
-        let mut new_hits: Vec<u64> = vec![0; record_count(point_count as usize)];
-        let mut unfilled_hits = new_hits.as_mut_slice();
-        let corners = items.corners();
-        for merge_start in (0..items.len()).step_by(ITEMS_PER_MERGE) {
-            let merge_end = (merge_start + ITEMS_PER_MERGE).min(items.len());
-            let tasks: Vec<(usize, &mut [u64])> = (merge_start..merge_end)
-                .step_by(ITEMS_PER_TASK)
-                .map(|task_start| {
-                    let task_end = (task_start + ITEMS_PER_TASK).min(merge_end);
-                    let points = items.first_point(task_end) - items.first_point(task_start);
-                    let (hits, rest) = std::mem::take(&mut unfilled_hits).split_at_mut(record_count(points));
-                    unfilled_hits = rest;
-                    (task_start, hits)
-                })
-                .collect();
-            let outputs: Vec<TaskOutput> = tasks
-                .into_par_iter()
-                .map(|(task_start, hits)| {
-                    let mut out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(merge_end), bounce);
-                    hits.copy_from_slice(&out.hits);
-                    // Freed now, not after the merge: a merge's records would otherwise be held twice.
-                    out.hits = Vec::new();
-                    progress.add(out.rays);
-                    out
-                })
-                .collect();
-            // Merge in item order: the only place results meet, so the sum order is fixed.
-            for (task_index, out) in outputs.into_iter().enumerate() {
-                let task_start = merge_start + task_index * ITEMS_PER_TASK;
-                rays += out.rays;
-                traced += out.traced;
-                new_rejections.extend(out.rejected);
-                let stride = pass_channels * coeffs;
-                for (local, corner_sums) in out.sums.chunks_exact(corners * stride).enumerate() {
-                    let vertices = pass.corner_vertices(task_start + local);
-                    for (corner, sums) in corner_sums.chunks_exact(stride).enumerate() {
-                        let v = vertices[corner] as usize;
-                        if bounce == 0 {
-                            vertex_weight[v] += out.weights[local * corners + corner];
-                        }
-                        let target = &mut accumulated[v * stride..(v + 1) * stride];
-                        target.iter_mut().zip(sums).for_each(|(t, s)| *t += s);
-                    }
-                }
-            }
-        }
+        let progress = Progress::start(format!("bounce {}/{}", bounce, params.bounces), point_count * params.rays as u64, params.quiet);
+        let cached = use_cache.then_some(HitRecords { records: &hit_cache, first_point: 0 });
+        let pass = plan.pass(bounce, &source, &rejected, cached, use_cache);
+        let sums = run_range(&pass, 0..plan.items.len(), None, &progress);
         drop(progress);
-        if bounce == 0 && use_cache {
-            hit_cache = new_hits;
-        }
-        for (index, flag) in new_rejections {
-            rejected[index as usize] = flag;
-        }
-        // Normalise by the barycentric weight each vertex received: the
-        // output layer with bounce 0 widened to all channels, and the next
-        // bounce's gather rows unwidened.
-        let stride = pass_channels * coeffs;
-        let mut layer = vec![0.0f32; vertex_count * channels * coeffs];
-        let weighted_rows = || accumulated.par_chunks(stride).zip(vertex_weight.par_iter());
-        layer.par_chunks_mut(channels * coeffs).zip(weighted_rows()).for_each(|(dst, (src, &w))| {
-            if w > 0.0 {
-                for (c, dst) in dst.chunks_exact_mut(coeffs).enumerate() {
-                    let source_channel = if pass_channels == 1 { 0 } else { c };
-                    dst.iter_mut().zip(&src[source_channel * coeffs..][..coeffs]).for_each(|(d, s)| *d = s / w);
-                }
+        drop(pass);
+        if bounce == 0 {
+            vertex_weight = sums.weights;
+            if use_cache {
+                hit_cache = sums.hits;
             }
-        });
+        }
+        for index in sums.rejected {
+            rejected[index as usize] = true;
+        }
+        let pass_channels = plan.pass_channels(bounce);
+        let layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
         if bounce < params.bounces {
-            if source.len() != vertex_count * stride {
-                source = RowBuffer::zeroed(vertex_count * stride);
-            }
-            source_channels = pass_channels;
-            source.as_mut_slice().par_chunks_mut(stride).zip(weighted_rows()).for_each(|(dst, (src, &w))| {
-                dst.iter_mut().zip(src).for_each(|(d, s)| *d = if w > 0.0 { s / w } else { 0.0 });
-            });
+            normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs);
         }
-        stats.rays_per_bounce.push(rays);
-        stats.rays_traced += traced;
+        add_layer(&mut total, &layer);
+        stats.rays_per_bounce.push(sums.rays);
+        stats.rays_traced += sums.traced;
         stats.seconds_per_bounce.push(phase_start.elapsed().as_secs_f64());
-        layers.push(layer);
+        if params.store_bounces {
+            layers.push(layer);
+        }
     }
 
     stats.points_rejected = rejected.iter().filter(|&&r| r).count() as u64;
@@ -391,12 +595,7 @@ pub fn bake_transfer_receivers(
     stats.rays = stats.rays_per_bounce.iter().sum();
     stats.seconds = started.elapsed().as_secs_f64();
     stats.rays_per_second = stats.rays as f64 / stats.seconds.max(1e-9);
-
-    let mut total = vec![0.0f32; vertex_count * channels * coeffs];
-    for layer in &layers {
-        total.iter_mut().zip(layer).for_each(|(t, l)| *t += l);
-    }
-    Ok(TransferResult { order, channels, total, bounces: if params.store_bounces { layers } else { Vec::new() }, stats })
+    Ok(TransferResult { order: params.order, channels, total, bounces: layers, stats })
 }
 
 /// Lists the work items: the `sampled` triangles (interior sampling), or
@@ -561,15 +760,9 @@ pub(crate) fn triangle_area(mesh: &Mesh, t: u32) -> f32 {
 }
 
 impl Pass<'_> {
-    fn corner_vertices(&self, item: usize) -> [u32; 3] {
-        match self.items {
-            Items::Interior { triangles, .. } => self.mesh.triangle(triangles[item] as usize),
-            Items::Vertex { vertices } => [vertices[item]; 3],
-        }
-    }
-
-    /// Traces every point of items `start..end` for `bounce`.
-    fn run_task(&self, start: usize, end: usize, bounce: u32) -> TaskOutput {
+    /// Traces (or gathers) every point of items `start..end` for this pass's bounce.
+    fn run_task(&self, start: usize, end: usize) -> TaskOutput {
+        let bounce = self.bounce;
         let corners = self.items.corners();
         let stride = self.channels * self.coeffs;
         let mut out = TaskOutput {
@@ -631,7 +824,7 @@ impl Pass<'_> {
                         out.rays += self.params.rays as u64;
                         out.traced += traced;
                         if inside {
-                            out.rejected.push((global, true));
+                            out.rejected.push(global);
                             continue;
                         }
                         for corner in 0..3 {
@@ -660,9 +853,10 @@ impl Pass<'_> {
     fn gather_cached(&self, point_index: u64, result: &mut [f32]) -> bool {
         let (Some(cache), Some(gather)) = (self.hit_cache, &self.gather) else { return false };
         let rays = self.params.rays as usize;
+        let local = (point_index - cache.first_point) as usize;
         // This point's records, then the next points' (usually gathered
         // next), which the gather prefetches into.
-        gather.point(&cache[point_index as usize * rays..], rays, self.ray_weight(), result);
+        gather.point(&cache.records[local * rays..], rays, self.ray_weight(), result);
         true
     }
 

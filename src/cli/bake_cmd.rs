@@ -31,6 +31,8 @@ pub struct BakeConfig {
     pub view_box: Option<(bake::cull::ViewBox, bake::cull::CullParams)>,
     /// Replace a read-only output (`--force`).
     pub force: bool,
+    /// Bake one shard's part of one round instead of the bundle (`--shard`).
+    pub shard: Option<super::shard_cmd::ShardRun>,
 }
 
 /// What the user asked about storage.
@@ -85,13 +87,38 @@ impl StorageRequest {
     }
 }
 
-/// Runs a bake end to end and prints its stats line (or JSON).
+/// Runs a bake end to end and prints its stats line (or JSON); with
+/// `--shard`, one shard's part of one round ([`super::shard_cmd`]).
 pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
+    if let Some(shard) = &config.shard {
+        return super::shard_cmd::run_transfer(config, shard);
+    }
     let outputs = [Output::new(&config.output, BUNDLE_FORMAT)];
     super::check_outputs(&[&config.input], &outputs, config.force)?;
     super::check_threads(config.threads)?;
+    let loaded = load_for_bake(config, &outputs)?;
+    let mut staged = Staged::new();
+    let mut report = bake_to_bundle(&loaded.mesh, config, loaded.meta, &mut staged)?;
+    staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
+    report.load_seconds = loaded.load_seconds;
+    report.clean_seconds = loaded.clean_seconds;
+    print_report(&report, config.json)
+}
+
+/// A mesh loaded for baking, and what its bundle's metadata says about it.
+pub struct LoadedMesh {
+    pub mesh: Mesh,
+    /// `source` (the file name) and, with `--clean`, the clean report.
+    pub meta: serde_json::Value,
+    pub load_seconds: f64,
+    pub clean_seconds: Option<f64>,
+}
+
+/// Loads `config.input` (refusing `outputs` that are files the loader read)
+/// and cleans it with `--clean`: the one way whole bakes and shards get their mesh.
+pub fn load_for_bake(config: &BakeConfig, outputs: &[Output]) -> anyhow::Result<LoadedMesh> {
     let load_start = std::time::Instant::now();
-    let mut mesh = super::load_mesh(&config.input, config.up, config.params.quiet, &outputs, config.force)?;
+    let mut mesh = super::load_mesh(&config.input, config.up, config.params.quiet, outputs, config.force)?;
     let load_seconds = load_start.elapsed().as_secs_f64();
     let clean_start = std::time::Instant::now();
     let mut meta = json!({ "source": config.input.file_name().map(|n| n.to_string_lossy().to_string()) });
@@ -103,13 +130,45 @@ pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
         meta["clean"] = serde_json::to_value(&report)?;
         mesh = cleaned;
     }
-    let clean_seconds = clean_start.elapsed().as_secs_f64();
-    let mut staged = Staged::new();
-    let mut report = bake_to_bundle(&mesh, config, meta, &mut staged)?;
-    staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
-    report.load_seconds = load_seconds;
-    report.clean_seconds = config.clean.is_some().then_some(clean_seconds);
-    print_report(&report, config.json)
+    let clean_seconds = config.clean.is_some().then(|| clean_start.elapsed().as_secs_f64());
+    Ok(LoadedMesh { mesh, meta, load_seconds, clean_seconds })
+}
+
+/// The metadata a bundle records beyond the bake: `base` (source, clean)
+/// with the window patterns and the window materials found.
+pub fn bundle_meta(base: serde_json::Value, window_patterns: &[String], surfaces: &bake::Surfaces) -> serde_json::Value {
+    let mut meta = base;
+    meta["window_patterns"] = json!(window_patterns);
+    meta["windows"] = json!(surfaces.window_names);
+    meta
+}
+
+/// Refuses window mode without a window.
+pub fn check_windows(config: &BakeConfig, surfaces: &bake::Surfaces) -> anyhow::Result<()> {
+    if config.params.mode == bake::Mode::Window && surfaces.window_triangle_count() == 0 {
+        anyhow::bail!(
+            "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
+            config.input.display(),
+            config.window_patterns
+        );
+    }
+    Ok(())
+}
+
+/// The bundle of a bake: stored as `storage` asks, measured, encoded. The
+/// one way whole bakes and merged shards make their bundle.
+pub fn encode_transfer_bundle(
+    mesh: &Mesh,
+    result: &TransferResult,
+    params: &BakeParams,
+    meta: serde_json::Value,
+    storage: &StorageRequest,
+    output: &std::path::Path,
+) -> anyhow::Result<(Vec<u8>, Option<budget::Choice>)> {
+    let choice = storage.choose(result);
+    let bundle = make_bundle_stored(mesh, result, params, meta, choice.as_ref());
+    let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
+    Ok((encoded, choice))
 }
 
 /// What a bake reports on stdout.
@@ -137,17 +196,9 @@ pub const BUNDLE_FORMAT: &[&str] = &["prtb"];
 pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value, staged: &mut Staged) -> anyhow::Result<BakeReport> {
     let (result, surfaces, build_seconds, cull) =
         super::with_threads(config.threads, || bake_maybe_culled(mesh, config))?.with_context(|| config.input.display().to_string())?;
-    if config.params.mode == bake::Mode::Window && surfaces.window_triangle_count() == 0 {
-        anyhow::bail!(
-            "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
-            config.input.display(),
-            config.window_patterns
-        );
-    }
+    check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
-    let mut extra_meta = extra_meta;
-    extra_meta["window_patterns"] = json!(config.window_patterns);
-    extra_meta["windows"] = json!(surfaces.window_names);
+    let mut extra_meta = bundle_meta(extra_meta, &config.window_patterns, &surfaces);
     let (stored_mesh, result) = match &cull {
         Some((visible, report)) => {
             if !config.params.quiet {
@@ -174,10 +225,8 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         }
         None => (std::borrow::Cow::Borrowed(mesh), result),
     };
-    let choice = config.storage.choose(&result);
     let stored_mesh = bake::Surfaces::with_window_roles(&stored_mesh, &config.window_patterns)?;
-    let bundle = make_bundle_stored(&stored_mesh, &result, &config.params, extra_meta, choice.as_ref());
-    let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
+    let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage, &config.output)?;
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
     let bundle_bytes = encoded.len() as u64;
     Ok(BakeReport {

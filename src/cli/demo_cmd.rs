@@ -54,6 +54,7 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         storage: Default::default(),
         view_box: None,
         force: false,
+        shard: None,
     };
     let mut staged = Staged::new();
     let meta = json!({ "source": "demo cabin", "defects_injected": defects, "clean": clean_report });

@@ -9,6 +9,8 @@ pub mod demo_cmd;
 pub mod export_cmd;
 pub mod generate_cmd;
 pub mod inspect_cmd;
+pub mod merge_cmd;
+pub mod shard_cmd;
 pub mod sun_cmd;
 pub mod verify_cmd;
 pub mod view_cmd;

@@ -12,7 +12,7 @@ use anyhow::Context;
 use glam::Vec3;
 use serde_json::json;
 
-use crate::bake::{self, BuildQuality, Mode, Scene, SunMasks, SunParams, Surfaces};
+use crate::bake::{self, BuildQuality, Mode, Scene, SunMasks, SunParams, SunStats, Surfaces};
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::files::read::read_head;
 use crate::files::{read_limited, Limit};
@@ -59,6 +59,8 @@ pub struct SunConfig {
     pub json: bool,
     /// Replace a read-only output (`--force`).
     pub force: bool,
+    /// Trace one shard's samples into a part instead of the bundle (`--shard`).
+    pub shard: Option<crate::bake::shards::Shard>,
 }
 
 /// What `sun` reports.
@@ -72,8 +74,12 @@ pub struct SunReport {
     pub bundle_bytes: u64,
 }
 
-/// Runs `sun` end to end and prints its report.
+/// Runs `sun` end to end and prints its report; with `--shard`, one
+/// shard's part ([`super::shard_cmd`]).
 pub fn run(config: &SunConfig) -> anyhow::Result<()> {
+    if let Some(shard) = config.shard {
+        return super::shard_cmd::run_sun(config, shard);
+    }
     let report = sun_to_bundle(config)?;
     print_report(&report, config.json)
 }
@@ -87,18 +93,38 @@ fn is_obj(path: &Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"))
 }
 
-/// Loads the input, computes the day, bakes the masks and writes the bundle.
-pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
+/// A sun bake's input, loaded: the mesh in the bake's +Y-up world, the
+/// input bundle's bytes and metadata when it was one, and the sky frame.
+pub struct SunInput {
+    pub mesh: crate::mesh::Mesh,
+    /// The input bundle and its META, when the input was a bundle.
+    pub original: Option<(Vec<u8>, serde_json::Value)>,
+    pub frame: SkyFrame,
+    /// The axes `--north` and `--directions` are read in.
+    pub file_up: UpAxis,
+    /// The input's file name, as META `source` records it.
+    pub source_name: Option<String>,
+}
+
+impl SunInput {
+    pub fn was_bundle(&self) -> bool {
+        self.original.is_some()
+    }
+}
+
+/// Loads and checks the input (`outputs`' extensions: `formats`); a bundle
+/// may be its own output only when `in_place` (the documented update).
+pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> anyhow::Result<SunInput> {
     let quiet = config.params.quiet;
     let input = &config.input;
     super::check_threads(config.threads)?;
     let input_was_bundle = is_bundle(input)?;
     // `sun B.prtb -o B.prtb` is the documented in-place update; every other
     // overlap of an output with an input is refused.
-    let outputs = [Output { may_be_input: input_was_bundle, ..Output::new(&config.output, BUNDLE_FORMAT) }];
+    let outputs = [Output { may_be_input: input_was_bundle && in_place, ..Output::new(&config.output, formats) }];
     super::check_outputs(&[input], &outputs, config.force)?;
     if let SunSource::Directions(csv) = &config.source {
-        super::check_outputs(&[csv], &[Output::new(&config.output, BUNDLE_FORMAT)], config.force)?;
+        super::check_outputs(&[csv], &[Output::new(&config.output, formats)], config.force)?;
     }
     // The bake's world is +Y up; user vectors come in the input's axes.
     let file_up = if input_was_bundle {
@@ -111,7 +137,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     } else {
         UpAxis::Y
     };
-    let (mesh, original_bytes) = if input_was_bundle {
+    let (mesh, original) = if input_was_bundle {
         let bytes = read_limited(input, Limit::Bundle).with_context(|| format!("cannot read {}", input.display()))?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
         (b.mesh, Some((bytes, b.meta)))
@@ -130,37 +156,81 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         None => sky::default_north(up),
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
+    let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
+    Ok(SunInput { mesh, original, frame, file_up, source_name })
+}
 
-    let (steps, build_seconds, sky_seconds, masks) = super::with_threads(config.threads, || -> anyhow::Result<_> {
-        // The day: sun positions, colour and sky per step.
-        let sky_start = Instant::now();
-        let steps = match &config.source {
-            SunSource::Solar { site, date, tz_minutes, from_min, to_min, steps } => {
-                let timeline = sky::timeline(*date, *tz_minutes, *from_min, *to_min, *steps).context("bad time line")?;
-                sky::day_steps(site, &timeline, sky::DEFAULT_DELTA_T_S, &frame)
-            }
-            SunSource::Directions(path) => {
-                let bytes = read_limited(path, Limit::Text).with_context(|| format!("cannot read {}", path.display()))?;
-                let text = String::from_utf8(bytes).map_err(|e| anyhow::anyhow!("{}: not UTF-8 text ({e})", path.display()))?;
-                let directions = sky::parse_directions(&text, bake::sun::MAX_SUN_STEPS)
-                    .map_err(|e| anyhow::anyhow!("{}:{}: {}", path.display(), e.line, e.message))?;
-                let world: Vec<Vec3> = directions.into_iter().map(|d| file_up.to_y_up(d)).collect();
-                sky::steps_from_directions(&world, &frame)
-            }
-        };
-        let sky_seconds = sky_start.elapsed().as_secs_f64();
-        // The masks.
-        let surfaces = Surfaces::resolve(&mesh, &config.window_patterns)?;
-        if config.params.mode == Mode::Window && surfaces.window_triangle_count() == 0 {
-            anyhow::bail!(
-                "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
-                input.display(),
-                config.window_patterns
-            );
+/// The day: sun position, colour and sky per step.
+pub fn day_steps(config: &SunConfig, input: &SunInput) -> anyhow::Result<Vec<SunStep>> {
+    Ok(match &config.source {
+        SunSource::Solar { site, date, tz_minutes, from_min, to_min, steps } => {
+            let timeline = sky::timeline(*date, *tz_minutes, *from_min, *to_min, *steps).context("bad time line")?;
+            sky::day_steps(site, &timeline, sky::DEFAULT_DELTA_T_S, &input.frame)
         }
-        let in_input = || input.display().to_string();
-        let scene = Scene::build(&mesh, BuildQuality::Sah).with_context(in_input)?;
-        let masks = bake::bake_sun_masks(&mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params).with_context(in_input)?;
+        SunSource::Directions(path) => {
+            let bytes = read_limited(path, Limit::Text).with_context(|| format!("cannot read {}", path.display()))?;
+            let text = String::from_utf8(bytes).map_err(|e| anyhow::anyhow!("{}: not UTF-8 text ({e})", path.display()))?;
+            let directions = sky::parse_directions(&text, bake::sun::MAX_SUN_STEPS)
+                .map_err(|e| anyhow::anyhow!("{}:{}: {}", path.display(), e.line, e.message))?;
+            let world: Vec<Vec3> = directions.into_iter().map(|d| input.file_up.to_y_up(d)).collect();
+            sky::steps_from_directions(&world, &input.frame)
+        }
+    })
+}
+
+/// The surfaces of `mesh`; window mode needs a window.
+pub fn sun_surfaces(config: &SunConfig, mesh: &crate::mesh::Mesh) -> anyhow::Result<Surfaces> {
+    let surfaces = Surfaces::resolve(mesh, &config.window_patterns)?;
+    if config.params.mode == Mode::Window && surfaces.window_triangle_count() == 0 {
+        anyhow::bail!(
+            "{}: window mode, but no triangle is a window (no material role, and --window {:?} matched no material or group name)",
+            config.input.display(),
+            config.window_patterns
+        );
+    }
+    Ok(surfaces)
+}
+
+/// The output bundle's bytes: the input bundle with the sun sections added
+/// (every other section copied byte for byte) or a new bundle of the mesh.
+pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: &SunSeries, output: &Path) -> anyhow::Result<Vec<u8>> {
+    let encoded = match &input.original {
+        Some((bytes, meta)) => {
+            let mut meta = meta.clone();
+            if let Some(m) = meta.as_object_mut() {
+                m.insert("sun".into(), sun_meta);
+            } else {
+                meta = json!({ "previous_meta": meta, "sun": sun_meta });
+            }
+            bundle::encode_with_sun(bytes, &meta, series)
+        }
+        None => {
+            let meta = json!({
+                "tool": "prtbake",
+                "version": env!("CARGO_PKG_VERSION"),
+                "command": "sun",
+                "source": input.source_name,
+                "sun": sun_meta,
+                "conventions": super::conventions(),
+            });
+            bundle::encode_bundle(&Bundle { meta, mesh: input.mesh.clone(), transfer: None, sun: Some(series.clone()) })
+        }
+    };
+    encoded.with_context(|| format!("cannot encode {}", output.display()))
+}
+
+/// Loads the input, computes the day, bakes the masks and writes the bundle.
+pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
+    let input = load_sun_input(config, BUNDLE_FORMAT, true)?;
+    let (steps, build_seconds, sky_seconds, masks) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+        let sky_start = Instant::now();
+        let steps = day_steps(config, &input)?;
+        let sky_seconds = sky_start.elapsed().as_secs_f64();
+        let surfaces = sun_surfaces(config, &input.mesh)?;
+        let in_input = || config.input.display().to_string();
+        let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
+        let masks =
+            bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params).with_context(in_input)?;
         Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks))
     })??;
 
@@ -170,37 +240,16 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         words_per_vertex: masks.words_per_vertex,
         masks: masks.masks.clone(),
     };
-    let sun_meta = sun_meta(config, &frame, &masks, input_was_bundle);
+    let sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
     let output = &config.output;
-    match original_bytes {
-        Some((bytes, mut meta)) => {
-            if let Some(m) = meta.as_object_mut() {
-                m.insert("sun".into(), sun_meta);
-            } else {
-                meta = json!({ "previous_meta": meta, "sun": sun_meta });
-            }
-            let encoded = bundle::encode_with_sun(&bytes, &meta, &series).with_context(|| format!("cannot encode {}", output.display()))?;
-            crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
-        }
-        None => {
-            let meta = json!({
-                "tool": "prtbake",
-                "version": env!("CARGO_PKG_VERSION"),
-                "command": "sun",
-                "source": input.file_name().map(|n| n.to_string_lossy().to_string()),
-                "sun": sun_meta,
-                "conventions": super::conventions(),
-            });
-            let b = Bundle { meta, mesh, transfer: None, sun: Some(series) };
-            bundle::write_bundle(output, &b).context("cannot write the bundle")?;
-        }
-    }
-    let bundle_bytes = std::fs::metadata(output).map(|m| m.len()).unwrap_or(0);
-    Ok(SunReport { output: output.clone(), masks, steps, input_was_bundle, sky_seconds, build_seconds, bundle_bytes })
+    let encoded = encode_sun_output(&input, sun_meta, &series, output)?;
+    crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
+    let bundle_bytes = encoded.len() as u64;
+    Ok(SunReport { output: output.clone(), masks, steps, input_was_bundle: input.was_bundle(), sky_seconds, build_seconds, bundle_bytes })
 }
 
 /// The sun parameters and deterministic stats recorded in META (no timings).
-fn sun_meta(config: &SunConfig, frame: &SkyFrame, masks: &SunMasks, input_was_bundle: bool) -> serde_json::Value {
+pub fn sun_meta(config: &SunConfig, frame: &SkyFrame, stats: &SunStats, input_was_bundle: bool) -> serde_json::Value {
     let source = match &config.source {
         SunSource::Solar { site, date, tz_minutes, from_min, to_min, steps } => json!({
             "kind": "spa",
@@ -217,10 +266,9 @@ fn sun_meta(config: &SunConfig, frame: &SkyFrame, masks: &SunMasks, input_was_bu
             "file": path.file_name().map(|n| n.to_string_lossy().to_string()),
         }),
     };
-    let s = &masks.stats;
     json!({
         "source": source,
-        "steps": s.steps,
+        "steps": stats.steps,
         "turbidity": frame.turbidity,
         "sky_order": frame.sky_order,
         "sky_model": "Preetham 1999, projected to SH by Gauss-Legendre quadrature (256 x 512)",
@@ -231,10 +279,15 @@ fn sun_meta(config: &SunConfig, frame: &SkyFrame, masks: &SunMasks, input_was_bu
         "window_patterns": config.window_patterns,
         "added_to_bundle": input_was_bundle,
         "bit_rule": "lit iff day step, n.s > 0 (open mode only), and a strict barycentric-weighted majority of the interior samples of the adjacent triangles see the sun",
-        "stats": {
-            "points": s.points, "day_steps": s.day_steps, "rays": s.rays,
-            "vertices_without_samples": s.vertices_without_samples, "lit_vertices": s.lit_vertices,
-        },
+        "stats": sun_stats_meta(stats),
+    })
+}
+
+/// META `sun.stats`: the deterministic counts of a sun bake.
+pub fn sun_stats_meta(s: &SunStats) -> serde_json::Value {
+    json!({
+        "points": s.points, "day_steps": s.day_steps, "rays": s.rays,
+        "vertices_without_samples": s.vertices_without_samples, "lit_vertices": s.lit_vertices,
     })
 }
 

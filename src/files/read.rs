@@ -18,6 +18,8 @@ pub enum Limit {
     Image,
     /// A small text input (a CSV of sun directions): 16 MiB.
     Text,
+    /// A shard file of a sharded bake (.prtp part, .prth hit records, .prtl layer): 64 GiB.
+    Shard,
 }
 
 impl Limit {
@@ -28,6 +30,7 @@ impl Limit {
             Limit::Bundle => 32 << 30,
             Limit::Image => 4 << 30,
             Limit::Text => 16 << 20,
+            Limit::Shard => 64 << 30,
         }
     }
 }

@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# A sharded bake on this machine, run the way a scheduler runs it
+# (docs/scale.md "Sharded bakes"): each round's N shards as separate
+# processes, in parallel, then the merge; the bundle is byte-identical to
+# `prtbake bake MESH -o OUT [bake args…]` in one process.
+#
+#   scripts/shards-local.sh MESH OUT.prtb N [bake args…]
+#
+# Environment:
+#   PRTBAKE  the binary (default: prtbake on PATH, else target/release/prtbake)
+#   JOBS     shards run at once (default: the number of cores)
+#   RUNNER   parallel or xargs (default: GNU parallel when installed, else xargs -P)
+#   WORK     folder for parts, layers and hit records (default: OUT without
+#            .prtb, plus .shards; kept, so a failed round's commands can be re-run)
+# Each shard runs with --threads 1 unless the bake args give --threads.
+set -euo pipefail
+
+usage() {
+    echo "usage: $0 MESH OUT.prtb N [bake args…]" >&2
+    exit 2
+}
+[ $# -ge 3 ] || usage
+mesh=$1 out=$2 n=$3
+shift 3
+bake_args=("$@")
+case $n in '' | *[!0-9]*) usage ;; esac
+[ "$n" -ge 1 ] || usage
+case $out in *.prtb) ;; *) echo "$0: OUT must be a .prtb bundle" >&2 && exit 2 ;; esac
+
+# The rounds are the bounces: read --bounces from the bake args (default 0).
+bounces=0 threads_given=no prev=
+for arg in "${bake_args[@]}"; do
+    case $prev in --bounces) bounces=$arg ;; esac
+    case $arg in
+        --bounces=*) bounces=${arg#--bounces=} ;;
+        --threads | --threads=*) threads_given=yes ;;
+    esac
+    prev=$arg
+done
+[ "$threads_given" = yes ] || bake_args+=(--threads 1)
+
+prtbake=${PRTBAKE:-$(command -v prtbake || echo target/release/prtbake)}
+work=${WORK:-${out%.prtb}.shards}
+jobs=${JOBS:-$(nproc 2>/dev/null || echo 2)}
+runner=${RUNNER:-$(command -v parallel >/dev/null && echo parallel || echo xargs)}
+mkdir -p "$work/hits"
+
+# Runs the commands of $1 (one per line), $jobs at a time; fails if any fails.
+run_all() {
+    case $runner in
+        parallel) parallel --will-cite --halt now,fail=1 -j "$jobs" <"$1" ;;
+        xargs) tr '\n' '\0' <"$1" | xargs -0 -P "$jobs" -n 1 bash -c ;;
+        *) echo "$0: RUNNER must be parallel or xargs" >&2 && exit 2 ;;
+    esac
+}
+
+for ((round = 0; round <= bounces; round++)); do
+    layer_args=()
+    if [ "$round" -gt 0 ]; then
+        layer_args=(--layer "$work/r$((round - 1)).prtl")
+    fi
+    mkdir -p "$work/r$round"
+    # Shard K's command, exactly as a scheduler's array task K runs it.
+    parts=()
+    for ((k = 0; k < n; k++)); do
+        part="$work/r$round/part-$k.prtp"
+        parts+=("$part")
+        printf '%q ' "$prtbake" bake "$mesh" --shard "$k/$n" --round "$round" ${layer_args[@]+"${layer_args[@]}"} \
+            --shard-dir "$work/hits" -o "$part" --quiet "${bake_args[@]}"
+        echo
+    done >"$work/r$round/commands.sh"
+    echo "round $round of $bounces: $n shards ($runner, $jobs at once)" >&2
+    run_all "$work/r$round/commands.sh"
+    if [ "$round" -eq "$bounces" ]; then
+        target=$out
+    else
+        target="$work/r$round.prtl"
+    fi
+    "$prtbake" merge "${parts[@]}" ${layer_args[@]+"${layer_args[@]}"} -o "$target"
+done

@@ -1,0 +1,598 @@
+//! The shard files as structs ⇄ bytes (layouts in docs/scale.md): transfer
+//! parts, hit records, merged layers and sun parts. Writers stream through
+//! [`codec::Writer`]; decoders check every count against the bytes present
+//! and every index against the mesh, and return an error, never panic.
+
+use std::io::Write;
+use std::ops::Range;
+
+use super::codec::{self, FileKind, Reader, Writer};
+use super::{MeshId, MAX_SHARDS};
+
+/// What every file of one bake shares: the mesh, the shard count and the
+/// parameter block ([`super::key`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Identity {
+    pub mesh: MeshId,
+    /// N, the number of shards.
+    pub shards: u32,
+    /// A [`super::TransferKey`] or [`super::SunKey`] block.
+    pub key: Vec<u8>,
+}
+
+impl Identity {
+    fn write<W: Write>(&self, w: &mut Writer<W>) -> std::io::Result<()> {
+        w.u32(self.mesh.crc)?;
+        w.u32(self.shards)?;
+        w.u64(self.mesh.vertices)?;
+        w.u64(self.mesh.triangles)?;
+        w.u32(self.key.len() as u32)?;
+        w.bytes(&self.key)?;
+        w.pad4()
+    }
+
+    fn read(r: &mut Reader) -> Result<Identity, String> {
+        let crc = r.u32("mesh CRC")?;
+        let shards = r.u32("shard count")?;
+        if shards == 0 || shards > MAX_SHARDS {
+            return Err(format!("shard count {shards} is outside 1..={MAX_SHARDS}"));
+        }
+        let vertices = r.u64("vertex count")?;
+        let triangles = r.u64("triangle count")?;
+        if vertices > u32::MAX as u64 + 1 {
+            return Err(format!("{vertices} vertices: more than 32-bit indices reach"));
+        }
+        let len = r.u32("parameter block length")?;
+        let key = r.take(len as u64, "parameter block")?.to_vec();
+        r.pad4("parameter block")?;
+        Ok(Identity { mesh: MeshId { crc, vertices, triangles }, shards, key })
+    }
+
+    fn read_shard(&self, r: &mut Reader) -> Result<u32, String> {
+        let index = r.u32("shard index")?;
+        if index >= self.shards {
+            return Err(format!("shard index {index} is not below the shard count {}", self.shards));
+        }
+        Ok(index)
+    }
+}
+
+/// Per-vertex rows: `stride` floats for each vertex of `vertices`, and in
+/// round 0 its barycentric weight.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VertexRows {
+    pub vertices: Vec<u32>,
+    pub rows: Vec<f32>,
+    /// One per vertex in round 0, else empty.
+    pub weights: Vec<f32>,
+}
+
+impl VertexRows {
+    pub fn len(&self) -> usize {
+        self.vertices.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.vertices.is_empty()
+    }
+
+    fn write<W: Write>(&self, w: &mut Writer<W>) -> std::io::Result<()> {
+        w.u64(self.vertices.len() as u64)?;
+        w.u32s(&self.vertices)?;
+        w.f32s(&self.rows)?;
+        w.f32s(&self.weights)
+    }
+
+    fn read(r: &mut Reader, what: &str, stride: u64, with_weights: bool, vertex_count: u64) -> Result<VertexRows, String> {
+        let count = r.u64(what)?;
+        let vertices = r.u32s(count, what)?;
+        if let Some(&v) = vertices.iter().find(|&&v| v as u64 >= vertex_count) {
+            return Err(format!("{what}: vertex {v} of a mesh of {vertex_count}"));
+        }
+        let rows = r.f32s(count.saturating_mul(stride), what)?;
+        let weights = if with_weights { r.f32s(count, what)? } else { Vec::new() };
+        Ok(VertexRows { vertices, rows, weights })
+    }
+}
+
+fn read_range32(r: &mut Reader, what: &str, limit: u32) -> Result<Range<u32>, String> {
+    let (start, end) = (r.u32(what)?, r.u32(what)?);
+    if start > end || end > limit {
+        return Err(format!("{what} {start}..{end} is not within 0..{limit}"));
+    }
+    Ok(start..end)
+}
+
+fn read_range64(r: &mut Reader, what: &str, limit: u64) -> Result<Range<u64>, String> {
+    let (start, end) = (r.u64(what)?, r.u64(what)?);
+    if start > end || end > limit {
+        return Err(format!("{what} {start}..{end} is not within 0..{limit}"));
+    }
+    Ok(start..end)
+}
+
+/// Order `coeffs` and channels a file may hold.
+fn check_sizes(channels: u32, coeffs: u32, pass_channels: u32) -> Result<(), String> {
+    let order = (coeffs as f64).sqrt() as u32;
+    if order == 0 || order as usize > crate::sh::MAX_ORDER || order * order != coeffs {
+        return Err(format!("{coeffs} coefficients is not the square of an order in 1..={}", crate::sh::MAX_ORDER));
+    }
+    if !(channels == 1 || channels == 3) || !(pass_channels == 1 || pass_channels == channels) {
+        return Err(format!("{pass_channels} of {channels} channel(s) is not a transfer layout"));
+    }
+    Ok(())
+}
+
+/// One shard's sums of one transfer round (`PRTP`, `.prtp`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferPart {
+    pub identity: Identity,
+    /// K.
+    pub shard: u32,
+    /// The bounce this part traced or gathered.
+    pub round: u32,
+    pub items: Range<u32>,
+    pub item_count: u32,
+    pub points: Range<u64>,
+    pub point_count: u64,
+    pub window_triangles: u64,
+    /// The CRC of the layer file gathered from (rounds ≥ 1), else 0.
+    pub layer_crc: u32,
+    /// Channels of this round's rows (1 in round 0), of the result, and SH coefficients.
+    pub pass_channels: u32,
+    pub channels: u32,
+    pub coeffs: u32,
+    /// Rays evaluated and traced, and points found inside geometry (round 0).
+    pub rays: u64,
+    pub traced: u64,
+    pub rejected: u64,
+    /// Sums of the vertices whose first item is this shard's.
+    pub opened: VertexRows,
+    /// Contributions to vertices an earlier shard opened, in item and corner order.
+    pub late: VertexRows,
+    /// Last round, shard 0: a bundle holding the mesh and the metadata the
+    /// final bundle is made with (empty otherwise).
+    pub frame: Vec<u8>,
+}
+
+impl TransferPart {
+    pub fn stride(&self) -> usize {
+        (self.pass_channels * self.coeffs) as usize
+    }
+
+    pub fn write_to<W: Write>(&self, out: W) -> std::io::Result<u32> {
+        let mut w = Writer::new(out, FileKind::TransferPart)?;
+        self.identity.write(&mut w)?;
+        for v in [self.shard, self.round, self.items.start, self.items.end, self.item_count] {
+            w.u32(v)?;
+        }
+        for v in [self.points.start, self.points.end, self.point_count, self.window_triangles] {
+            w.u64(v)?;
+        }
+        for v in [self.layer_crc, self.pass_channels, self.channels, self.coeffs] {
+            w.u32(v)?;
+        }
+        for v in [self.rays, self.traced, self.rejected] {
+            w.u64(v)?;
+        }
+        self.opened.write(&mut w)?;
+        self.late.write(&mut w)?;
+        w.blob(&self.frame)?;
+        w.finish()
+    }
+
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        // Writing into a Vec cannot fail.
+        let _ = self.write_to(&mut out);
+        out
+    }
+
+    pub fn decode(bytes: &[u8]) -> Result<TransferPart, String> {
+        let (mut r, _) = codec::open(bytes, FileKind::TransferPart)?;
+        let identity = Identity::read(&mut r)?;
+        let shard = identity.read_shard(&mut r)?;
+        let round = r.u32("round")?;
+        if round > 16 {
+            return Err(format!("round {round}: bakes have at most 16 bounces"));
+        }
+        let items = read_range32(&mut r, "item range", u32::MAX)?;
+        let item_count = r.u32("item count")?;
+        if items.end > item_count {
+            return Err(format!("item range {items:?} is past the {item_count} items"));
+        }
+        let points = read_range64(&mut r, "point range", u64::MAX)?;
+        let point_count = r.u64("point count")?;
+        if points.end > point_count {
+            return Err(format!("point range {points:?} is past the {point_count} points"));
+        }
+        let window_triangles = r.u64("window triangles")?;
+        let layer_crc = r.u32("layer CRC")?;
+        let (pass_channels, channels, coeffs) = (r.u32("pass channels")?, r.u32("channels")?, r.u32("coefficients")?);
+        check_sizes(channels, coeffs, pass_channels)?;
+        // Round 0 is traced colourless, later rounds in every channel.
+        if pass_channels != if round == 0 { 1 } else { channels } {
+            return Err(format!("round {round} with {pass_channels} of {channels} channels"));
+        }
+        let (rays, traced, rejected) = (r.u64("rays")?, r.u64("rays traced")?, r.u64("points rejected")?);
+        let stride = (pass_channels * coeffs) as u64;
+        let vertex_count = identity.mesh.vertices;
+        let opened = VertexRows::read(&mut r, "opened vertices", stride, round == 0, vertex_count)?;
+        let late = VertexRows::read(&mut r, "late contributions", stride, round == 0, vertex_count)?;
+        let frame = r.blob("bundle frame")?.to_vec();
+        r.finish()?;
+        Ok(TransferPart {
+            identity,
+            shard,
+            round,
+            items,
+            item_count,
+            points,
+            point_count,
+            window_triangles,
+            layer_crc,
+            pass_channels,
+            channels,
+            coeffs,
+            rays,
+            traced,
+            rejected,
+            opened,
+            late,
+            frame,
+        })
+    }
+}
+
+/// One shard's bounce-0 hit records (`PRTH`, `.prth`): 8 bytes a ray, and
+/// which of its points lie inside geometry. Written by round 0, read back
+/// by the same shard in every later round.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HitFile {
+    pub identity: Identity,
+    pub shard: u32,
+    pub items: Range<u32>,
+    pub points: Range<u64>,
+    pub rays: u32,
+    /// Bit p % 32 of word p / 32: point `points.start + p` was rejected.
+    pub rejected: Vec<u32>,
+    /// `rays` records per point, in point order ([`crate::bake`]'s hit encoding).
+    pub records: Vec<u64>,
+}
+
+impl HitFile {
+    pub fn is_rejected(&self, local_point: u64) -> bool {
+        (self.rejected[(local_point / 32) as usize] >> (local_point % 32)) & 1 == 1
+    }
+
+    pub fn write_to<W: Write>(&self, out: W) -> std::io::Result<u32> {
+        let mut w = Writer::new(out, FileKind::Hits)?;
+        self.identity.write(&mut w)?;
+        for v in [self.shard, self.items.start, self.items.end] {
+            w.u32(v)?;
+        }
+        w.u64(self.points.start)?;
+        w.u64(self.points.end)?;
+        w.u32(self.rays)?;
+        w.u32s(&self.rejected)?;
+        w.u64s(&self.records)?;
+        w.finish()
+    }
+
+    pub fn decode(bytes: &[u8]) -> Result<HitFile, String> {
+        let (mut r, _) = codec::open(bytes, FileKind::Hits)?;
+        let identity = Identity::read(&mut r)?;
+        let shard = identity.read_shard(&mut r)?;
+        let items = read_range32(&mut r, "item range", u32::MAX)?;
+        let points = read_range64(&mut r, "point range", u64::MAX)?;
+        let rays = r.u32("rays")?;
+        let count = points.end - points.start;
+        let rejected = r.u32s(count.div_ceil(32), "rejected points")?;
+        let records = r.u64s(count.saturating_mul(rays as u64), "hit records")?;
+        r.finish()?;
+        // The gather indexes the hit triangle's corners: a record past the mesh would read out of bounds.
+        let triangles = identity.mesh.triangles;
+        if let Some(i) = records.iter().position(|&h| h != crate::bake::gather::NO_HIT && h >> 32 >= triangles) {
+            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", records[i] >> 32));
+        }
+        Ok(HitFile { identity, shard, items, points, rays, rejected, records })
+    }
+}
+
+/// A merged round (`PRTL`, `.prtl`): what later rounds and merges need of
+/// the rounds so far, and no hit record.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerFile {
+    pub identity: Identity,
+    /// The bounce this layer completes.
+    pub round: u32,
+    pub channels: u32,
+    pub coeffs: u32,
+    /// Channels of `source`: 1 after round 0, else `channels`.
+    pub source_channels: u32,
+    pub window_triangles: u64,
+    pub points: u64,
+    pub points_rejected: u64,
+    pub rays_traced: u64,
+    /// Rays evaluated in each round so far.
+    pub rays_per_bounce: Vec<u64>,
+    /// Per vertex: barycentric weight (from round 0).
+    pub weights: Vec<f32>,
+    /// Per vertex `[source channel][coeff]`: this bounce normalised, what the next round gathers.
+    pub source: Vec<f32>,
+    /// Per vertex `[channel][coeff]`: bounces 0..=round summed in order.
+    pub total: Vec<f32>,
+    /// With `--store-bounces`, each bounce so far; else empty.
+    pub layers: Vec<Vec<f32>>,
+}
+
+impl LayerFile {
+    pub fn write_to<W: Write>(&self, out: W) -> std::io::Result<u32> {
+        let mut w = Writer::new(out, FileKind::Layer)?;
+        self.identity.write(&mut w)?;
+        for v in [self.round, self.channels, self.coeffs, self.source_channels] {
+            w.u32(v)?;
+        }
+        for v in [self.window_triangles, self.points, self.points_rejected, self.rays_traced] {
+            w.u64(v)?;
+        }
+        w.u32(self.rays_per_bounce.len() as u32)?;
+        w.u64s(&self.rays_per_bounce)?;
+        w.f32s(&self.weights)?;
+        w.f32s(&self.source)?;
+        w.f32s(&self.total)?;
+        w.u32(self.layers.len() as u32)?;
+        for layer in &self.layers {
+            w.f32s(layer)?;
+        }
+        w.finish()
+    }
+
+    /// Decodes a layer file; also returns its CRC (the parts gathered from it name it).
+    pub fn decode(bytes: &[u8]) -> Result<(LayerFile, u32), String> {
+        let (mut r, crc) = codec::open(bytes, FileKind::Layer)?;
+        let identity = Identity::read(&mut r)?;
+        let round = r.u32("round")?;
+        let (channels, coeffs, source_channels) = (r.u32("channels")?, r.u32("coefficients")?, r.u32("source channels")?);
+        check_sizes(channels, coeffs, source_channels)?;
+        if round > 16 || source_channels != if round == 0 { 1 } else { channels } {
+            return Err(format!("round {round} with {source_channels} of {channels} source channels"));
+        }
+        let (window_triangles, points, points_rejected, rays_traced) =
+            (r.u64("window triangles")?, r.u64("points")?, r.u64("points rejected")?, r.u64("rays traced")?);
+        let bounces = r.u32("bounce count")?;
+        if bounces != round + 1 {
+            return Err(format!("{bounces} ray counts for round {round}"));
+        }
+        let rays_per_bounce = r.u64s(bounces as u64, "rays per bounce")?;
+        let v = identity.mesh.vertices;
+        let weights = r.f32s(v, "weights")?;
+        let source = r.f32s(v.saturating_mul((source_channels * coeffs) as u64), "source rows")?;
+        let layer_len = v.saturating_mul((channels * coeffs) as u64);
+        let total = r.f32s(layer_len, "total")?;
+        let stored = r.u32("stored layers")?;
+        if stored != 0 && stored != round + 1 {
+            return Err(format!("{stored} stored layers after round {round}"));
+        }
+        let layers = (0..stored).map(|_| r.f32s(layer_len, "stored layer")).collect::<Result<_, _>>()?;
+        r.finish()?;
+        let layer = LayerFile {
+            identity,
+            round,
+            channels,
+            coeffs,
+            source_channels,
+            window_triangles,
+            points,
+            points_rejected,
+            rays_traced,
+            rays_per_bounce,
+            weights,
+            source,
+            total,
+            layers,
+        };
+        Ok((layer, crc))
+    }
+}
+
+/// One shard's sun bits (`PRTS`, `.prtp`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunPart {
+    pub identity: Identity,
+    pub shard: u32,
+    pub items: Range<u32>,
+    pub item_count: u32,
+    pub points: Range<u64>,
+    pub point_count: u64,
+    /// Mask words per sample.
+    pub words: u32,
+    pub rays: u64,
+    /// `words` per point of `points`, in point order.
+    pub bits: Vec<u32>,
+    /// Shard 0: the output bundle as the single process writes it, with its
+    /// masks zero and its statistics to be filled in (empty otherwise).
+    pub frame: Vec<u8>,
+}
+
+impl SunPart {
+    pub fn write_to<W: Write>(&self, out: W) -> std::io::Result<u32> {
+        let mut w = Writer::new(out, FileKind::SunPart)?;
+        self.identity.write(&mut w)?;
+        for v in [self.shard, self.items.start, self.items.end, self.item_count] {
+            w.u32(v)?;
+        }
+        for v in [self.points.start, self.points.end, self.point_count] {
+            w.u64(v)?;
+        }
+        w.u32(self.words)?;
+        w.u64(self.rays)?;
+        w.u32s(&self.bits)?;
+        w.blob(&self.frame)?;
+        w.finish()
+    }
+
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        let _ = self.write_to(&mut out);
+        out
+    }
+
+    pub fn decode(bytes: &[u8]) -> Result<SunPart, String> {
+        let (mut r, _) = codec::open(bytes, FileKind::SunPart)?;
+        let identity = Identity::read(&mut r)?;
+        let shard = identity.read_shard(&mut r)?;
+        let items = read_range32(&mut r, "item range", u32::MAX)?;
+        let item_count = r.u32("item count")?;
+        if items.end > item_count {
+            return Err(format!("item range {items:?} is past the {item_count} items"));
+        }
+        let points = read_range64(&mut r, "point range", u64::MAX)?;
+        let point_count = r.u64("point count")?;
+        if points.end > point_count {
+            return Err(format!("point range {points:?} is past the {point_count} points"));
+        }
+        let words = r.u32("words per sample")?;
+        if words == 0 || words as usize > crate::bake::sun::MAX_SUN_STEPS.div_ceil(32) {
+            return Err(format!("{words} mask words per sample"));
+        }
+        let rays = r.u64("rays")?;
+        let bits = r.u32s((points.end - points.start).saturating_mul(words as u64), "sample bits")?;
+        let frame = r.blob("bundle frame")?.to_vec();
+        r.finish()?;
+        Ok(SunPart { identity, shard, items, item_count, points, point_count, words, rays, bits, frame })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn identity() -> Identity {
+        Identity { mesh: MeshId { crc: 0x1234_5678, vertices: 5, triangles: 3 }, shards: 3, key: vec![1, 2, 3, 4] }
+    }
+
+    fn part() -> TransferPart {
+        TransferPart {
+            identity: identity(),
+            shard: 1,
+            round: 0,
+            items: 1..2,
+            item_count: 3,
+            points: 3..6,
+            point_count: 9,
+            window_triangles: 0,
+            layer_crc: 0,
+            pass_channels: 1,
+            channels: 3,
+            coeffs: 4,
+            rays: 96,
+            traced: 96,
+            rejected: 1,
+            opened: VertexRows { vertices: vec![3], rows: vec![0.5, -0.25, 0.0, 1.0], weights: vec![0.75] },
+            late: VertexRows { vertices: vec![0, 2], rows: vec![1.0; 8], weights: vec![0.5, 0.25] },
+            frame: b"frame".to_vec(),
+        }
+    }
+
+    /// Every file kind round-trips, and every truncation and every flipped
+    /// byte of it is an error, not a panic.
+    #[test]
+    fn files_round_trip_and_refuse_damage() {
+        let hits = HitFile {
+            identity: identity(),
+            shard: 2,
+            items: 2..3,
+            points: 6..9,
+            rays: 2,
+            rejected: vec![0b010],
+            records: vec![1, 2, 3, 4, u64::MAX, u64::MAX],
+        };
+        let layer = LayerFile {
+            identity: identity(),
+            round: 1,
+            channels: 3,
+            coeffs: 1,
+            source_channels: 3,
+            window_triangles: 2,
+            points: 9,
+            points_rejected: 1,
+            rays_traced: 300,
+            rays_per_bounce: vec![288, 256],
+            weights: vec![1.0; 5],
+            source: vec![0.25; 15],
+            total: vec![0.5; 15],
+            layers: vec![vec![0.25; 15], vec![0.25; 15]],
+        };
+        let sun = SunPart {
+            identity: identity(),
+            shard: 0,
+            items: 0..1,
+            item_count: 3,
+            points: 0..3,
+            point_count: 9,
+            words: 2,
+            rays: 40,
+            bits: vec![1, 2, 3, 4, 5, 6],
+            frame: vec![9; 7],
+        };
+        let mut hit_bytes = Vec::new();
+        hits.write_to(&mut hit_bytes).unwrap();
+        let mut layer_bytes = Vec::new();
+        let crc = layer.write_to(&mut layer_bytes).unwrap();
+        let files: [(Vec<u8>, fn(&[u8]) -> bool); 4] = [
+            (part().to_bytes(), |b| TransferPart::decode(b).is_ok_and(|p| p == part())),
+            (hit_bytes, |b| HitFile::decode(b).is_ok()),
+            (layer_bytes.clone(), |b| LayerFile::decode(b).is_ok()),
+            (sun.to_bytes(), |b| SunPart::decode(b).is_ok()),
+        ];
+        assert_eq!(LayerFile::decode(&layer_bytes).unwrap(), (layer, crc));
+        assert_eq!(HitFile::decode(&files[1].0).unwrap(), hits);
+        assert!(hits.is_rejected(1) && !hits.is_rejected(0));
+        assert_eq!(SunPart::decode(&files[3].0).unwrap(), sun);
+        for (bytes, decodes) in &files {
+            assert!(decodes(bytes));
+            for len in 0..bytes.len() {
+                assert!(!decodes(&bytes[..len]));
+            }
+            for i in 0..bytes.len() {
+                let mut bad = bytes.clone();
+                bad[i] ^= 0x41;
+                assert!(!decodes(&bad), "byte {i} changed was accepted");
+            }
+        }
+    }
+
+    /// A well-formed file (CRC right) whose fields lie: vertex ids past the
+    /// mesh, ranges past their counts, hostile counts.
+    #[test]
+    fn consistent_checksums_do_not_excuse_bad_fields() {
+        let mut p = part();
+        p.late.vertices[1] = 5;
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("vertex 5 of a mesh of 5"));
+        let mut p = part();
+        p.items = 2..4;
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("past the 3 items"));
+        let mut p = part();
+        p.shard = 3;
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("shard index 3"));
+        let mut p = part();
+        p.coeffs = 5;
+        p.opened.rows.push(0.0);
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("5 coefficients"));
+        let mut hits = Vec::new();
+        HitFile { identity: identity(), shard: 0, items: 0..1, points: 0..1, rays: 2, rejected: vec![0], records: vec![u64::MAX, 3 << 32] }
+            .write_to(&mut hits)
+            .unwrap();
+        assert!(HitFile::decode(&hits).unwrap_err().contains("names triangle 3 of a mesh of 3"));
+        let big = codec::to_vec(FileKind::Hits, |w| {
+            identity().write(w)?;
+            for v in [0u32, 0, 1] {
+                w.u32(v)?;
+            }
+            w.u64(0)?;
+            w.u64(u64::MAX)?;
+            w.u32(u32::MAX)
+        });
+        assert!(HitFile::decode(&big).is_err());
+    }
+}

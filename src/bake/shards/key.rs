@@ -1,0 +1,317 @@
+//! The parameters every part of one bake must share, as a canonical byte
+//! block (its layout is in docs/scale.md): a merge compares the blocks, and
+//! names the first field that differs.
+
+use super::codec::Reader;
+use crate::bake::{BakeParams, Channels, DirectionPattern, Mode, Sampling, SunParams};
+use crate::bundle::Quantization;
+
+/// What a transfer bake's result and bundle depend on besides the mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferKey {
+    /// `quiet` and `hit_cache_bytes` are not part of the bake (not stored).
+    pub params: BakeParams,
+    pub window_patterns: Vec<String>,
+    /// How the bundle stores the transfer: a fixed quantization, or `None` to choose one within the budget.
+    pub quantize: Option<Quantization>,
+    pub max_error: Option<f64>,
+}
+
+/// What a sun bake's masks and bundle depend on besides the mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunKey {
+    /// `loop_order`, `shadow_cache` and `quiet` never change the masks (not stored).
+    pub params: SunParams,
+    pub window_patterns: Vec<String>,
+    pub steps: u32,
+    /// CRC-32 of the day (every step's time, direction, sun colour and sky)
+    /// and of the sun metadata (site, date, north, turbidity, …).
+    pub day_crc: u32,
+}
+
+fn mode_code(mode: Mode) -> u8 {
+    match mode {
+        Mode::Open => 0,
+        Mode::Window => 1,
+    }
+}
+
+fn mode_of(code: u8) -> Result<Mode, String> {
+    match code {
+        0 => Ok(Mode::Open),
+        1 => Ok(Mode::Window),
+        c => Err(format!("mode code {c} is not 0 (open) or 1 (window)")),
+    }
+}
+
+fn quantize_code(q: Option<Quantization>) -> u8 {
+    match q {
+        None => 0,
+        Some(q) => 1 + q.code() as u8,
+    }
+}
+
+fn quantize_of(code: u8) -> Result<Option<Quantization>, String> {
+    Ok(match code {
+        0 => None,
+        1 => Some(Quantization::F32),
+        2 => Some(Quantization::F16),
+        3 => Some(Quantization::I16PerVertexScale),
+        4 => Some(Quantization::F16Tinted),
+        c => return Err(format!("quantization code {c} is not 0..=4")),
+    })
+}
+
+fn flag(code: u8, what: &str) -> Result<bool, String> {
+    match code {
+        0 => Ok(false),
+        1 => Ok(true),
+        c => Err(format!("{what} flag is {c}, not 0 or 1")),
+    }
+}
+
+fn put_patterns(out: &mut Vec<u8>, patterns: &[String]) {
+    out.extend_from_slice(&(patterns.len() as u32).to_le_bytes());
+    for p in patterns {
+        out.extend_from_slice(&(p.len() as u32).to_le_bytes());
+        out.extend_from_slice(p.as_bytes());
+        out.resize(out.len().next_multiple_of(4), 0);
+    }
+}
+
+fn read_patterns(r: &mut Reader) -> Result<Vec<String>, String> {
+    let count = r.u32("window pattern count")?;
+    // Each pattern takes at least its 4-byte length: no allocation beyond the bytes present.
+    let mut patterns = Vec::new();
+    for _ in 0..count {
+        patterns.push(r.string("window pattern")?);
+    }
+    Ok(patterns)
+}
+
+/// Reads a key block: its fields in order, then nothing else.
+fn read_block<T>(block: &[u8], read: impl FnOnce(&mut Reader) -> Result<T, String>) -> Result<T, String> {
+    let mut r = Reader::new(block);
+    let value = read(&mut r)?;
+    r.finish().map_err(|e| format!("parameter block: {e}"))?;
+    Ok(value)
+}
+
+impl TransferKey {
+    /// The canonical block (docs/scale.md "Transfer parameter block").
+    pub fn encode(&self) -> Vec<u8> {
+        let p = &self.params;
+        let mut out = Vec::with_capacity(64);
+        let u32 = |out: &mut Vec<u8>, v: u32| out.extend_from_slice(&v.to_le_bytes());
+        u32(&mut out, p.order as u32);
+        u32(&mut out, p.rays);
+        u32(&mut out, p.seed);
+        u32(&mut out, p.point_seed.is_some() as u32);
+        u32(&mut out, p.point_seed.unwrap_or(0));
+        let (sampling, samples_per_vertex, max_per_triangle) = match p.sampling {
+            Sampling::Interior { samples_per_vertex, max_per_triangle } => (0u8, samples_per_vertex, max_per_triangle),
+            Sampling::Vertex => (1, 0.0, 0),
+        };
+        let channels = match p.channels {
+            Channels::Auto => 0u8,
+            Channels::One => 1,
+            Channels::Three => 3,
+        };
+        let pattern = match p.pattern {
+            DirectionPattern::Sobol => 0u8,
+            DirectionPattern::Random => 1,
+        };
+        out.extend_from_slice(&[mode_code(p.mode), sampling, channels, pattern]);
+        out.extend_from_slice(&samples_per_vertex.to_le_bytes());
+        u32(&mut out, max_per_triangle);
+        u32(&mut out, p.bounces);
+        out.extend_from_slice(&[
+            p.store_bounces as u8,
+            p.window_sampling as u8,
+            quantize_code(self.quantize),
+            self.max_error.is_some() as u8,
+        ]);
+        out.extend_from_slice(&p.inside_distance.to_le_bytes());
+        out.extend_from_slice(&self.max_error.unwrap_or(0.0).to_le_bytes());
+        put_patterns(&mut out, &self.window_patterns);
+        out
+    }
+
+    /// Reads a block written by [`TransferKey::encode`]; the parameters are range-checked.
+    pub fn decode(block: &[u8]) -> Result<TransferKey, String> {
+        read_block(block, |r| {
+            let order = r.u32("order")? as usize;
+            let rays = r.u32("rays")?;
+            let seed = r.u32("seed")?;
+            let has_point_seed = flag(r.u32("point seed flag")?.min(2) as u8, "point seed")?;
+            let point_seed = r.u32("point seed")?;
+            let mode = mode_of(r.u8("mode")?)?;
+            let sampling_code = r.u8("sampling")?;
+            let channels = match r.u8("channels")? {
+                0 => Channels::Auto,
+                1 => Channels::One,
+                3 => Channels::Three,
+                c => return Err(format!("channels code {c} is not 0, 1 or 3")),
+            };
+            let pattern = match r.u8("pattern")? {
+                0 => DirectionPattern::Sobol,
+                1 => DirectionPattern::Random,
+                c => return Err(format!("pattern code {c} is not 0 or 1")),
+            };
+            let samples_per_vertex = r.f32("samples per vertex")?;
+            let max_per_triangle = r.u32("max per triangle")?;
+            let sampling = match sampling_code {
+                0 => Sampling::Interior { samples_per_vertex, max_per_triangle },
+                1 => Sampling::Vertex,
+                c => return Err(format!("sampling code {c} is not 0 or 1")),
+            };
+            let bounces = r.u32("bounces")?;
+            let store_bounces = flag(r.u8("store bounces")?, "store bounces")?;
+            let window_sampling = flag(r.u8("window sampling")?, "window sampling")?;
+            let quantize = quantize_of(r.u8("quantize")?)?;
+            let has_max_error = flag(r.u8("max error flag")?, "max error")?;
+            let inside_distance = r.f32("inside distance")?;
+            let max_error = r.f64("max error")?;
+            let window_patterns = read_patterns(r)?;
+            let params = BakeParams {
+                order,
+                rays,
+                seed,
+                point_seed: has_point_seed.then_some(point_seed),
+                mode,
+                sampling,
+                bounces,
+                channels,
+                store_bounces,
+                pattern,
+                window_sampling,
+                inside_distance,
+                ..BakeParams::default()
+            };
+            params.check().map_err(|e| e.to_string())?;
+            Ok(TransferKey { params, window_patterns, quantize, max_error: has_max_error.then_some(max_error) })
+        })
+    }
+
+    /// Each field and its value, for naming what differs between two parts.
+    pub fn fields(&self) -> Vec<(&'static str, String)> {
+        let p = &self.params;
+        vec![
+            ("order", p.order.to_string()),
+            ("rays", p.rays.to_string()),
+            ("seed", p.seed.to_string()),
+            ("point seed", format!("{:?}", p.point_seed)),
+            ("mode", format!("{:?}", p.mode)),
+            ("sampling", format!("{:?}", p.sampling)),
+            ("channels", format!("{:?}", p.channels)),
+            ("pattern", format!("{:?}", p.pattern)),
+            ("bounces", p.bounces.to_string()),
+            ("store bounces", p.store_bounces.to_string()),
+            ("window sampling", p.window_sampling.to_string()),
+            ("inside distance", p.inside_distance.to_string()),
+            ("window patterns", format!("{:?}", self.window_patterns)),
+            ("quantize", format!("{:?}", self.quantize)),
+            ("max error", format!("{:?}", self.max_error)),
+        ]
+    }
+}
+
+impl SunKey {
+    /// The canonical block (docs/scale.md "Sun parameter block").
+    pub fn encode(&self) -> Vec<u8> {
+        let p = &self.params;
+        let mut out = vec![mode_code(p.mode), 0, 0, 0];
+        out.extend_from_slice(&p.samples_per_vertex.to_le_bytes());
+        out.extend_from_slice(&p.max_per_triangle.to_le_bytes());
+        out.extend_from_slice(&p.seed.to_le_bytes());
+        out.extend_from_slice(&self.steps.to_le_bytes());
+        out.extend_from_slice(&self.day_crc.to_le_bytes());
+        put_patterns(&mut out, &self.window_patterns);
+        out
+    }
+
+    pub fn decode(block: &[u8]) -> Result<SunKey, String> {
+        read_block(block, |r| {
+            let mode = mode_of(r.u8("mode")?)?;
+            if r.take(3, "reserved")? != [0, 0, 0] {
+                return Err("reserved bytes are not zero".into());
+            }
+            let params = SunParams {
+                mode,
+                samples_per_vertex: r.f32("samples per vertex")?,
+                max_per_triangle: r.u32("max per triangle")?,
+                seed: r.u32("seed")?,
+                ..SunParams::default()
+            };
+            params.check().map_err(|e| e.to_string())?;
+            let steps = r.u32("steps")?;
+            if steps == 0 || steps as usize > crate::bake::sun::MAX_SUN_STEPS {
+                return Err(format!("{steps} steps, outside 1..={}", crate::bake::sun::MAX_SUN_STEPS));
+            }
+            let day_crc = r.u32("day CRC")?;
+            Ok(SunKey { params, window_patterns: read_patterns(r)?, steps, day_crc })
+        })
+    }
+
+    pub fn fields(&self) -> Vec<(&'static str, String)> {
+        let p = &self.params;
+        vec![
+            ("mode", format!("{:?}", p.mode)),
+            ("samples per vertex", p.samples_per_vertex.to_string()),
+            ("max per triangle", p.max_per_triangle.to_string()),
+            ("seed", p.seed.to_string()),
+            ("window patterns", format!("{:?}", self.window_patterns)),
+            ("steps", self.steps.to_string()),
+            ("day and sky (site, date, time line, north, turbidity, sky order)", format!("CRC-32 {:08x}", self.day_crc)),
+        ]
+    }
+}
+
+/// The first field whose values differ, as "rays 32 here, 64 in the other".
+pub fn first_difference(here: &[(&'static str, String)], there: &[(&'static str, String)]) -> Option<String> {
+    here.iter().zip(there).find(|(a, b)| a != b).map(|((name, a), (_, b))| format!("{name} {a} here, {b} in"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_round_trip_and_name_their_differences() {
+        let key = TransferKey {
+            params: BakeParams { rays: 64, bounces: 3, mode: Mode::Window, seed: 7, store_bounces: true, ..BakeParams::default() },
+            window_patterns: vec!["glass*".into(), "Glass_Gray=0.6".into()],
+            quantize: Some(Quantization::F16),
+            max_error: Some(0.01),
+        };
+        let block = key.encode();
+        assert_eq!(block.len() % 4, 0);
+        assert_eq!(TransferKey::decode(&block).unwrap(), key);
+        let other = TransferKey { params: BakeParams { rays: 32, ..key.params }, ..key.clone() };
+        assert_eq!(first_difference(&other.fields(), &key.fields()).unwrap(), "rays 32 here, 64 in");
+
+        let sun =
+            SunKey { params: SunParams { seed: 9, ..SunParams::default() }, window_patterns: vec![], steps: 92, day_crc: 0xdead_beef };
+        assert_eq!(SunKey::decode(&sun.encode()).unwrap(), sun);
+    }
+
+    #[test]
+    fn bad_blocks_are_errors_not_panics() {
+        let block =
+            TransferKey { params: BakeParams::default(), window_patterns: vec!["a".into()], quantize: None, max_error: None }.encode();
+        for len in 0..block.len() {
+            assert!(TransferKey::decode(&block[..len]).is_err());
+        }
+        let mut bad = block.clone();
+        bad[0] = 0; // order 0
+        assert!(TransferKey::decode(&bad).unwrap_err().contains("order"));
+        for byte in 0..block.len() {
+            for value in [0u8, 2, 0xff] {
+                let mut bad = block.clone();
+                bad[byte] = value;
+                let _ = TransferKey::decode(&bad);
+                let _ = SunKey::decode(&bad);
+            }
+        }
+    }
+}

@@ -1,0 +1,423 @@
+//! Merges: first the checks that the parts belong together (one bake, one
+//! round, every shard exactly once, item ranges end to end), then the sums
+//! in shard order, which is item order, so each vertex's f32 sum runs as in
+//! a whole bake; then the normalisation a whole bake runs.
+
+use std::path::{Path, PathBuf};
+
+use super::codec::FileKind;
+use super::files::{Identity, LayerFile, SunPart, TransferPart};
+use super::key::{first_difference, SunKey, TransferKey};
+use super::ShardError;
+use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
+use crate::bake::{BakeStats, TransferResult};
+
+/// What two identities differ in, as "rays 32 here, 64 in" (the caller names
+/// the other file), or `None` when they are the same bake.
+pub(crate) fn identity_difference(here: &Identity, there: &Identity, kind: FileKind) -> Option<String> {
+    if here.mesh != there.mesh {
+        return Some(format!("baked from another mesh ({}) than ({}) in", here.mesh, there.mesh));
+    }
+    if here.shards != there.shards {
+        return Some(format!("is one of {} shards, not of {} as in", here.shards, there.shards));
+    }
+    if here.key == there.key {
+        return None;
+    }
+    let fields = |key: &[u8]| match kind {
+        FileKind::SunPart => SunKey::decode(key).map(|k| k.fields()),
+        _ => TransferKey::decode(key).map(|k| k.fields()),
+    };
+    match (fields(&here.key), fields(&there.key)) {
+        (Ok(a), Ok(b)) => first_difference(&a, &b).or_else(|| Some("other parameters here than in".into())),
+        _ => Some("an unreadable parameter block here, unlike".into()),
+    }
+}
+
+/// Shard indices as "2, 5-7".
+fn list_indices(indices: impl IntoIterator<Item = u32>) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut run: Option<(u32, u32)> = None;
+    let flush = |run: (u32, u32), out: &mut Vec<String>| {
+        out.push(if run.0 == run.1 { run.0.to_string() } else { format!("{}-{}", run.0, run.1) });
+    };
+    for i in indices {
+        run = match run {
+            Some((a, b)) if b + 1 == i => Some((a, i)),
+            Some(r) => {
+                flush(r, &mut out);
+                Some((i, i))
+            }
+            None => Some((i, i)),
+        };
+    }
+    if let Some(r) = run {
+        flush(r, &mut out);
+    }
+    if out.is_empty() {
+        "none".into()
+    } else {
+        out.join(", ")
+    }
+}
+
+/// The header fields of a part the checks compare.
+struct PartHead<'a> {
+    path: &'a Path,
+    identity: &'a Identity,
+    shard: u32,
+    /// Transfer rounds; sun parts are all round 0.
+    round: u32,
+    items: std::ops::Range<u32>,
+    item_count: u32,
+    points: std::ops::Range<u64>,
+    point_count: u64,
+}
+
+/// Checks that `heads` are every shard of one bake exactly once, their
+/// items end to end; returns their indices in shard order.
+fn check_together(heads: &[PartHead], kind: FileKind) -> Result<Vec<usize>, ShardError> {
+    let first = heads.first().ok_or(ShardError::NoParts)?;
+    let count = first.identity.shards;
+    let mut by_shard: Vec<Option<usize>> = vec![None; count as usize];
+    for (i, head) in heads.iter().enumerate() {
+        if let Some(d) = identity_difference(head.identity, first.identity, kind) {
+            return Err(ShardError::mismatch(
+                head.path,
+                format!("{d} {}: parts of one merge must come from one bake", first.path.display()),
+            ));
+        }
+        if head.round != first.round {
+            return Err(ShardError::mismatch(
+                head.path,
+                format!(
+                    "is a part of round {}, but {} of round {}: merge one round at a time",
+                    head.round,
+                    first.path.display(),
+                    first.round
+                ),
+            ));
+        }
+        match by_shard[head.shard as usize] {
+            Some(other) => {
+                return Err(ShardError::Duplicate {
+                    path: head.path.to_path_buf(),
+                    other: heads[other].path.to_path_buf(),
+                    index: head.shard,
+                    count,
+                })
+            }
+            None => by_shard[head.shard as usize] = Some(i),
+        }
+    }
+    let missing: Vec<u32> = (0..count).filter(|&k| by_shard[k as usize].is_none()).collect();
+    if !missing.is_empty() {
+        let given = (0..count).filter(|&k| by_shard[k as usize].is_some());
+        return Err(ShardError::Missing { count, missing: list_indices(missing), given: list_indices(given) });
+    }
+    let order: Vec<usize> = by_shard.into_iter().flatten().collect();
+    let (mut item, mut point) = (0u32, 0u64);
+    for &i in &order {
+        let h = &heads[i];
+        if h.item_count != first.item_count || h.point_count != first.point_count || h.items.start != item || h.points.start != point {
+            return Err(ShardError::mismatch(
+                h.path,
+                format!(
+                    "covers items {:?} of {} (points {:?} of {}), which does not follow on from the shards before it: \
+                     the parts disagree on the bake's items",
+                    h.items, h.item_count, h.points, h.point_count
+                ),
+            ));
+        }
+        (item, point) = (h.items.end, h.points.end);
+    }
+    let last = &heads[*order.last().unwrap_or(&0)];
+    if item != first.item_count || point != first.point_count {
+        return Err(ShardError::mismatch(
+            last.path,
+            format!("ends at item {item} of {}: the parts do not cover the bake", first.item_count),
+        ));
+    }
+    Ok(order)
+}
+
+/// What a transfer merge gives: the next round's layer, or after the last
+/// round the result and the frame its bundle is made from.
+pub enum TransferMerge {
+    Layer(LayerFile),
+    Final { result: TransferResult, key: TransferKey, frame: Vec<u8> },
+}
+
+/// Merges every part of one transfer round. Rounds ≥ 1 also take the layer
+/// their parts gathered from (`path`, layer, CRC), whose weights normalise
+/// them and whose total they add to.
+pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, LayerFile, u32)>) -> Result<TransferMerge, ShardError> {
+    let heads: Vec<PartHead> = parts
+        .iter()
+        .map(|(path, p)| PartHead {
+            path,
+            identity: &p.identity,
+            shard: p.shard,
+            round: p.round,
+            items: p.items.clone(),
+            item_count: p.item_count,
+            points: p.points.clone(),
+            point_count: p.point_count,
+        })
+        .collect();
+    let order = check_together(&heads, FileKind::TransferPart)?;
+    let first = &heads[0];
+    let (first_path, reference) = (&parts[0].0, &parts[0].1);
+    for (path, p) in parts {
+        if (p.channels, p.coeffs, p.pass_channels, p.window_triangles)
+            != (reference.channels, reference.coeffs, reference.pass_channels, reference.window_triangles)
+        {
+            return Err(ShardError::mismatch(path, format!("holds rows of another size than {}", first_path.display())));
+        }
+    }
+    let key = TransferKey::decode(&first.identity.key).map_err(|e| ShardError::malformed(first_path, format!("parameter block: {e}")))?;
+    let params = &key.params;
+    let round = reference.round;
+    if reference.coeffs as usize != crate::sh::coeff_count(params.order) {
+        return Err(ShardError::mismatch(
+            first_path,
+            format!("holds {} coefficients, but order {} has {}", reference.coeffs, params.order, crate::sh::coeff_count(params.order)),
+        ));
+    }
+    if round > params.bounces {
+        return Err(ShardError::mismatch(first_path, format!("is round {round} of a bake of {} bounce(s)", params.bounces)));
+    }
+    let previous = match (round, layer) {
+        (0, None) => None,
+        (0, Some((path, ..))) => {
+            return Err(ShardError::mismatch(path, "round 0 parts gather from no layer: merge them without --layer"));
+        }
+        (_, None) => {
+            return Err(ShardError::mismatch(
+                first_path,
+                format!("round {round} parts gathered from the merged layer of round {}: give it with --layer", round - 1),
+            ));
+        }
+        (_, Some((path, layer, crc))) => {
+            check_layer(path, &layer, crc, reference, parts)?;
+            Some(layer)
+        }
+    };
+
+    // The sums, in shard order: each vertex's opening shard's row, then the
+    // later shards' contributions in item order.
+    let vertex_count = first.identity.mesh.vertices as usize;
+    let (pass_channels, channels, coeffs) = (reference.pass_channels as usize, reference.channels as usize, reference.coeffs as usize);
+    let stride = pass_channels * coeffs;
+    // The vertex count comes from the parts' identity: allocate without aborting when it lies.
+    let mut sums = zeroed(vertex_count * stride, first_path)?;
+    let mut weights = match &previous {
+        Some(layer) => layer.weights.clone(),
+        None => zeroed(vertex_count, first_path)?,
+    };
+    let mut opened = vec![false; vertex_count];
+    for &i in &order {
+        let (path, part) = &parts[i];
+        for (j, &v) in part.opened.vertices.iter().enumerate() {
+            let v = v as usize;
+            if std::mem::replace(&mut opened[v], true) {
+                return Err(ShardError::mismatch(path, format!("opens vertex {v}, which an earlier part opened too")));
+            }
+            sums[v * stride..(v + 1) * stride].copy_from_slice(&part.opened.rows[j * stride..(j + 1) * stride]);
+            if round == 0 {
+                weights[v] = part.opened.weights[j];
+            }
+        }
+        for (j, &v) in part.late.vertices.iter().enumerate() {
+            let v = v as usize;
+            if !opened[v] {
+                return Err(ShardError::mismatch(path, format!("adds to vertex {v}, which no earlier part opened")));
+            }
+            add_row(&mut sums[v * stride..(v + 1) * stride], &part.late.rows[j * stride..(j + 1) * stride]);
+            if round == 0 {
+                weights[v] += part.late.weights[j];
+            }
+        }
+    }
+
+    let layer = normalised_layer(&sums, &weights, pass_channels, channels, coeffs);
+    let (mut total, mut layers, mut rays_per_bounce, points_rejected, rays_traced) = match previous {
+        Some(p) => (p.total, p.layers, p.rays_per_bounce, p.points_rejected, p.rays_traced),
+        None => (vec![0.0f32; vertex_count * channels * coeffs], Vec::new(), Vec::new(), parts.iter().map(|(_, p)| p.rejected).sum(), 0),
+    };
+    add_layer(&mut total, &layer);
+    rays_per_bounce.push(parts.iter().map(|(_, p)| p.rays).sum());
+    let rays_traced = rays_traced + parts.iter().map(|(_, p)| p.traced).sum::<u64>();
+    if params.store_bounces {
+        layers.push(layer);
+    }
+    if round < params.bounces {
+        let mut source = vec![0.0f32; vertex_count * stride];
+        normalise_rows(&mut source, &sums, &weights, stride);
+        return Ok(TransferMerge::Layer(LayerFile {
+            identity: first.identity.clone(),
+            round,
+            channels: channels as u32,
+            coeffs: coeffs as u32,
+            source_channels: pass_channels as u32,
+            window_triangles: reference.window_triangles,
+            points: reference.point_count,
+            points_rejected,
+            rays_traced,
+            rays_per_bounce,
+            weights,
+            source,
+            total,
+            layers,
+        }));
+    }
+    let frame_part = &parts[order[0]];
+    if frame_part.1.frame.is_empty() {
+        return Err(ShardError::mismatch(&frame_part.0, "is shard 0 of the last round but carries no bundle frame (mesh and metadata)"));
+    }
+    let stats = BakeStats {
+        triangles: first.identity.mesh.triangles,
+        vertices: vertex_count as u64,
+        window_triangles: reference.window_triangles,
+        points: reference.point_count,
+        points_rejected,
+        vertices_without_samples: weights.iter().filter(|&&w| w <= 0.0).count() as u64,
+        rays: rays_per_bounce.iter().sum(),
+        rays_per_bounce,
+        rays_traced,
+        ..BakeStats::default()
+    };
+    let result = TransferResult { order: params.order, channels, total, bounces: layers, stats };
+    Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key })
+}
+
+/// `len` zeros, or an error naming `path` when they cannot be allocated.
+fn zeroed(len: usize, path: &Path) -> Result<Vec<f32>, ShardError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len)
+        .map_err(|_| ShardError::mismatch(path, format!("claims a mesh whose sums ({len} floats) do not fit in memory")))?;
+    v.resize(len, 0.0);
+    Ok(v)
+}
+
+/// The layer given to a merge must be the one every part gathered from.
+fn check_layer(
+    path: &Path,
+    layer: &LayerFile,
+    crc: u32,
+    reference: &TransferPart,
+    parts: &[(PathBuf, TransferPart)],
+) -> Result<(), ShardError> {
+    if let Some(d) = identity_difference(&layer.identity, &reference.identity, FileKind::Layer) {
+        return Err(ShardError::mismatch(path, format!("{d} {}: this layer is another bake's", parts[0].0.display())));
+    }
+    if layer.round + 1 != reference.round {
+        return Err(ShardError::mismatch(
+            path,
+            format!(
+                "is the layer of round {}, but the parts are round {}: give the layer of round {}",
+                layer.round,
+                reference.round,
+                reference.round - 1
+            ),
+        ));
+    }
+    let source_channels = if layer.round == 0 { 1 } else { reference.channels };
+    if (layer.channels, layer.coeffs, layer.source_channels) != (reference.channels, reference.coeffs, source_channels) {
+        return Err(ShardError::mismatch(path, format!("holds rows of another size than {}", parts[0].0.display())));
+    }
+    if let Some((part_path, _)) = parts.iter().find(|(_, p)| p.layer_crc != crc) {
+        return Err(ShardError::mismatch(
+            part_path,
+            format!("gathered from another layer file than {} (CRC-32 {crc:08x}): re-run this shard with that layer", path.display()),
+        ));
+    }
+    Ok(())
+}
+
+/// Every sun part of one bake put together: all samples' bits in sample
+/// order, the rays traced, and shard 0's frame.
+pub struct MergedSun {
+    pub key: SunKey,
+    pub identity: Identity,
+    pub bits: Vec<u32>,
+    pub rays: u64,
+    pub frame: Vec<u8>,
+}
+
+/// Checks and concatenates the parts of a sharded sun bake.
+pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardError> {
+    let heads: Vec<PartHead> = parts
+        .iter()
+        .map(|(path, p)| PartHead {
+            path,
+            identity: &p.identity,
+            shard: p.shard,
+            round: 0,
+            items: p.items.clone(),
+            item_count: p.item_count,
+            points: p.points.clone(),
+            point_count: p.point_count,
+        })
+        .collect();
+    let order = check_together(&heads, FileKind::SunPart)?;
+    let (first_path, first) = &parts[order[0]];
+    let key = SunKey::decode(&first.identity.key).map_err(|e| ShardError::malformed(first_path, format!("parameter block: {e}")))?;
+    let words = key.steps.div_ceil(32);
+    if let Some((path, _)) = parts.iter().find(|(_, p)| p.words != words) {
+        return Err(ShardError::mismatch(
+            path,
+            format!("holds {} mask words per point, not the {words} of {} steps", first.words, key.steps),
+        ));
+    }
+    // The vote counts each set bit's step: a bit past the last step would count a step that does not exist.
+    let last_word_mask = if key.steps % 32 == 0 { u32::MAX } else { (1u32 << (key.steps % 32)) - 1 };
+    for (path, part) in parts {
+        if part.bits.chunks_exact(words as usize).any(|point| point[point.len() - 1] & !last_word_mask != 0) {
+            return Err(ShardError::mismatch(path, format!("has bits set past the last of its {} steps", key.steps)));
+        }
+    }
+    if first.frame.is_empty() {
+        return Err(ShardError::mismatch(first_path, "is shard 0 but carries no bundle frame"));
+    }
+    let mut bits = Vec::with_capacity(first.point_count as usize * first.words as usize);
+    for &i in &order {
+        bits.extend_from_slice(&parts[i].1.bits);
+    }
+    Ok(MergedSun { key, identity: first.identity.clone(), bits, rays: parts.iter().map(|(_, p)| p.rays).sum(), frame: first.frame.clone() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Sun bits past the last step would make the vote count a step that
+    /// does not exist: a part with one is refused, not merged.
+    #[test]
+    fn sun_bits_past_the_last_step_are_refused() {
+        use crate::bake::shards::{Identity, MeshId};
+        let key = SunKey { params: crate::bake::SunParams::default(), window_patterns: Vec::new(), steps: 5, day_crc: 7 };
+        let identity = Identity { mesh: MeshId { crc: 1, vertices: 3, triangles: 1 }, shards: 1, key: key.encode() };
+        let part = |bits: Vec<u32>| SunPart {
+            identity: identity.clone(),
+            shard: 0,
+            items: 0..1,
+            item_count: 1,
+            points: 0..2,
+            point_count: 2,
+            words: 1,
+            rays: 10,
+            bits,
+            frame: vec![1],
+        };
+        assert!(merge_sun_parts(&[(PathBuf::from("ok.prtp"), part(vec![0b11111, 0b1]))]).is_ok());
+        let e = merge_sun_parts(&[(PathBuf::from("bad.prtp"), part(vec![0b1, 0b100000]))]).err().unwrap().to_string();
+        assert!(e.contains("bad.prtp: has bits set past the last of its 5 steps"), "{e}");
+    }
+
+    #[test]
+    fn index_lists_are_short() {
+        assert_eq!(list_indices([2, 5, 6, 7, 9]), "2, 5-7, 9");
+        assert_eq!(list_indices([]), "none");
+    }
+}

@@ -1,0 +1,223 @@
+//! One shard of a round: the same plan, pass and sums as a whole bake, over
+//! the shard's items (no I/O: the caller reads and writes the files).
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::files::{HitFile, Identity, LayerFile, SunPart, TransferPart, VertexRows};
+use super::key::{SunKey, TransferKey};
+use super::merge::identity_difference;
+use super::{split_by_cost, MeshId, Shard, ShardError};
+use crate::bake::gather::RowBuffer;
+use crate::bake::progress::Progress;
+use crate::bake::sun::SunPlan;
+use crate::bake::transfer::{run_range, HitRecords, Plan, SourceRows};
+use crate::bake::{BakeError, Scene, Surfaces};
+use crate::mesh::Mesh;
+
+/// What a transfer shard of round b ≥ 1 reads: its own hit records (from
+/// round 0) and the merged layer of round b − 1, with their paths for errors.
+pub struct RoundInput<'a> {
+    pub hits_path: &'a Path,
+    pub hits: HitFile,
+    pub layer_path: &'a Path,
+    pub layer: LayerFile,
+    /// The layer file's CRC (its identity in the part).
+    pub layer_crc: u32,
+}
+
+/// What a transfer shard writes: its part, and in round 0 of a bake with
+/// bounces its hit records.
+pub struct RoundOutput {
+    pub part: TransferPart,
+    pub hits: Option<HitFile>,
+    pub seconds: f64,
+}
+
+/// Bakes shard `shard`'s items of transfer round `round` (the bounce): round
+/// 0 traces, later rounds gather from `input`. `quiet` silences the progress line.
+///
+/// Errors: bad parameters, a round past the bounces, inputs missing or
+/// present against the round, and inputs from another bake, shard or round
+/// (named with their path).
+pub fn bake_transfer_shard(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    key: &TransferKey,
+    quiet: bool,
+    shard: Shard,
+    round: u32,
+    input: Option<RoundInput>,
+) -> Result<RoundOutput, ShardError> {
+    let started = Instant::now();
+    let params = crate::bake::BakeParams { quiet, ..key.params };
+    if round > params.bounces {
+        return Err(BakeError::Params(format!(
+            "round {round} of a bake of {} bounce(s): rounds run 0..={}",
+            params.bounces, params.bounces
+        ))
+        .into());
+    }
+    if (round == 0) != input.is_none() {
+        return Err(BakeError::Params(format!(
+            "round {round} needs {}",
+            if round == 0 { "no inputs" } else { "its hit records and the previous round's layer" }
+        ))
+        .into());
+    }
+    let plan = Plan::new(mesh, scene, surfaces, &params, None)?;
+    let identity = Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() };
+    let costs: Vec<u64> = plan.items.points_per_item().iter().map(|&p| p as u64 * params.rays as u64).collect();
+    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+    let points = plan.items.first_point(range.start) as u64..plan.items.first_point(range.end) as u64;
+    let mut rejected = vec![false; plan.items.point_count() as usize];
+    let mut source = SourceRows::empty();
+    if let Some(input) = &input {
+        check_inputs(input, &identity, shard, round, range.start as u32..range.end as u32, points.clone(), &plan)?;
+        for local in 0..points.end - points.start {
+            rejected[(points.start + local) as usize] = input.hits.is_rejected(local);
+        }
+        source.rows = RowBuffer::zeroed(input.layer.source.len());
+        source.rows.as_mut_slice().copy_from_slice(&input.layer.source);
+        source.channels = input.layer.source_channels as usize;
+    }
+    let record = round == 0 && params.bounces > 0;
+    let cached = input.as_ref().map(|i| HitRecords { records: &i.hits.records, first_point: points.start });
+    let pass = plan.pass(round, &source, &rejected, cached, record);
+    let label = format!("shard {shard}, round {round}/{}", params.bounces);
+    let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
+    let first_items = plan.items.first_items(mesh);
+    let sums = run_range(&pass, range.clone(), Some(&first_items), &progress);
+    drop(progress);
+    drop(pass);
+
+    let stride = plan.pass_channels(round) * plan.coeffs;
+    let mut opened = VertexRows::default();
+    for (v, &first) in first_items.iter().enumerate() {
+        if range.contains(&(first as usize)) {
+            opened.vertices.push(v as u32);
+            opened.rows.extend_from_slice(&sums.sums[v * stride..(v + 1) * stride]);
+            if round == 0 {
+                opened.weights.push(sums.weights[v]);
+            }
+        }
+    }
+    let items = range.start as u32..range.end as u32;
+    let hits = record.then(|| {
+        let count = points.end - points.start;
+        let mut bits = vec![0u32; count.div_ceil(32) as usize];
+        for &global in &sums.rejected {
+            let local = global as u64 - points.start;
+            bits[(local / 32) as usize] |= 1 << (local % 32);
+        }
+        HitFile {
+            identity: identity.clone(),
+            shard: shard.index,
+            items: items.clone(),
+            points: points.clone(),
+            rays: params.rays,
+            rejected: bits,
+            records: sums.hits,
+        }
+    });
+    let part = TransferPart {
+        identity,
+        shard: shard.index,
+        round,
+        items,
+        item_count: plan.items.len() as u32,
+        points,
+        point_count: plan.items.point_count(),
+        window_triangles: plan.base_stats().window_triangles,
+        layer_crc: input.as_ref().map_or(0, |i| i.layer_crc),
+        pass_channels: plan.pass_channels(round) as u32,
+        channels: plan.channels as u32,
+        coeffs: plan.coeffs as u32,
+        rays: sums.rays,
+        traced: sums.traced,
+        rejected: sums.rejected.len() as u64,
+        opened,
+        late: VertexRows { vertices: sums.late.vertices, rows: sums.late.rows, weights: sums.late.weights },
+        frame: Vec::new(),
+    };
+    Ok(RoundOutput { part, hits, seconds: started.elapsed().as_secs_f64() })
+}
+
+/// A later round's inputs must be this bake's and this shard's: its own hit
+/// records, and the layer of the round before.
+fn check_inputs(
+    input: &RoundInput,
+    identity: &Identity,
+    shard: Shard,
+    round: u32,
+    items: std::ops::Range<u32>,
+    points: std::ops::Range<u64>,
+    plan: &Plan,
+) -> Result<(), ShardError> {
+    let (hits, layer) = (&input.hits, &input.layer);
+    let this_bake = "this bake's mesh and arguments";
+    if let Some(d) = identity_difference(&hits.identity, identity, super::FileKind::Hits) {
+        return Err(ShardError::mismatch(input.hits_path, format!("{d} {this_bake}: these hit records are another bake's")));
+    }
+    if hits.shard != shard.index || hits.items != items || hits.points != points {
+        return Err(ShardError::mismatch(
+            input.hits_path,
+            format!(
+                "holds shard {}/{}'s hit records (items {:?}), not shard {shard}'s (items {items:?})",
+                hits.shard, shard.count, hits.items
+            ),
+        ));
+    }
+    if let Some(d) = identity_difference(&layer.identity, identity, super::FileKind::Layer) {
+        return Err(ShardError::mismatch(input.layer_path, format!("{d} {this_bake}: this layer is another bake's")));
+    }
+    if layer.round + 1 != round {
+        return Err(ShardError::mismatch(
+            input.layer_path,
+            format!("is the layer of round {}, but round {round} gathers from round {}'s", layer.round, round - 1),
+        ));
+    }
+    let source_channels = plan.pass_channels(round - 1) as u32;
+    if layer.channels != plan.channels as u32 || layer.coeffs != plan.coeffs as u32 || layer.source_channels != source_channels {
+        return Err(ShardError::mismatch(input.layer_path, "holds rows of another size than this bake's"));
+    }
+    Ok(())
+}
+
+/// Traces shard `shard`'s samples toward every day step of `suns` (see
+/// [`crate::bake::bake_sun_masks`]); the caller adds the frame to shard 0's part.
+pub fn bake_sun_shard(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    suns: &[Option<Vec3>],
+    key: &SunKey,
+    quiet: bool,
+    shard: Shard,
+) -> Result<SunPart, ShardError> {
+    if key.steps as usize != suns.len() {
+        return Err(BakeError::Params(format!("{} sun steps, but the key says {}", suns.len(), key.steps)).into());
+    }
+    let params = crate::bake::SunParams { quiet, ..key.params };
+    let plan = SunPlan::new(mesh, surfaces, suns, &params)?;
+    let day_steps = suns.iter().filter(|s| s.is_some()).count().max(1) as u64;
+    let costs: Vec<u64> = plan.points_per_item().iter().map(|&p| p as u64 * day_steps).collect();
+    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+    let first_point = |item: usize| plan.layout.first_sample.get(item).map_or(plan.layout.sample_count(), |&f| f as u64);
+    let (bits, rays) = plan.trace_items(scene, surfaces, range.clone());
+    Ok(SunPart {
+        identity: Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() },
+        shard: shard.index,
+        items: range.start as u32..range.end as u32,
+        item_count: costs.len() as u32,
+        points: first_point(range.start)..first_point(range.end),
+        point_count: plan.layout.sample_count(),
+        words: plan.words as u32,
+        rays,
+        bits,
+        frame: Vec::new(),
+    })
+}

@@ -1,0 +1,187 @@
+//! `prtbake merge PARTS… [--layer PREV.prtl] -o OUT`: joins every part of one
+//! round of a sharded bake into the next round's layer (`.prtl`) or, after
+//! the last round, the bundle (`.prtb`) a single process writes, byte for
+//! byte (docs/scale.md). Parts may come in any order; a missing, repeated
+//! or foreign part is named in the error (exit 2).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde_json::json;
+
+use super::bake_cmd::{encode_transfer_bundle, StorageRequest};
+use super::shard_cmd::{decode, read_shard_file};
+use super::sun_cmd::sun_stats_meta;
+use super::Output;
+use crate::bake::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
+use crate::bake::Surfaces;
+use crate::bundle;
+use crate::files::Staged;
+
+/// A checked `merge` configuration.
+#[derive(Clone, Debug)]
+pub struct MergeConfig {
+    pub parts: Vec<PathBuf>,
+    pub output: PathBuf,
+    /// Rounds ≥ 1: the layer the parts gathered from.
+    pub layer: Option<PathBuf>,
+    pub threads: usize,
+    pub json: bool,
+    pub force: bool,
+}
+
+/// Outputs a merge may write: the next round's layer or the bundle.
+const MERGE_FORMATS: &[&str] = &["prtl", "prtb"];
+
+/// Reads the parts, merges them and writes the layer or bundle.
+pub fn run(config: &MergeConfig) -> anyhow::Result<()> {
+    super::check_threads(config.threads)?;
+    let mut inputs: Vec<&Path> = config.parts.iter().map(PathBuf::as_path).collect();
+    inputs.extend(config.layer.as_deref());
+    super::check_outputs(&inputs, &[Output::new(&config.output, MERGE_FORMATS)], config.force)?;
+    let mut transfer: Vec<(PathBuf, TransferPart)> = Vec::new();
+    let mut sun: Vec<(PathBuf, SunPart)> = Vec::new();
+    for path in &config.parts {
+        let bytes = read_shard_file(path)?;
+        match FileKind::of(&bytes) {
+            Ok(FileKind::TransferPart) => transfer.push((path.clone(), decode(path, &bytes, TransferPart::decode)?)),
+            Ok(FileKind::SunPart) => sun.push((path.clone(), decode(path, &bytes, SunPart::decode)?)),
+            Ok(other) => {
+                return Err(ShardError::Malformed {
+                    path: path.clone(),
+                    problem: format!(
+                        "is {}, not a part: merge takes the parts of one round (and the previous layer with --layer)",
+                        other.name()
+                    ),
+                }
+                .into())
+            }
+            Err(problem) => return Err(ShardError::Malformed { path: path.clone(), problem }.into()),
+        }
+    }
+    if let (Some((t, _)), Some((s, _))) = (transfer.first(), sun.first()) {
+        return Err(ShardError::Mismatch {
+            path: s.clone(),
+            problem: format!("is a sun part, but {} is a transfer part: merge one bake at a time", t.display()),
+        }
+        .into());
+    }
+    if sun.is_empty() {
+        merge_transfer(config, &transfer)
+    } else {
+        merge_sun(config, &sun)
+    }
+}
+
+fn has_extension(path: &Path, extension: &str) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case(extension))
+}
+
+fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> anyhow::Result<()> {
+    let layer = match &config.layer {
+        Some(path) => {
+            let bytes = read_shard_file(path)?;
+            let (layer, crc): (LayerFile, u32) = decode(path, &bytes, LayerFile::decode)?;
+            Some((path.as_path(), layer, crc))
+        }
+        None => None,
+    };
+    let merged = super::with_threads(config.threads, || shards::merge_transfer(parts, layer))??;
+    let output = &config.output;
+    let round = parts.first().map_or(0, |(_, p)| p.round);
+    let mut staged = Staged::new();
+    let summary = match merged {
+        TransferMerge::Layer(layer) => {
+            if !has_extension(output, "prtl") {
+                anyhow::bail!(
+                    "{}: round {round} is not the last: its merge is the layer round {} gathers from; name the output .prtl",
+                    output.display(),
+                    round + 1
+                );
+            }
+            staged.stage(output, |w| layer.write_to(w).map(drop)).with_context(|| format!("cannot write {}", output.display()))?;
+            json!({ "kind": "layer", "round": round, "vertices": layer.identity.mesh.vertices })
+        }
+        TransferMerge::Final { result, key, frame } => {
+            if !has_extension(output, "prtb") {
+                anyhow::bail!("{}: round {round} is the last: its merge is the bundle; name the output .prtb", output.display());
+            }
+            let frame_path = &parts.iter().find(|(_, p)| p.shard == 0).map_or(&parts[0].0, |(path, _)| path);
+            let b = bundle::decode_bundle(&frame).map_err(|e| ShardError::Malformed {
+                path: frame_path.to_path_buf(),
+                problem: format!("its bundle frame (the mesh and metadata) does not decode: {e}"),
+            })?;
+            if MeshId::of(&b.mesh) != parts[0].1.identity.mesh {
+                return Err(ShardError::Mismatch {
+                    path: frame_path.to_path_buf(),
+                    problem: "its bundle frame holds another mesh than the one the parts baked".into(),
+                }
+                .into());
+            }
+            let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
+            let (encoded, choice) =
+                super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage, output))??;
+            staged.stage_bytes(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
+            let s = &result.stats;
+            json!({
+                "kind": "bundle", "round": round, "vertices": s.vertices, "triangles": s.triangles, "points": s.points,
+                "points_rejected": s.points_rejected, "rays": s.rays, "order": result.order, "channels": result.channels,
+                "storage": choice.as_ref().map(|c| super::bake_cmd::storage_meta(c, &result)),
+            })
+        }
+    };
+    staged.commit().with_context(|| format!("cannot write {}", output.display()))?;
+    report(config, parts.len(), summary)
+}
+
+fn merge_sun(config: &MergeConfig, parts: &[(PathBuf, SunPart)]) -> anyhow::Result<()> {
+    let output = &config.output;
+    if config.layer.is_some() {
+        anyhow::bail!("--layer: sun parts are merged in one round, without a layer");
+    }
+    if !has_extension(output, "prtb") {
+        anyhow::bail!("{}: sun parts merge into a bundle; name the output .prtb", output.display());
+    }
+    let merged = shards::merge_sun_parts(parts)?;
+    let frame_path = parts.iter().find(|(_, p)| p.shard == 0).map_or(&parts[0].0, |(path, _)| path);
+    let frame_error = |problem: String| ShardError::Malformed { path: frame_path.clone(), problem };
+    let b = bundle::decode_bundle(&merged.frame).map_err(|e| frame_error(format!("its bundle frame does not decode: {e}")))?;
+    let mut series = b.sun.ok_or_else(|| frame_error("its bundle frame has no sun sections".into()))?;
+    if MeshId::of(&b.mesh) != merged.identity.mesh || series.steps.len() != merged.key.steps as usize {
+        return Err(frame_error("its bundle frame holds another mesh or day than the parts baked".into()).into());
+    }
+    let surfaces = Surfaces::resolve(&b.mesh, &merged.key.window_patterns)?;
+    let suns = crate::sky::day_directions(&series.steps);
+    let masks = super::with_threads(config.threads, || {
+        crate::bake::sun::sun_masks_from_bits(&b.mesh, &surfaces, &suns, &merged.key.params, &merged.bits, merged.rays)
+    })??;
+    let mut meta = b.meta;
+    let sun_meta =
+        meta.get_mut("sun").and_then(|s| s.as_object_mut()).ok_or_else(|| frame_error("its frame's META has no sun object".into()))?;
+    sun_meta.insert("stats".into(), sun_stats_meta(&masks.stats));
+    series.words_per_vertex = masks.words_per_vertex;
+    series.masks = masks.masks;
+    let encoded = bundle::encode_with_sun(&merged.frame, &meta, &series).with_context(|| format!("cannot encode {}", output.display()))?;
+    crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
+    let s = &masks.stats;
+    report(
+        config,
+        parts.len(),
+        json!({ "kind": "sun bundle", "vertices": s.vertices, "points": s.points, "steps": s.steps, "rays": s.rays }),
+    )
+}
+
+fn report(config: &MergeConfig, parts: usize, summary: serde_json::Value) -> anyhow::Result<()> {
+    let bytes = std::fs::metadata(&config.output).map(|m| m.len()).unwrap_or(0);
+    if config.json {
+        let mut doc = json!({ "output": super::json_path(&config.output), "parts": parts, "bytes": bytes });
+        if let (Some(d), serde_json::Value::Object(s)) = (doc.as_object_mut(), summary) {
+            d.extend(s);
+        }
+        return super::print_json(&doc);
+    }
+    let kind = summary["kind"].as_str().unwrap_or("file");
+    let round = summary.get("round").and_then(|r| r.as_u64()).map(|r| format!(" of round {r}")).unwrap_or_default();
+    println!("merged {parts} part(s){round} into {} ({kind}, {bytes} bytes)", config.output.display());
+    Ok(())
+}

@@ -1,0 +1,256 @@
+//! `prtbake bake MESH --shard K/N [--round R --layer PREV.prtl] -o PART.prtp`
+//! and `prtbake sun INPUT --shard K/N -o PART.prtp`: one shard's part of a
+//! sharded bake, merged by `prtbake merge` (docs/scale.md).
+//!
+//! A shard loads the mesh exactly as a whole bake does and writes its part
+//! (and in round 0 its hit records) through `files::Staged`, so a failed or
+//! interrupted shard leaves nothing, and a re-run writes the same bytes.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde_json::json;
+
+use super::bake_cmd::{bundle_meta, check_windows, load_for_bake, BakeConfig};
+use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
+use super::Output;
+use crate::bake::shards::{self, FileKind, HitFile, LayerFile, RoundInput, Shard, SunKey, TransferKey};
+use crate::bake::{BuildQuality, Scene, SunStats};
+use crate::bundle::{self, Bundle, SunSeries, SunStep};
+use crate::files::{read_limited, Limit, Staged};
+use crate::sky;
+
+/// Extensions of a part, a hit-record file and a merged layer.
+pub const PART_FORMAT: &[&str] = &["prtp"];
+pub const HITS_FORMAT: &[&str] = &["prth"];
+pub const LAYER_FORMAT: &[&str] = &["prtl"];
+
+/// What `bake --shard` asks of one run.
+#[derive(Clone, Debug)]
+pub struct ShardRun {
+    pub shard: Shard,
+    /// The bounce this run bakes (0..=bounces).
+    pub round: u32,
+    /// Rounds ≥ 1: the merged layer of the round before.
+    pub layer: Option<PathBuf>,
+    /// The folder of this shard's hit records (default: the part's).
+    pub shard_dir: Option<PathBuf>,
+}
+
+impl ShardRun {
+    /// Where shard `shard`'s hit records are written (round 0) and read (later rounds).
+    pub fn hits_path(&self, part: &Path) -> PathBuf {
+        let dir = match &self.shard_dir {
+            Some(dir) => dir.clone(),
+            None => part.parent().map(Path::to_path_buf).unwrap_or_default(),
+        };
+        dir.join(shards::hit_file_name(self.shard))
+    }
+}
+
+/// Reads a shard file of `kind` whole (bounded), with the path in every error.
+pub fn read_shard_file(path: &Path) -> anyhow::Result<Vec<u8>> {
+    read_limited(path, Limit::Shard).with_context(|| format!("cannot read {}", path.display()))
+}
+
+/// Decodes with the file named in the error.
+pub fn decode<T>(path: &Path, bytes: &[u8], decode: impl FnOnce(&[u8]) -> Result<T, String>) -> Result<T, shards::ShardError> {
+    decode(bytes).map_err(|problem| shards::ShardError::Malformed { path: path.to_path_buf(), problem })
+}
+
+/// Bakes one shard's part of one transfer round and prints what it wrote.
+pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
+    let (shard, round, bounces) = (run.shard, run.round, config.params.bounces);
+    if config.view_box.is_some() {
+        anyhow::bail!("--view-box with --shard: sharded bakes store every triangle (bake the view box in one process)");
+    }
+    if round > bounces {
+        anyhow::bail!("--round {round}: a bake of {bounces} bounce(s) has rounds 0..={bounces}");
+    }
+    match (round, &run.layer) {
+        (0, Some(layer)) => anyhow::bail!("--layer {}: round 0 traces from scratch and takes no layer", layer.display()),
+        (r, None) if r > 0 => {
+            anyhow::bail!("--round {r} needs --layer, the merged layer of round {} (prtbake merge … -o LAYER.prtl)", r - 1)
+        }
+        _ => {}
+    }
+    let hits_path = run.hits_path(&config.output);
+    let writes_hits = round == 0 && bounces > 0;
+    let mut outputs = vec![Output::new(&config.output, PART_FORMAT)];
+    if writes_hits {
+        outputs.push(Output::new(&hits_path, HITS_FORMAT));
+    }
+    let mut inputs: Vec<&Path> = vec![&config.input];
+    if let Some(layer) = &run.layer {
+        inputs.extend([layer.as_path(), hits_path.as_path()]);
+    }
+    super::check_outputs(&inputs, &outputs, config.force)?;
+    super::check_threads(config.threads)?;
+    let loaded = load_for_bake(config, &outputs)?;
+    // The inputs of later rounds are read (and checked) before any ray.
+    let layer_path = run.layer.clone().unwrap_or_default();
+    let input = match &run.layer {
+        None => None,
+        Some(layer_path) => {
+            let bytes = read_shard_file(layer_path)?;
+            let (layer, layer_crc): (LayerFile, u32) = decode(layer_path, &bytes, LayerFile::decode)?;
+            drop(bytes);
+            let bytes = read_shard_file(&hits_path).with_context(|| {
+                format!("shard {shard}'s hit records from round 0 (--shard-dir names their folder; round 0 writes them)")
+            })?;
+            let hits: HitFile = decode(&hits_path, &bytes, HitFile::decode)?;
+            Some((layer, layer_crc, hits))
+        }
+    };
+    let key = TransferKey {
+        params: config.params,
+        window_patterns: config.window_patterns.clone(),
+        quantize: config.storage.quantize,
+        max_error: config.storage.max_error,
+    };
+    let mesh = &loaded.mesh;
+    let (output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+        let surfaces = crate::bake::Surfaces::resolve(mesh, &config.window_patterns)?;
+        check_windows(config, &surfaces)?;
+        let scene = Scene::build(mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
+        let input =
+            input.map(|(layer, layer_crc, hits)| RoundInput { hits_path: &hits_path, hits, layer_path: &layer_path, layer, layer_crc });
+        let output = shards::bake_transfer_shard(mesh, &scene, &surfaces, &key, config.params.quiet, shard, round, input)?;
+        Ok((output, surfaces, scene.build_time.as_secs_f64()))
+    })??;
+    let mut part = output.part;
+    if round == bounces && shard.index == 0 {
+        // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
+        let meta = bundle_meta(loaded.meta, &config.window_patterns, &surfaces);
+        let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None };
+        part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
+    }
+    let mut staged = Staged::new();
+    staged.stage(&config.output, |w| part.write_to(w).map(drop)).with_context(|| format!("cannot write {}", config.output.display()))?;
+    if let Some(hits) = &output.hits {
+        staged.stage(&hits_path, |w| hits.write_to(w).map(drop)).with_context(|| format!("cannot write {}", hits_path.display()))?;
+    }
+    staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
+
+    let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+    let hits_written = output.hits.is_some().then_some(hits_path.as_path());
+    if config.json {
+        return super::print_json(&json!({
+            "output": super::json_path(&config.output),
+            "part_bytes": size(&config.output),
+            "hits": hits_written.map(super::json_path),
+            "hits_bytes": hits_written.map(size),
+            "shard": shard.to_string(),
+            "round": round,
+            "bounces": bounces,
+            "items": [part.items.start, part.items.end],
+            "item_count": part.item_count,
+            "points": [part.points.start, part.points.end],
+            "opened_vertices": part.opened.len(),
+            "late_contributions": part.late.len(),
+            "rays": part.rays,
+            "rays_traced": part.traced,
+            "bvh_build_seconds": build_seconds,
+            "seconds": output.seconds,
+            "peak_memory_bytes": crate::bake::peak_memory_bytes(),
+        }));
+    }
+    println!(
+        "shard {shard}, round {round}/{bounces}: items {}..{} of {}, {} points, {} rays in {:.2}s; wrote {} ({} bytes){}",
+        part.items.start,
+        part.items.end,
+        part.item_count,
+        part.points.end - part.points.start,
+        part.rays,
+        output.seconds,
+        config.output.display(),
+        size(&config.output),
+        hits_written.map(|p| format!(" and {} ({} bytes)", p.display(), size(p))).unwrap_or_default()
+    );
+    Ok(())
+}
+
+/// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
+/// metadata without its stats: what every shard of one sun bake must share.
+fn day_crc(steps: &[SunStep], meta_without_stats: &serde_json::Value) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    for s in steps {
+        h.update(&s.unix_time_utc.to_le_bytes());
+        let floats = s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).chain(s.sky_sh.iter().flatten());
+        for f in floats {
+            h.update(&f.to_le_bytes());
+        }
+        h.update(&[s.night as u8]);
+        h.update(&(s.sky_sh.len() as u64).to_le_bytes());
+    }
+    h.update(&serde_json::to_vec(meta_without_stats).unwrap_or_default());
+    h.finalize()
+}
+
+/// The stats a sun part's frame carries until the merge counts them: only the step count is known.
+fn placeholder_stats(steps: &[SunStep]) -> SunStats {
+    SunStats { steps: steps.len() as u64, ..SunStats::default() }
+}
+
+/// Traces one shard's sun samples into a part and prints what it wrote.
+pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
+    let input = load_sun_input(config, PART_FORMAT, false)?;
+    let started = std::time::Instant::now();
+    let (part, steps) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+        let steps = day_steps(config, &input)?;
+        let surfaces = sun_surfaces(config, &input.mesh)?;
+        let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
+        let mut meta = sun_meta(config, &input.frame, &placeholder_stats(&steps), input.was_bundle());
+        if let Some(m) = meta.as_object_mut() {
+            m.remove("stats");
+        }
+        let key = SunKey {
+            params: config.params,
+            window_patterns: config.window_patterns.clone(),
+            steps: steps.len() as u32,
+            day_crc: day_crc(&steps, &meta),
+        };
+        let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &sky::day_directions(&steps), &key, config.params.quiet, shard)?;
+        Ok((part, steps))
+    })??;
+    let mut part = part;
+    if shard.index == 0 {
+        // The merge fills in the masks and the stats; everything else is the bundle a whole bake writes.
+        let words = part.words;
+        let series = SunSeries {
+            sky_order: config.sky_order as u32,
+            steps,
+            words_per_vertex: words,
+            masks: vec![0; input.mesh.vertex_count() * words as usize],
+        };
+        let meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());
+        part.frame = encode_sun_output(&input, meta, &series, &config.output)?;
+    }
+    crate::files::write_atomic_with(&config.output, |w| part.write_to(w).map(drop))
+        .with_context(|| format!("cannot write {}", config.output.display()))?;
+    let bytes = std::fs::metadata(&config.output).map(|m| m.len()).unwrap_or(0);
+    let seconds = started.elapsed().as_secs_f64();
+    if config.json {
+        return super::print_json(&json!({
+            "output": super::json_path(&config.output),
+            "part_bytes": bytes,
+            "kind": FileKind::SunPart.name(),
+            "shard": shard.to_string(),
+            "items": [part.items.start, part.items.end],
+            "item_count": part.item_count,
+            "points": [part.points.start, part.points.end],
+            "rays": part.rays,
+            "seconds": seconds,
+        }));
+    }
+    println!(
+        "sun shard {shard}: items {}..{} of {}, {} points, {} rays in {seconds:.2}s; wrote {} ({bytes} bytes)",
+        part.items.start,
+        part.items.end,
+        part.item_count,
+        part.points.end - part.points.start,
+        part.rays,
+        config.output.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,209 @@
+//! Sharded bakes (docs/scale.md): shards run as separate processes in any
+//! order and at any thread count, merged round by round, give the bundle a
+//! single process writes, byte for byte; merges name missing, repeated and
+//! foreign parts.
+
+use std::path::{Path, PathBuf};
+
+use crate::util::{prtbake, Scratch};
+
+/// The demo cabin at low detail (11,738 triangles and 6,746 vertices once
+/// cleaned; 12,186 sample points, 34 of them inside geometry), with its
+/// injected defects (`bake --clean` repairs them in every process), as GLB.
+fn write_cabin(dir: &Scratch) -> PathBuf {
+    let (mesh, _) = prtbake::fixtures::cabin::generate_cabin(10.0);
+    let path = dir.path("cabin.glb");
+    prtbake::mesh::write_glb(&path, &mesh).unwrap();
+    path
+}
+
+/// Window light, three bounces, colour, each bounce stored, cleaned inline:
+/// every piece of a bake's bundle that a merge has to reproduce.
+const BAKE_ARGS: &[&str] = &["--window", "glass", "--bounces", "3", "--rays", "12", "--seed", "5", "--store-bounces", "--clean", "--quiet"];
+
+fn run(args: &[&str]) -> String {
+    let out = prtbake(args);
+    assert!(out.status.success(), "prtbake {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Runs `prtbake args` expecting exit 2, and returns its stderr.
+fn refused(args: &[&str]) -> String {
+    let out = prtbake(args);
+    assert_eq!(out.status.code(), Some(2), "prtbake {} should fail: {}", args.join(" "), String::from_utf8_lossy(&out.stdout));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fixed shuffle of 0..n (the shards' run order and the parts' merge order).
+fn shuffled(n: u32, salt: u32) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..n).collect();
+    let mut state = 0x9e37_79b9u32 ^ salt.wrapping_mul(0x85eb_ca6b);
+    for i in (1..order.len()).rev() {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        order.swap(i, state as usize % (i + 1));
+    }
+    order
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// `merge INPUTS… -o OUT`.
+fn merge<'a>(inputs: &[&'a Path], out: &'a Path) -> Vec<&'a str> {
+    let mut a = vec!["merge", "-o", s(out)];
+    a.extend(inputs.iter().map(|p| s(p)));
+    a
+}
+
+/// Runs every round of a sharded transfer bake of `mesh` into `dir`, as a
+/// scheduler would (shards in shuffled order, 1 or 2 threads), and returns
+/// the merged bundle. `part(round, k)` names each part.
+fn sharded_bake(dir: &Path, mesh: &Path, args: &[&str], bounces: u32, n: u32) -> PathBuf {
+    let part = |round: u32, k: u32| dir.join(format!("r{round}-{k}.prtp"));
+    let layer = |round: u32| dir.join(format!("r{round}.prtl"));
+    let bundle = dir.join("merged.prtb");
+    for round in 0..=bounces {
+        for k in shuffled(n, round) {
+            let (shard, round_text, threads) = (format!("{k}/{n}"), round.to_string(), (1 + k % 2).to_string());
+            let previous = layer(round.saturating_sub(1));
+            let part = part(round, k);
+            let mut a = vec!["bake", s(mesh), "-o", s(&part), "--shard", &shard, "--round", &round_text, "--threads", &threads];
+            if round > 0 {
+                a.extend(["--layer", s(&previous)]);
+            }
+            a.extend(args);
+            run(&a);
+        }
+        let parts: Vec<PathBuf> = shuffled(n, round + 100).into_iter().map(|k| part(round, k)).collect();
+        let out = if round == bounces { bundle.clone() } else { layer(round) };
+        let previous = layer(round.saturating_sub(1));
+        let mut a = vec!["merge", "-o", s(&out)];
+        a.extend(parts.iter().map(|p| s(p)));
+        if round > 0 {
+            a.extend(["--layer", s(&previous)]);
+        }
+        run(&a);
+    }
+    bundle
+}
+
+#[test]
+fn sharded_transfer_merges_into_the_single_process_bundle() {
+    let dir = Scratch::new("shards-transfer");
+    let mesh = write_cabin(&dir);
+    let single = dir.path("single.prtb");
+    let mut a = vec!["bake", s(&mesh), "-o", s(&single), "--threads", "2"];
+    a.extend(BAKE_ARGS);
+    run(&a);
+    let expected = std::fs::read(&single).unwrap();
+    for n in [1u32, 2, 3, 7] {
+        let work = dir.path(&format!("n{n}"));
+        std::fs::create_dir(&work).unwrap();
+        let merged = sharded_bake(&work, &mesh, BAKE_ARGS, 3, n);
+        assert!(std::fs::read(&merged).unwrap() == expected, "{n} shards: the merged bundle differs from the single-process bake");
+    }
+}
+
+#[test]
+fn sharded_sun_merges_into_the_single_process_bundle() {
+    let dir = Scratch::new("shards-sun");
+    let mesh = write_cabin(&dir);
+    let args = ["--window", "glass", "--steps", "24", "--seed", "3", "--quiet"];
+    let single = dir.path("single.prtb");
+    let mut a = vec!["sun", s(&mesh), "-o", s(&single)];
+    a.extend(args);
+    run(&a);
+    let expected = std::fs::read(&single).unwrap();
+    for n in [1u32, 2, 3, 7] {
+        let part = |k: u32| dir.path(&format!("sun-{n}-{k}.prtp"));
+        for k in shuffled(n, 7) {
+            let (shard, threads) = (format!("{k}/{n}"), (1 + k % 2).to_string());
+            let p = part(k);
+            let mut a = vec!["sun", s(&mesh), "-o", s(&p), "--shard", &shard, "--threads", &threads];
+            a.extend(args);
+            run(&a);
+        }
+        let merged = dir.path(&format!("sun-{n}.prtb"));
+        let parts: Vec<PathBuf> = shuffled(n, 8).into_iter().map(part).collect();
+        let mut a = vec!["merge", "-o", s(&merged)];
+        a.extend(parts.iter().map(|p| s(p)));
+        run(&a);
+        assert!(std::fs::read(&merged).unwrap() == expected, "{n} sun shards: the merged bundle differs from the single-process one");
+    }
+    // A part of another day, or another seed, is named; so is a missing one.
+    let foreign = dir.path("sun-foreign.prtp");
+    let mut a = vec!["sun", s(&mesh), "-o", s(&foreign), "--shard", "1/3"];
+    a.extend(args);
+    a.extend(["--turbidity", "4"]);
+    run(&a);
+    let parts = [dir.path("sun-3-0.prtp"), foreign.clone(), dir.path("sun-3-2.prtp")];
+    let e = refused(&merge(&[&parts[0], &parts[1], &parts[2]], &dir.path("x.prtb")));
+    assert!(e.contains(&format!("{}: day and sky", foreign.display())), "{e}");
+    let e = refused(&merge(&[&parts[0], &parts[2]], &dir.path("x.prtb")));
+    assert!(e.contains("missing part(s) of 3 shards: 1 (given: 0, 2)"), "{e}");
+    let e = refused(&merge(&[&parts[0], &dir.path("sun-2-1.prtp"), &parts[2]], &dir.path("x.prtb")));
+    assert!(e.contains("sun-2-1.prtp: is one of 2 shards, not of 3"), "{e}");
+}
+
+/// A re-run shard writes the same bytes; a merge refuses a missing, a
+/// repeated and a foreign part, naming it, and writes nothing.
+#[test]
+fn shards_are_idempotent_and_merges_name_bad_parts() {
+    let dir = Scratch::new("shards-errors");
+    let mesh = write_cabin(&dir);
+    let args = ["--window", "glass", "--bounces", "1", "--rays", "8", "--quiet"];
+    let bake = |shard: &str, round: &str, out: &Path, extra: &[&str]| {
+        let mut a = vec!["bake", s(&mesh), "-o", s(out), "--shard", shard, "--round", round];
+        a.extend(args);
+        a.extend(extra);
+        run(&a);
+    };
+    let parts: Vec<PathBuf> = (0..3).map(|k| dir.path(&format!("r0-{k}.prtp"))).collect();
+    for (k, p) in parts.iter().enumerate() {
+        bake(&format!("{k}/3"), "0", p, &[]);
+    }
+    // Idempotent: the same shard again, at another thread count, gives the same part and hit records.
+    let (part_1, hits_1) = (std::fs::read(&parts[1]).unwrap(), std::fs::read(dir.path("hits-1-of-3.prth")).unwrap());
+    let again = dir.path("again").join("r0-1.prtp");
+    std::fs::create_dir(again.parent().unwrap()).unwrap();
+    bake("1/3", "0", &again, &["--threads", "1"]);
+    assert!(std::fs::read(&again).unwrap() == part_1, "a re-run shard wrote another part");
+    assert!(std::fs::read(dir.path("again").join("hits-1-of-3.prth")).unwrap() == hits_1, "a re-run shard wrote other hit records");
+
+    let layer = dir.path("r0.prtl");
+    let e = refused(&merge(&[&parts[0], &parts[2]], &layer));
+    assert!(e.contains("missing part(s) of 3 shards: 1 (given: 0, 2)"), "{e}");
+    let e = refused(&merge(&[&parts[0], &parts[1], &parts[2], &again], &layer));
+    assert!(e.contains(&format!("{}: shard 1/3 is given twice (also as {})", again.display(), parts[1].display())), "{e}");
+    let foreign = dir.path("seed9-1.prtp");
+    bake("1/3", "0", &foreign, &["--seed", "9", "--shard-dir", s(&dir.path("again"))]);
+    let e = refused(&merge(&[&parts[0], &foreign, &parts[2]], &layer));
+    assert!(e.contains(&format!("{}: seed 9 here, 1 in {}", foreign.display(), parts[0].display())), "{e}");
+    let other_n = dir.path("of2-1.prtp");
+    bake("1/2", "0", &other_n, &["--shard-dir", s(&dir.path("again"))]);
+    let e = refused(&merge(&[&parts[0], &other_n, &parts[2]], &layer));
+    assert!(e.contains(&format!("{}: is one of 2 shards, not of 3", other_n.display())), "{e}");
+    assert!(!layer.exists(), "a refused merge wrote its output");
+
+    // Round 1 needs the layer its parts gathered from, and refuses another bake's hit records.
+    run(&merge(&[&parts[2], &parts[0], &parts[1]], &layer));
+    let r1 = dir.path("r1-0.prtp");
+    let e =
+        refused(&["bake", s(&mesh), "-o", s(&r1), "--shard", "0/3", "--round", "1", "--window", "glass", "--bounces", "1", "--rays", "8"]);
+    assert!(e.contains("--round 1 needs --layer"), "{e}");
+    let mut a = vec!["bake", s(&mesh), "-o", s(&r1), "--shard", "1/3", "--round", "1", "--layer", s(&layer), "--shard-dir"];
+    a.push(s(&dir.0));
+    a.extend(["--window", "glass", "--bounces", "1", "--rays", "16", "--quiet"]);
+    let e = refused(&a);
+    assert!(e.contains("hits-1-of-3.prth: rays 8 here, 16 in this bake's"), "{e}");
+    let x = dir.path("x.prtb");
+    let mut a = merge(&[&parts[0], &parts[1], &parts[2]], &x);
+    a.extend(["--layer", s(&layer)]);
+    let e = refused(&a);
+    assert!(e.contains("round 0 parts gather from no layer"), "{e}");
+    let e = refused(&["merge", s(&layer), "-o", s(&dir.path("x.prtb"))]);
+    assert!(e.contains("is a merged layer, not a part"), "{e}");
+}
