@@ -18,6 +18,8 @@ pub enum Limit {
     Image,
     /// A small text input (a CSV of sun directions): 16 MiB.
     Text,
+    /// A measured BRDF (the text table or a MERL `.binary`, 35 MB): 64 MiB.
+    Brdf,
 }
 
 impl Limit {
@@ -28,6 +30,7 @@ impl Limit {
             Limit::Bundle => 32 << 30,
             Limit::Image => 4 << 30,
             Limit::Text => 16 << 20,
+            Limit::Brdf => 64 << 20,
         }
     }
 }
