@@ -6,6 +6,7 @@
 //! ARCHITECTURE.md.
 
 pub mod bake;
+pub mod brdf;
 pub mod budget;
 pub mod bundle;
 pub mod chart;

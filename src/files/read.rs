@@ -20,6 +20,8 @@ pub enum Limit {
     Text,
     /// A shard file of a sharded bake (.prtp part, .prth hit records, .prtl layer): 64 GiB.
     Shard,
+    /// A measured BRDF (the text table or a MERL `.binary`, 35 MB): 64 MiB.
+    Brdf,
 }
 
 impl Limit {
@@ -31,6 +33,7 @@ impl Limit {
             Limit::Image => 4 << 30,
             Limit::Text => 16 << 20,
             Limit::Shard => 64 << 30,
+            Limit::Brdf => 64 << 20,
         }
     }
 }
