@@ -72,6 +72,13 @@ fn script(dir: &Scratch, name: &str, args: &[&str], env: &[(&str, &str)]) -> (Op
     (o.status.code(), String::from_utf8_lossy(&o.stdout).trim().to_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
+/// Runs a script with `operands` then `args`, expecting success; returns its stdout.
+fn script_ok(dir: &Scratch, name: &str, operands: &[&str], args: &[&str], env: &[(&str, &str)]) -> String {
+    let (code, out, e) = script(dir, name, &[operands, args].concat(), env);
+    assert_eq!(code, Some(0), "{name}: {e}");
+    out
+}
+
 #[test]
 fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     let dir = Scratch::new("schedulers-slurm");
@@ -86,10 +93,7 @@ fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     let single = dir.path("single.prtb");
     let expected = bake_alone(&[&["bake", s(&mesh), "-o", s(&single), "--quiet"], BAKE_ARGS].concat(), &single);
     let bundle = dir.path("slurm.prtb");
-    let mut args = vec![s(&mesh), s(&bundle), "3"];
-    args.extend(BAKE_ARGS);
-    let (code, last, e) = script(&dir, "scripts/slurm/submit.sh", &args, &[("CPUS", "2")]);
-    assert_eq!(code, Some(0), "{e}");
+    let last = script_ok(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&bundle), "3"], BAKE_ARGS, &[("CPUS", "2")]);
     assert!(std::fs::read(&bundle).unwrap() == expected, "3 Slurm shards: the merged bundle differs from the single-process bake");
 
     // Three rounds, each an array of 3 after the previous merge, each merge after its array.
@@ -104,10 +108,7 @@ fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     let single_sun = dir.path("single-sun.prtb");
     let expected = bake_alone(&[&["sun", s(&single), "-o", s(&single_sun), "--quiet"], SUN_ARGS].concat(), &single_sun);
     let sun = dir.path("slurm-sun.prtb");
-    let mut args = vec![s(&bundle), s(&sun), "4"];
-    args.extend(SUN_ARGS);
-    let (code, last, e) = script(&dir, "scripts/slurm/submit-sun.sh", &args, &[("AFTER", "105")]);
-    assert_eq!(code, Some(0), "{e}");
+    let last = script_ok(&dir, "scripts/slurm/submit-sun.sh", &[s(&bundle), s(&sun), "4"], SUN_ARGS, &[("AFTER", "105")]);
     assert_eq!(last, "107");
     assert!(std::fs::read(&sun).unwrap() == expected, "4 Slurm sun shards: the merged bundle differs from the single-process one");
 
@@ -139,11 +140,8 @@ fn kubernetes_manifests_run_in_order_into_the_single_process_bundle() {
     let manifests = dir.path("manifests");
     let bundle = dir.path("out/k8s.prtb");
     std::fs::create_dir(dir.path("out")).unwrap();
-    let mut args = vec![s(&mesh), s(&bundle), "3"];
-    args.extend(BAKE_ARGS);
     let env = [("DIR", s(&manifests)), ("MOUNT", s(&dir.0)), ("PRTBAKE", env!("CARGO_BIN_EXE_prtbake"))];
-    let (code, _, e) = script(&dir, "scripts/kubernetes/manifests.sh", &args, &env);
-    assert_eq!(code, Some(0), "{e}");
+    script_ok(&dir, "scripts/kubernetes/manifests.sh", &[s(&mesh), s(&bundle), "3"], BAKE_ARGS, &env);
     let names: Vec<String> = std::fs::read_dir(&manifests).unwrap().map(|f| f.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(names.len(), 6, "{names:?}: 3 rounds and 3 merges");
 
