@@ -48,6 +48,7 @@ mod coplanar;
 mod degenerate;
 mod duplicates;
 pub mod fixtures;
+mod hub_pairs;
 mod orient;
 mod refine;
 mod report;
@@ -342,6 +343,7 @@ fn remove_covered(work: &mut Work, plane_tol: f32, params: &CleanParams, r: &mut
     r.covered_coplanar_removed += cop.removed;
     r.partial_overlaps = cop.partial;
     r.partial_overlap_count = cop.partial_count;
+    r.coplanar_pairs_enumerated += cop.pairs_enumerated;
     cop.removed_area
 }
 

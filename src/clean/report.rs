@@ -102,6 +102,9 @@ pub struct CleanReport {
     pub rounds: usize,
     /// True when the last round repaired nothing: cleaning the output again is a no-op.
     pub converged: bool,
+    /// Work done: candidate pairs the coplanar broad phase enumerated, all rounds.
+    /// Near-linear in triangles at any valence (a fan's triangles all share a box).
+    pub coplanar_pairs_enumerated: usize,
     /// Resolved tolerances of the first round (world units).
     pub weld_tolerance: f32,
     pub coplanar_tolerance: f32,
@@ -145,6 +148,7 @@ impl CleanReport {
         self.slivers_fixed += later.slivers_fixed;
         self.sliver_flips += later.sliver_flips;
         self.triangles_flipped += later.triangles_flipped;
+        self.coplanar_pairs_enumerated += later.coplanar_pairs_enumerated;
         self.area_before -= removed_area;
         self.output_triangles = later.output_triangles;
         self.output_vertices = later.output_vertices;
