@@ -17,7 +17,8 @@
 //! the whole circle when it covers the hub). The projection along `m` is an
 //! affine bijection on a plane that is not parallel to `m`; triangles steeper
 //! than [`MIN_AXIS_COSINE`] stay in the box tree. Sectors are widened by the
-//! angle the plane tolerance subtends, so near-coplanar pairs are not missed.
+//! angle that a tilt within the plane tolerance subtends (zero on a flat fan),
+//! so near-coplanar pairs are not missed.
 //!
 //! The result is a superset of the overlapping pairs, filtered by the same
 //! padded box test as before and sorted, so the narrow phase sees the pairs it
@@ -47,8 +48,11 @@ pub(crate) fn candidate_pairs(points: &[[u32; 3]], corners: &[[DVec3; 3]], boxes
     let n = boxes.len();
     let live = |t: usize| boxes[t] != Aabb::EMPTY;
     let hubs = find_hubs(points, n, &live);
-    let pad = 2.0 * plane_tol;
+    let pad = plane_tol;
     let mut groups = build_groups(points, corners, &hubs, &live, pad);
+    // Pairs between two triangles outside every group come out sorted; the rest
+    // (a group member in the pair) are sorted and merged in at the end.
+    let mut tree_pairs: Vec<(u32, u32)> = Vec::new();
     let mut found: Vec<(u32, u32)> = Vec::new();
     let mut enumerated = 0;
 
@@ -60,7 +64,14 @@ pub(crate) fn candidate_pairs(points: &[[u32; 3]], corners: &[[DVec3; 3]], boxes
         hits.clear();
         tree.query(&boxes[t], &mut hits);
         enumerated += hits.len();
-        found.extend(hits.iter().map(|&i| rest[i as usize]).filter(|&o| o as usize != t).map(|o| ordered(t as u32, o)));
+        let others = hits.iter().map(|&i| rest[i as usize]);
+        if groups.group_of[t] == NO_GROUP {
+            let start = tree_pairs.len();
+            tree_pairs.extend(others.filter(|&o| o as usize > t).map(|o| (t as u32, o)));
+            tree_pairs[start..].sort_unstable();
+        } else {
+            found.extend(others.map(|o| ordered(t as u32, o)));
+        }
     }
 
     // Within each group: overlapping sectors.
@@ -87,7 +98,37 @@ pub(crate) fn candidate_pairs(points: &[[u32; 3]], corners: &[[DVec3; 3]], boxes
     found.retain(|&(a, b)| boxes[a as usize].overlaps(&boxes[b as usize]));
     found.sort_unstable();
     found.dedup();
-    Candidates { pairs: found, enumerated }
+    let pairs = merge_sorted(tree_pairs, found);
+    Candidates { pairs, enumerated }
+}
+
+/// The union of two sorted lists without repeats.
+fn merge_sorted(a: Vec<(u32, u32)>, b: Vec<(u32, u32)>) -> Vec<(u32, u32)> {
+    if b.is_empty() {
+        return a;
+    }
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() || j < b.len() {
+        let next = match (a.get(i), b.get(j)) {
+            (Some(&x), Some(&y)) if x <= y => {
+                i += 1;
+                j += (x == y) as usize;
+                x
+            }
+            (_, Some(&y)) => {
+                j += 1;
+                y
+            }
+            (Some(&x), None) => {
+                i += 1;
+                x
+            }
+            (None, None) => break,
+        };
+        out.push(next);
+    }
+    out
 }
 
 fn ordered(a: u32, b: u32) -> (u32, u32) {
@@ -197,9 +238,11 @@ enum Span {
 
 impl HubGroup {
     /// The angular span of a triangle's projection around the hub, widened by
-    /// the angle `pad` subtends at its nearest corner. `None` when it projects
-    /// to a single point at the hub.
-    fn span_of(&self, corners: [DVec3; 3], pad: f64) -> Option<Span> {
+    /// the angle that the shift of a point `plane_tol` off its plane subtends at
+    /// its nearest corner (the shift between projecting along its normal, as the
+    /// narrow phase does, and along the hub's axis: twice `plane_tol · tan` of
+    /// their angle). `None` when it projects to a single point at the hub.
+    fn span_of(&self, corners: [DVec3; 3], plane_tol: f64) -> Option<Span> {
         let flat = corners.map(|p| {
             let d = p - self.hub;
             (d.dot(self.u), d.dot(self.v))
@@ -235,7 +278,10 @@ impl HubGroup {
                 (gap, after) = (angles[i] - angles[i - 1], i);
             }
         }
-        let widen = if pad > 0.0 { (pad / nearest).min(PI) } else { 0.0 };
+        let [a, b, c] = corners;
+        let cos = (b - a).cross(c - a).normalize_or_zero().dot(self.u.cross(self.v)).abs().max(1e-3);
+        let shift = 2.0 * plane_tol * (1.0 - cos * cos).sqrt() / cos;
+        let widen = (shift / nearest).min(PI);
         let width = TAU - gap + 2.0 * widen;
         if width >= PI {
             return Some(Span::Full);

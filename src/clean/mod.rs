@@ -221,6 +221,7 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
         report.rounds += 1;
     }
     report.converged = round.report.repairs() == 0;
+    report.retriggered = round.report.repair_counts().iter().filter(|&&(_, n)| n > 0).map(|&(name, n)| (name.to_string(), n)).collect();
     Ok((round.mesh, report))
 }
 
