@@ -27,7 +27,12 @@
 //! A step can enable another that ran before it (a zip makes two patches overlap,
 //! a weld lets an edge flip), so the whole pipeline repeats until a round repairs
 //! nothing, at most [`MAX_ROUNDS`] times: cleaning a cleaned mesh then changes
-//! nothing (the report says whether the last round was clean).
+//! nothing (the report says whether the last round was clean, and if not,
+//! `retriggered` names each repair the last round still made).
+//!
+//! Every step is near-linear in triangles at any valence: a fan around one point
+//! (a big polygon face, a cone's apex) costs what a grid does
+//! ([`hub_pairs`]; `benches/clean.rs`, docs/performance.md).
 //!
 //! Keep-rules are deterministic: the smallest index survives (vertex, point or
 //! triangle). Same input and parameters give the same bytes.

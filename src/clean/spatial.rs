@@ -130,6 +130,9 @@ pub(crate) fn cluster_points(points: &[Vec3], ids: &[u32], tol: f32) -> Vec<u32>
 /// closer than both their `limit`s (one per entry of `ids`; used when `tol > 0`).
 pub(crate) fn cluster_points_limited(points: &[Vec3], ids: &[u32], tol: f32, limit: Option<&[f32]>) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..ids.len() as u32).collect();
+    // No pair joins beyond the largest limit: cells that small keep a dense rim's
+    // points few per cell.
+    let tol = limit.map_or(tol, |l| l.iter().copied().fold(0.0, f32::max).min(tol));
     if tol > 0.0 {
         cluster_grid(points, ids, tol, limit, &mut parent);
     } else {
