@@ -84,3 +84,38 @@ fn demo_cabin_cleans_and_stays_clean() {
     let (_, again) = clean_mesh(&cleaned, &CleanParams::cad()).unwrap();
     assert_eq!(again.repairs(), 0, "second clean repaired: {}", again.summary());
 }
+
+/// One OBJ face of 100k corners (the loader fans it from its first corner):
+/// `clean` finishes, and when it stops at the round limit it says on stderr,
+/// as in the report, which repairs the last round still made.
+#[test]
+fn clean_of_a_huge_polygon_face_names_what_kept_retriggering() {
+    let dir = Scratch::new("clean-polygon");
+    let (obj, out, report) = (dir.path("polygon.obj"), dir.path("out.obj"), dir.path("report.json"));
+    let n = 100_000;
+    let mut text = String::new();
+    for i in 0..n {
+        let a = std::f64::consts::TAU * i as f64 / n as f64;
+        text += &format!("v {} 0 {}\n", a.cos(), -a.sin());
+    }
+    text += "f";
+    (1..=n).for_each(|i| text += &format!(" {i}"));
+    text += "\n";
+    std::fs::write(&obj, text).unwrap();
+    let run = prtbake(&["clean", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(r["input_triangles"], n - 2);
+    let retriggered = r["retriggered"].as_array().unwrap();
+    if r["converged"] == true {
+        assert!(retriggered.is_empty() && !stderr.contains("warning"), "{stderr}");
+        return;
+    }
+    assert!(!retriggered.is_empty(), "{r}");
+    assert!(stderr.contains("warning") && stderr.contains("polygon.obj"), "{stderr}");
+    for entry in retriggered {
+        let (name, count) = (entry[0].as_str().unwrap(), entry[1].as_u64().unwrap());
+        assert!(count > 0 && stderr.contains(&format!("{name} {count}")), "{name} {count}: {stderr}");
+    }
+}

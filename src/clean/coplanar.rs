@@ -2,8 +2,10 @@
 //! tessellated twice at different densities, or two CAD patches overlapping.
 //!
 //! Broad phase: an AABB tree over the triangles, boxes padded by the plane
-//! tolerance. Narrow phase: a pair is *coplanar* when each triangle's corners lie
-//! within the plane tolerance of the other's plane; its overlap is the area of the
+//! tolerance, except around high-valence points, where angular sectors replace
+//! the boxes that a fan's triangles all share ([`super::hub_pairs`]). Narrow
+//! phase: a pair is *coplanar* when each triangle's corners lie within the plane
+//! tolerance of the other's plane; its overlap is the area of the
 //! intersection polygon (the other triangle clipped against this one in this one's
 //! plane, Sutherland–Hodgman, in f64). Pairs overlapping by less than
 //! [`OVERLAP_EPS`] of the smaller area are neighbours that merely touch.
@@ -19,7 +21,8 @@
 //!
 //! Overlapping pairs left after removal are reported as partial overlaps.
 
-use super::spatial::{Aabb, AabbTree};
+use super::hub_pairs;
+use super::spatial::Aabb;
 use super::work::Work;
 use super::OverlapReport;
 use glam::{DVec2, DVec3};
@@ -41,6 +44,8 @@ pub(crate) struct CoplanarOutcome {
     /// Largest partial overlaps first, at most [`MAX_LISTED_OVERLAPS`].
     pub partial: Vec<OverlapReport>,
     pub partial_count: usize,
+    /// Candidate pairs the broad phase enumerated: the step's work.
+    pub pairs_enumerated: usize,
 }
 
 /// A triangle's plane frame: origin, in-plane axes `u`, `v` and unit normal `n`.
@@ -76,7 +81,7 @@ pub(crate) fn remove_covered_coplanar(work: &mut Work, plane_tol: f32, keep_two_
     let n = work.tris.len();
     let corners: Vec<[DVec3; 3]> = (0..n).map(|t| work.tri_positions(t).map(|p| p.as_dvec3())).collect();
     let frames: Vec<Option<Frame>> = (0..n).map(|t| if work.tri_alive[t] { Frame::of(corners[t]) } else { None }).collect();
-    let pairs = find_overlapping_pairs(work, &corners, &frames, plane_tol as f64, keep_two_sided);
+    let (pairs, enumerated) = find_overlapping_pairs(work, &corners, &frames, plane_tol as f64, keep_two_sided);
 
     // Adjacency in CSR form: for each triangle, its overlapping partners and areas.
     let mut start = vec![0usize; n + 1];
@@ -96,7 +101,7 @@ pub(crate) fn remove_covered_coplanar(work: &mut Work, plane_tol: f32, keep_two_
         fill[p.b as usize] += 1;
     }
 
-    let mut out = CoplanarOutcome::default();
+    let mut out = CoplanarOutcome { pairs_enumerated: enumerated, ..CoplanarOutcome::default() };
     if remove {
         // Highest index first: the lowest index of a mutually covering set survives.
         for t in (0..n).rev() {
@@ -142,42 +147,38 @@ struct Pair {
     location: DVec3,
 }
 
+/// The overlapping coplanar pairs, and the number of candidate pairs the broad phase enumerated.
 fn find_overlapping_pairs(
     work: &Work,
     corners: &[[DVec3; 3]],
     frames: &[Option<Frame>],
     plane_tol: f64,
     keep_two_sided: bool,
-) -> Vec<Pair> {
+) -> (Vec<Pair>, usize) {
     let pad = plane_tol as f32;
     let boxes: Vec<Aabb> = (0..work.tris.len())
         .map(|t| if frames[t].is_some() { Aabb::of_points(&work.tri_positions(t), pad) } else { Aabb::EMPTY })
         .collect();
-    let tree = AabbTree::build(boxes.clone());
+    let points: Vec<[u32; 3]> = (0..work.tris.len()).map(|t| work.tri_points(t)).collect();
+    let candidates = hub_pairs::candidate_pairs(&points, corners, &boxes, plane_tol);
     let mut pairs = Vec::new();
-    let mut found = Vec::new();
-    for a in 0..work.tris.len() {
-        let Some(fa) = frames[a] else { continue };
-        found.clear();
-        tree.query(&boxes[a], &mut found);
-        found.sort_unstable();
-        for &b in found.iter().filter(|&&b| b as usize > a) {
-            let Some(fb) = frames[b as usize] else { continue };
-            if keep_two_sided && fa.n.dot(fb.n) < 0.0 {
-                continue;
-            }
-            let on_plane = |f: &Frame, ps: &[DVec3; 3]| ps.iter().all(|&p| (p - f.o).dot(f.n).abs() <= plane_tol);
-            if !on_plane(&fa, &corners[b as usize]) || !on_plane(&fb, &corners[a]) {
-                continue;
-            }
-            let poly = clip_to_triangle(&fa, corners[a], corners[b as usize]);
-            let (area, centroid) = polygon_area_centroid(&poly);
-            if area > OVERLAP_EPS * fa.area.min(fb.area) {
-                pairs.push(Pair { a: a as u32, b, area, location: fa.unproject(centroid) });
-            }
+    for &(a, b) in &candidates.pairs {
+        let (a, b) = (a as usize, b as usize);
+        let (Some(fa), Some(fb)) = (frames[a], frames[b]) else { continue };
+        if keep_two_sided && fa.n.dot(fb.n) < 0.0 {
+            continue;
+        }
+        let on_plane = |f: &Frame, ps: &[DVec3; 3]| ps.iter().all(|&p| (p - f.o).dot(f.n).abs() <= plane_tol);
+        if !on_plane(&fa, &corners[b]) || !on_plane(&fb, &corners[a]) {
+            continue;
+        }
+        let poly = clip_to_triangle(&fa, corners[a], corners[b]);
+        let (area, centroid) = polygon_area_centroid(&poly);
+        if area > OVERLAP_EPS * fa.area.min(fb.area) {
+            pairs.push(Pair { a: a as u32, b: b as u32, area, location: fa.unproject(centroid) });
         }
     }
-    pairs
+    (pairs, candidates.enumerated)
 }
 
 /// The part of triangle `other` inside triangle `this`, in `this`'s plane frame.

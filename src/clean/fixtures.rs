@@ -530,3 +530,38 @@ pub fn large_torus(min_triangles: usize) -> Fixture {
     };
     Fixture { name: "large_torus", mesh: b.mesh, params: CleanParams::default(), expected }
 }
+
+/// The shapes of high-valence fans, for the clean-up's scaling tests and benches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FanShape {
+    /// A unit disc in the plane y = 0: `n` triangles around its centre, the rim a
+    /// circle (every triangle a sliver with a 360°/n apex angle once n > 72).
+    Disc,
+    /// The side of a cone (unit radius, unit height, open base): `n` triangles around the apex.
+    Cone,
+    /// One convex `n`-gon face on the unit circle triangulated as the OBJ loader
+    /// does it, as a fan from its first corner: `n - 2` triangles.
+    Polygon,
+}
+
+/// A fan of `n` rim points (see [`FanShape`]); every vertex normal faces +y.
+pub fn fan(shape: FanShape, n: usize) -> Mesh {
+    let mut b = Builder::new(materials());
+    let g = b.group("fan");
+    let rim: Vec<u32> = (0..n)
+        .map(|i| {
+            let a = 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+            b.vertex(Vec3::new(a.cos() as f32, 0.0, -a.sin() as f32), Vec3::Y)
+        })
+        .collect();
+    let apex = match shape {
+        FanShape::Disc => Some(b.vertex(Vec3::ZERO, Vec3::Y)),
+        FanShape::Cone => Some(b.vertex(Vec3::Y, Vec3::Y)),
+        FanShape::Polygon => None,
+    };
+    match apex {
+        Some(apex) => (0..n).for_each(|i| b.tri([apex, rim[i], rim[(i + 1) % n]], 0, g)),
+        None => (1..n - 1).for_each(|i| b.tri([rim[0], rim[i], rim[i + 1]], 0, g)),
+    }
+    b.mesh
+}

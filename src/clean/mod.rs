@@ -27,7 +27,12 @@
 //! A step can enable another that ran before it (a zip makes two patches overlap,
 //! a weld lets an edge flip), so the whole pipeline repeats until a round repairs
 //! nothing, at most [`MAX_ROUNDS`] times: cleaning a cleaned mesh then changes
-//! nothing (the report says whether the last round was clean).
+//! nothing (the report says whether the last round was clean, and if not,
+//! `retriggered` names each repair the last round still made).
+//!
+//! Every step is near-linear in triangles at any valence: a fan around one point
+//! (a big polygon face, a cone's apex) costs what a grid does
+//! ([`hub_pairs`]; `benches/clean.rs`, docs/performance.md).
 //!
 //! Keep-rules are deterministic: the smallest index survives (vertex, point or
 //! triangle). Same input and parameters give the same bytes.
@@ -48,6 +53,7 @@ mod coplanar;
 mod degenerate;
 mod duplicates;
 pub mod fixtures;
+mod hub_pairs;
 mod orient;
 mod refine;
 mod report;
@@ -220,6 +226,7 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
         report.rounds += 1;
     }
     report.converged = round.report.repairs() == 0;
+    report.retriggered = round.report.repair_counts().iter().filter(|&&(_, n)| n > 0).map(|&(name, n)| (name.to_string(), n)).collect();
     Ok((round.mesh, report))
 }
 
@@ -342,6 +349,7 @@ fn remove_covered(work: &mut Work, plane_tol: f32, params: &CleanParams, r: &mut
     r.covered_coplanar_removed += cop.removed;
     r.partial_overlaps = cop.partial;
     r.partial_overlap_count = cop.partial_count;
+    r.coplanar_pairs_enumerated += cop.pairs_enumerated;
     cop.removed_area
 }
 

@@ -102,6 +102,11 @@ pub struct CleanReport {
     pub rounds: usize,
     /// True when the last round repaired nothing: cleaning the output again is a no-op.
     pub converged: bool,
+    /// When not converged: the repairs the last round still made, by name and count.
+    pub retriggered: Vec<(String, usize)>,
+    /// Work done: candidate pairs the coplanar broad phase enumerated, all rounds.
+    /// Near-linear in triangles at any valence (a fan's triangles all share a box).
+    pub coplanar_pairs_enumerated: usize,
     /// Resolved tolerances of the first round (world units).
     pub weld_tolerance: f32,
     pub coplanar_tolerance: f32,
@@ -116,18 +121,25 @@ const LISTED_ANGLE_DEG: f32 = 10.0;
 const LISTED_EDGE_FRACTION: f32 = 0.5;
 
 impl CleanReport {
+    /// Every repair count by name, as in the JSON report.
+    pub fn repair_counts(&self) -> [(&'static str, usize); 10] {
+        [
+            ("welded_vertices", self.welded_vertices),
+            ("degenerate_removed", self.degenerate_removed),
+            ("duplicates_removed", self.duplicates_removed),
+            ("flipped_duplicates_removed", self.flipped_duplicates_removed),
+            ("covered_coplanar_removed", self.covered_coplanar_removed),
+            ("zipped_edges", self.zipped_edges),
+            ("tjunctions_fixed", self.tjunctions_fixed),
+            ("edges_split", self.edges_split),
+            ("sliver_flips", self.sliver_flips),
+            ("triangles_flipped", self.triangles_flipped),
+        ]
+    }
+
     /// The number of repairs made: zero when cleaning changed nothing.
     pub fn repairs(&self) -> usize {
-        self.welded_vertices
-            + self.degenerate_removed
-            + self.duplicates_removed
-            + self.flipped_duplicates_removed
-            + self.covered_coplanar_removed
-            + self.zipped_edges
-            + self.tjunctions_fixed
-            + self.edges_split
-            + self.sliver_flips
-            + self.triangles_flipped
+        self.repair_counts().iter().map(|&(_, n)| n).sum()
     }
 
     /// Adds a later round's repairs; takes its description of what remains.
@@ -145,6 +157,7 @@ impl CleanReport {
         self.slivers_fixed += later.slivers_fixed;
         self.sliver_flips += later.sliver_flips;
         self.triangles_flipped += later.triangles_flipped;
+        self.coplanar_pairs_enumerated += later.coplanar_pairs_enumerated;
         self.area_before -= removed_area;
         self.output_triangles = later.output_triangles;
         self.output_vertices = later.output_vertices;
@@ -156,6 +169,15 @@ impl CleanReport {
         self.non_manifold_edges = later.non_manifold_edges;
         self.area_after = later.area_after;
         self.worst = later.worst.clone();
+    }
+
+    /// "converged", or which repairs kept re-triggering in the last round.
+    pub fn convergence(&self) -> String {
+        if self.converged {
+            return "converged".into();
+        }
+        let names: Vec<String> = self.retriggered.iter().map(|(name, n)| format!("{name} {n}")).collect();
+        format!("NOT converged; still repairing in the last round: {}", names.join(", "))
     }
 
     /// A human-readable multi-line summary.
@@ -188,7 +210,7 @@ impl CleanReport {
             "boundary edges         {} -> {}, non-manifold edges {}",
             self.boundary_edges_before, self.boundary_edges_after, self.non_manifold_edges
         );
-        let _ = writeln!(s, "rounds                 {} ({})", self.rounds, if self.converged { "converged" } else { "NOT converged" });
+        let _ = writeln!(s, "rounds                 {} ({})", self.rounds, self.convergence());
         let rel = if self.area_before > 0.0 { (self.area_after - self.area_before) / self.area_before } else { 0.0 };
         let _ = writeln!(s, "area                   {:.6e} -> {:.6e} ({:+.2e} relative)", self.area_before, self.area_after, rel);
         for o in self.partial_overlaps.iter().take(WORST_PER_KIND) {

@@ -123,9 +123,18 @@ impl AabbTree {
 /// Returns, for each entry of `ids`, the smallest id of its cluster: the
 /// deterministic representative. `tol == 0` merges bit-identical positions only.
 pub(crate) fn cluster_points(points: &[Vec3], ids: &[u32], tol: f32) -> Vec<u32> {
+    cluster_points_limited(points, ids, tol, None)
+}
+
+/// [`cluster_points`], except that two entries join only when they are also
+/// closer than both their `limit`s (one per entry of `ids`; used when `tol > 0`).
+pub(crate) fn cluster_points_limited(points: &[Vec3], ids: &[u32], tol: f32, limit: Option<&[f32]>) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..ids.len() as u32).collect();
+    // No pair joins beyond the largest limit: cells that small keep a dense rim's
+    // points few per cell.
+    let tol = limit.map_or(tol, |l| l.iter().copied().fold(0.0, f32::max).min(tol));
     if tol > 0.0 {
-        cluster_grid(points, ids, tol, &mut parent);
+        cluster_grid(points, ids, tol, limit, &mut parent);
     } else {
         cluster_exact(points, ids, &mut parent);
     }
@@ -149,7 +158,7 @@ fn cluster_exact(points: &[Vec3], ids: &[u32], parent: &mut [u32]) {
     }
 }
 
-fn cluster_grid(points: &[Vec3], ids: &[u32], tol: f32, parent: &mut [u32]) {
+fn cluster_grid(points: &[Vec3], ids: &[u32], tol: f32, limit: Option<&[f32]>, parent: &mut [u32]) {
     // Cells of side 2·tol: a point within `tol` of p lies, per axis, in p's cell or in
     // the one neighbour on the side of p's nearer cell wall, so 8 cells are searched.
     let inv = 0.5 / tol as f64;
@@ -179,7 +188,8 @@ fn cluster_grid(points: &[Vec3], ids: &[u32], tol: f32, parent: &mut [u32]) {
                     continue;
                 }
                 let q = points[ids[j as usize] as usize].as_dvec3();
-                if p.distance_squared(q) <= tol2 {
+                let within_limits = || limit.is_none_or(|l| p.distance(q) < l[i].min(l[j as usize]) as f64);
+                if p.distance_squared(q) <= tol2 && within_limits() {
                     union(parent, i as u32, j);
                 }
             }

@@ -4,7 +4,10 @@
 //! Only boundary edges (used by one triangle) and their end points take part, so
 //! a closed surface is never touched. Two steps:
 //! 1. *Weld boundary points* closer than the zip tolerance (representative: the
-//!    smallest point id, i.e. the older patch keeps its position).
+//!    smallest point id, i.e. the older patch keeps its position), and closer
+//!    than either point's shortest boundary edge: a boundary whose own edges are
+//!    shorter than the tolerance (a finely tessellated rim) is not a crack, and
+//!    welding along it would collapse it.
 //! 2. *Split at T-junctions*: a boundary point within the tolerance of the interior
 //!    of another triangle's boundary edge (and farther than the tolerance from both
 //!    of its ends) splits that triangle there. The split vertex takes the point
@@ -14,7 +17,7 @@
 //!    and the area it describes is kept. Repeated until nothing splits, since a
 //!    triangle splits one edge per pass.
 
-use super::spatial::{cluster_points, Aabb, AabbTree};
+use super::spatial::{cluster_points_limited, Aabb, AabbTree};
 use super::work::{count_boundary_and_non_manifold, edge_runs, sorted_edges, EdgeUse, Work};
 
 /// Upper bound on T-junction passes (each pass splits one edge per triangle).
@@ -68,7 +71,17 @@ fn weld_boundary_points(work: &mut Work, tol: f32) -> (usize, usize) {
     let mut boundary_points: Vec<u32> = boundary_edges(&edges).flat_map(|e| [e.lo, e.hi]).collect();
     boundary_points.sort_unstable();
     boundary_points.dedup();
-    let reps = cluster_points(&work.points, &boundary_points, tol);
+    // A point joins only points closer than its shortest boundary edge: welding
+    // the two ends of a boundary edge closes no crack, it collapses the boundary
+    // (a rim finer than the tolerance would collapse to a point).
+    let mut shortest = vec![f32::INFINITY; work.points.len()];
+    for e in boundary_edges(&edges) {
+        let len = work.points[e.lo as usize].distance(work.points[e.hi as usize]);
+        shortest[e.lo as usize] = shortest[e.lo as usize].min(len);
+        shortest[e.hi as usize] = shortest[e.hi as usize].min(len);
+    }
+    let limit: Vec<f32> = boundary_points.iter().map(|&p| shortest[p as usize]).collect();
+    let reps = cluster_points_limited(&work.points, &boundary_points, tol, Some(&limit));
     let mut remap: Vec<u32> = (0..work.points.len() as u32).collect();
     let mut welded = 0;
     for (&p, &r) in boundary_points.iter().zip(&reps) {

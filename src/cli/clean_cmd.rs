@@ -26,7 +26,12 @@ pub struct CleanConfig {
 
 /// Cleans `mesh` (loaded from `source`, named in errors).
 pub fn clean_loaded(mesh: &Mesh, params: &CleanParams, source: &Path) -> anyhow::Result<(Mesh, CleanReport)> {
-    clean_mesh(mesh, params).with_context(|| format!("{}: cannot clean", source.display()))
+    let (cleaned, report) = clean_mesh(mesh, params).with_context(|| format!("{}: cannot clean", source.display()))?;
+    if !report.converged {
+        // Cleaning the output again would still change it: say which repair keeps coming back.
+        eprintln!("warning: {}: clean stopped after {} rounds, {}", source.display(), report.rounds, report.convergence());
+    }
+    Ok((cleaned, report))
 }
 
 /// Output formats of a cleaned mesh, by extension.
