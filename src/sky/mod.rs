@@ -23,6 +23,7 @@
 //! elevation in degrees, elevation = 90° − zenith.
 
 pub mod day;
+pub mod overcast;
 pub mod preetham;
 pub mod sky_sh;
 pub mod solar;
@@ -32,6 +33,7 @@ pub mod time;
 pub mod timeline;
 
 pub use day::{day_directions, day_steps, elevation_azimuth, parse_directions, steps_from_directions, DirectionsError, SkyFrame};
+pub use overcast::{CieOvercast, TYPICAL_OVERCAST_LUX};
 pub use preetham::{PreethamSky, DEFAULT_TURBIDITY};
 pub use sky_sh::{preetham_sky, SunSky};
 pub use solar::{default_north, solar_position, sun_direction, Site, SolarPosition, DEFAULT_DELTA_T_S};
