@@ -10,6 +10,7 @@ pub mod export_cmd;
 pub mod generate_cmd;
 pub mod inspect_cmd;
 pub mod merge_cmd;
+pub mod panel_cmd;
 pub mod shard_cmd;
 pub mod sun_cmd;
 pub mod verify_cmd;

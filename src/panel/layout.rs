@@ -159,6 +159,22 @@ impl PanelLayout {
     }
 }
 
+/// Texels for `long_side` along the panel's long edge and as many along the
+/// short edge as keep texels square (planar box), at least 1.
+pub fn default_texels(mesh: &Mesh, triangles: &[u32], long_side: u32) -> (u32, u32) {
+    let (mut weighted_normal, mut centroid, mut area) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
+    for &t in triangles {
+        let [a, b, c] = mesh.triangle_positions(t as usize);
+        let cross = (b - a).cross(c - a);
+        weighted_normal += cross;
+        centroid += (a + b + c) / 3.0 * cross.length();
+        area += cross.length();
+    }
+    let (Some(front), true) = (weighted_normal.try_normalize(), area > 0.0) else { return (long_side, long_side) };
+    let [long, short] = planar_corners(mesh, triangles, centroid / area, front).1;
+    (long_side, ((long_side as f32 * short / long.max(1e-12)).round() as u32).clamp(1, long_side))
+}
+
 /// The panel's triangle corners in UV space, when the mesh has UVs and they span an area.
 fn uv_corners(mesh: &Mesh, triangles: &[u32]) -> Option<Vec<Vec2>> {
     if mesh.uvs.is_empty() {
