@@ -6,6 +6,7 @@ pub mod bake_cmd;
 pub mod chart_cmd;
 pub mod clean_cmd;
 pub mod demo_cmd;
+mod demo_panel;
 pub mod export_cmd;
 pub mod generate_cmd;
 pub mod inspect_cmd;
