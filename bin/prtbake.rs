@@ -628,20 +628,11 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
                 a.lon.unwrap_or(acropolis.longitude_deg),
                 a.elevation.unwrap_or(acropolis.elevation_m),
             );
-            if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
-                bail!("--lat {lat} / --lon {lon}: latitude must be within -90..=90 and longitude within -180..=180");
-            }
+            check_lat_lon(lat, lon)?;
             if !elevation.is_finite() || !(-500.0..=9000.0).contains(&elevation) {
                 bail!("--elevation {elevation}: expected metres within -500..=9000");
             }
-            let date = match &a.date {
-                Some(d) => sky::parse_date(d)?,
-                None => sky::default_date(),
-            };
-            let tz_minutes = match &a.tz {
-                Some(tz) => sky::parse_tz(tz)?,
-                None => sky::athens_utc_offset_minutes(date),
-            };
+            let (date, tz_minutes) = date_and_tz(a.date.as_deref(), a.tz.as_deref())?;
             let steps = match (a.step, a.steps) {
                 (_, Some(n)) => sky::StepSpec::Count(n),
                 (Some(m), None) => sky::StepSpec::Step(m),
@@ -657,20 +648,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
             }
         }
     };
-    let north = match &a.north {
-        None => None,
-        Some(text) => {
-            let v: Vec<f32> = text
-                .split(',')
-                .map(|x| x.trim().parse::<f32>())
-                .collect::<Result<_, _>>()
-                .with_context(|| format!("--north {text:?}: expected X,Y,Z"))?;
-            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-                bail!("--north {text:?}: expected three finite numbers X,Y,Z");
-            }
-            Some(glam::Vec3::new(v[0], v[1], v[2]))
-        }
-    };
+    let north = a.north.as_deref().map(|text| parse_xyz("--north", text)).transpose()?;
     if !(2.0..=10.0).contains(&a.turbidity) {
         bail!("--turbidity {}: expected 2..=10", a.turbidity);
     }
@@ -792,6 +770,20 @@ struct PanelArgs {
     force: bool,
 }
 
+fn check_lat_lon(lat: f64, lon: f64) -> anyhow::Result<()> {
+    if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
+        anyhow::bail!("--lat {lat} / --lon {lon}: latitude must be within -90..=90 and longitude within -180..=180");
+    }
+    Ok(())
+}
+
+/// `--date` (default 2026-03-20) and `--tz` (default Athens's offset on that date).
+fn date_and_tz(date: Option<&str>, tz: Option<&str>) -> anyhow::Result<(prtbake::sky::LocalDate, i32)> {
+    let date = date.map(prtbake::sky::parse_date).transpose()?.unwrap_or_else(prtbake::sky::default_date);
+    let tz = tz.map(prtbake::sky::parse_tz).transpose()?.unwrap_or_else(|| prtbake::sky::athens_utc_offset_minutes(date));
+    Ok((date, tz))
+}
+
 fn parse_xyz(flag: &str, text: &str) -> anyhow::Result<glam::Vec3> {
     use anyhow::{bail, Context};
     let v: Vec<f32> = text
@@ -815,20 +807,11 @@ fn panel_config(a: PanelArgs) -> anyhow::Result<cli::panel_cmd::PanelConfig> {
         let time = a.time.as_deref().context("--sky needs --time HH:MM")?;
         let acropolis = sky::Site::acropolis();
         let (lat, lon) = (a.lat.unwrap_or(acropolis.latitude_deg), a.lon.unwrap_or(acropolis.longitude_deg));
-        if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
-            bail!("--lat {lat} / --lon {lon}: latitude must be within -90..=90 and longitude within -180..=180");
-        }
+        check_lat_lon(lat, lon)?;
         if !(2.0..=10.0).contains(&a.turbidity) {
             bail!("--turbidity {}: expected 2..=10", a.turbidity);
         }
-        let date = match &a.date {
-            Some(d) => sky::parse_date(d)?,
-            None => sky::default_date(),
-        };
-        let tz_minutes = match &a.tz {
-            Some(tz) => sky::parse_tz(tz)?,
-            None => sky::athens_utc_offset_minutes(date),
-        };
+        let (date, tz_minutes) = date_and_tz(a.date.as_deref(), a.tz.as_deref())?;
         let site = sky::Site::new(lat, lon, acropolis.elevation_m);
         PanelLight::Sky {
             date,

@@ -199,16 +199,21 @@ fn lambertian_panel_reflects_what_its_transfer_predicts() {
     eprintln!("lambertian vs transfer: worst |gap| / tolerance = {worst:.2}");
 }
 
+/// A closed 2 m box around a panel of `nu × nv` cells.
+fn furnace_box(nu: u32, nv: u32) -> Setup {
+    let mut b = MeshBuilder::new(vec![material("panel", 1.0, MaterialRole::Panel), material("box", 1.0, MaterialRole::Opaque)]);
+    let wall = b.material("box");
+    b.cuboid("box", Vec3::new(-0.5, -0.5, -0.5), Vec3::new(1.5, 1.5, 1.5), 4.0, wall);
+    add_panel(&mut b, 0.0, nu, nv);
+    Setup::new(with_uvs(b.mesh))
+}
+
 /// The furnace: inside a closed box whose walls all leave radiance `L`, any
 /// BRDF of directional albedo `a(wo)` reflects `a(wo) · L` (a from the energy
 /// quadrature); for the coating, its 2° text table, its MERL file and a Lambertian.
 #[test]
 fn furnace_returns_albedo_times_radiance_for_every_brdf() {
-    let mut b = MeshBuilder::new(vec![material("panel", 1.0, MaterialRole::Panel), material("box", 1.0, MaterialRole::Opaque)]);
-    let wall = b.material("box");
-    b.cuboid("box", Vec3::new(-0.5, -0.5, -0.5), Vec3::new(1.5, 1.5, 1.5), 4.0, wall);
-    add_panel(&mut b, 0.0, 3, 1);
-    let setup = Setup::new(with_uvs(b.mesh));
+    let setup = furnace_box(3, 1);
     let l = [2.0f32, 1.0, 0.5];
     // The box's faces point outward: its inside is the back, lit as in a window-mode bake.
     let interior = Interior { two_sided: true, ..setup.interior(vec![l; setup.mesh.vertex_count()]) };
@@ -307,11 +312,7 @@ fn sun_disk_glare_needs_light_sampling() {
 /// well (slope ≤ −0.5; measured −0.92 on this smooth integrand).
 #[test]
 fn error_falls_as_one_over_root_samples() {
-    let mut b = MeshBuilder::new(vec![material("panel", 1.0, MaterialRole::Panel), material("box", 1.0, MaterialRole::Opaque)]);
-    let wall = b.material("box");
-    b.cuboid("box", Vec3::new(-0.5, -0.5, -0.5), Vec3::new(1.5, 1.5, 1.5), 4.0, wall);
-    add_panel(&mut b, 0.0, 15, 7);
-    let setup = Setup::new(with_uvs(b.mesh));
+    let setup = furnace_box(15, 7);
     let interior = Interior { two_sided: true, ..setup.interior(vec![[1.0; 3]; setup.mesh.vertex_count()]) };
     let env = Environment::overcast(1.0);
     let layout = setup.layout(16, 8);
