@@ -1,6 +1,7 @@
 //! `prtbake demo`: the README's main job. Generates the demo cabin
 //! (src/fixtures/cabin.rs) with its injected defects, cleans it inline, bakes it in window mode and writes
-//! `cabin.prtb` and `summary.json` into the output folder.
+//! `cabin.prtb` and `summary.json` into the output folder, with the LCD panel's
+//! images under a low sun and an overcast sky (`demo_panel`, docs/panel.md).
 
 use std::path::Path;
 

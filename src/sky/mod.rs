@@ -1,6 +1,7 @@
 //! Sun and sky for a day's time lapse: dates and time zones, the sun's
 //! position (NREL SPA), the steps of the day, a clear-sky model (Preetham et
-//! al. 1999) with the sun's colour, and the sky projected to SH.
+//! al. 1999) with the sun's colour, the CIE overcast sky (`overcast`), and the
+//! sky projected to SH.
 //!
 //! # World frame
 //! Right-handed. `up` is the zenith (default +Y; +Z for Z-up scenes) and
