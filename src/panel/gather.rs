@@ -116,7 +116,8 @@ impl<'a> PanelGather<'a> {
         self.samples
     }
 
-    /// Rays traced so far (reflected, disk and shadow rays, glass continuations).
+    /// Gather rays traced so far: the BRDF draws and the sun-disk draws (not
+    /// their continuations through glass, nor the shadow rays from interior hits).
     pub fn rays(&self) -> u64 {
         self.sums.iter().map(|s| s.rays).sum()
     }
