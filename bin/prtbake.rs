@@ -415,6 +415,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// The LCD panel's reflections by final gather (measured BRDF, PRT-lit interior, sky through the windows) and its contrast ratio.
+    #[command(allow_negative_numbers = true)]
+    Panel(PanelArgs),
     /// Generate the demo cabin, bake it in window mode and write a bundle and a summary.
     #[command(allow_negative_numbers = true)]
     Demo {
@@ -629,20 +632,11 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
                 a.lon.unwrap_or(acropolis.longitude_deg),
                 a.elevation.unwrap_or(acropolis.elevation_m),
             );
-            if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
-                bail!("--lat {lat} / --lon {lon}: latitude must be within -90..=90 and longitude within -180..=180");
-            }
+            check_lat_lon(lat, lon)?;
             if !elevation.is_finite() || !(-500.0..=9000.0).contains(&elevation) {
                 bail!("--elevation {elevation}: expected metres within -500..=9000");
             }
-            let date = match &a.date {
-                Some(d) => sky::parse_date(d)?,
-                None => sky::default_date(),
-            };
-            let tz_minutes = match &a.tz {
-                Some(tz) => sky::parse_tz(tz)?,
-                None => sky::athens_utc_offset_minutes(date),
-            };
+            let (date, tz_minutes) = date_and_tz(a.date.as_deref(), a.tz.as_deref())?;
             let steps = match (a.step, a.steps) {
                 (_, Some(n)) => sky::StepSpec::Count(n),
                 (Some(m), None) => sky::StepSpec::Step(m),
@@ -658,20 +652,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
             }
         }
     };
-    let north = match &a.north {
-        None => None,
-        Some(text) => {
-            let v: Vec<f32> = text
-                .split(',')
-                .map(|x| x.trim().parse::<f32>())
-                .collect::<Result<_, _>>()
-                .with_context(|| format!("--north {text:?}: expected X,Y,Z"))?;
-            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-                bail!("--north {text:?}: expected three finite numbers X,Y,Z");
-            }
-            Some(glam::Vec3::new(v[0], v[1], v[2]))
-        }
-    };
+    let north = a.north.as_deref().map(|text| parse_xyz("--north", text)).transpose()?;
     if !(2.0..=10.0).contains(&a.turbidity) {
         bail!("--turbidity {}: expected 2..=10", a.turbidity);
     }
@@ -708,6 +689,190 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     })
 }
 
+#[derive(clap::Args)]
+#[command(group(clap::ArgGroup::new("light").required(true).args(["env", "sky", "overcast"])))]
+struct PanelArgs {
+    /// A baked bundle (.prtb) with the panel among its materials.
+    bundle: PathBuf,
+    /// The panel: materials or groups whose name matches this glob (default: materials with the panel role).
+    #[arg(long)]
+    panel: Option<String>,
+    /// The driver's eye, X,Y,Z in the bundle's frame (metres, +Y up).
+    #[arg(long, allow_hyphen_values = true)]
+    eye: String,
+    /// Environment map (.exr or .hdr, equirect) outside the windows.
+    #[arg(long, value_name = "MAP")]
+    env: Option<PathBuf>,
+    /// The Preetham clear sky and sun at --time (and --date, --tz, --lat, --lon).
+    #[arg(long)]
+    sky: bool,
+    /// The CIE overcast sky (no sun) of --lux horizontal illuminance.
+    #[arg(long)]
+    overcast: bool,
+    /// Horizontal illuminance of --overcast, lux.
+    #[arg(long, default_value_t = 10_000.0, requires = "overcast")]
+    lux: f64,
+    /// Local time HH:MM of --sky.
+    #[arg(long, requires = "sky")]
+    time: Option<String>,
+    /// Local date YYYY-MM-DD of --sky (default 2026-03-20).
+    #[arg(long, requires = "sky")]
+    date: Option<String>,
+    /// UTC offset ±HH:MM of --sky (default: Athens's on that date).
+    #[arg(long, allow_hyphen_values = true, requires = "sky")]
+    tz: Option<String>,
+    /// Latitude of --sky, degrees north (default: the Acropolis).
+    #[arg(long, allow_hyphen_values = true, requires = "sky")]
+    lat: Option<f64>,
+    /// Longitude of --sky, degrees east (default: the Acropolis).
+    #[arg(long, allow_hyphen_values = true, requires = "sky")]
+    lon: Option<f64>,
+    /// Preetham turbidity of --sky, 2..=10.
+    #[arg(long, default_value_t = 3.0)]
+    turbidity: f64,
+    /// The car's heading: turned by this many degrees counter-clockwise (seen from above) under the sky or map.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    yaw: f32,
+    /// The panel's BRDF: `antiglare` (the default coating), a text table or a MERL .binary file.
+    #[arg(long, default_value = "antiglare")]
+    brdf: String,
+    /// Texels WxH (default: 256 along the panel's long side, square texels).
+    #[arg(long)]
+    texels: Option<String>,
+    /// Samples per texel (1..=65536).
+    #[arg(long, default_value_t = 256)]
+    samples: u32,
+    /// Seed of the sample streams.
+    #[arg(long, default_value_t = 1)]
+    seed: u32,
+    /// Display white luminance, cd/m² (typical automotive LCD: 500).
+    #[arg(long, default_value_t = 500.0)]
+    display_white: f32,
+    /// Display black luminance, cd/m² (typical: 0.5).
+    #[arg(long, default_value_t = 0.5)]
+    display_black: f32,
+    /// Contrast ratio below which a texel counts as unreadable.
+    #[arg(long, default_value_t = 3.0)]
+    threshold: f32,
+    /// Reflected radiance (.exr); the contrast-ratio map goes beside it as OUT.cr.png unless --contrast says otherwise.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The contrast-ratio map (.png).
+    #[arg(long)]
+    contrast: Option<PathBuf>,
+    /// Worker threads (0 = all cores). The output does not depend on it.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Statistics as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// No progress on stderr.
+    #[arg(long, short)]
+    quiet: bool,
+    /// Replace read-only outputs.
+    #[arg(long)]
+    force: bool,
+}
+
+fn check_lat_lon(lat: f64, lon: f64) -> anyhow::Result<()> {
+    if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
+        anyhow::bail!("--lat {lat} / --lon {lon}: latitude must be within -90..=90 and longitude within -180..=180");
+    }
+    Ok(())
+}
+
+/// `--date` (default 2026-03-20) and `--tz` (default Athens's offset on that date).
+fn date_and_tz(date: Option<&str>, tz: Option<&str>) -> anyhow::Result<(prtbake::sky::LocalDate, i32)> {
+    let date = date.map(prtbake::sky::parse_date).transpose()?.unwrap_or_else(prtbake::sky::default_date);
+    let tz = tz.map(prtbake::sky::parse_tz).transpose()?.unwrap_or_else(|| prtbake::sky::athens_utc_offset_minutes(date));
+    Ok((date, tz))
+}
+
+fn parse_xyz(flag: &str, text: &str) -> anyhow::Result<glam::Vec3> {
+    use anyhow::{bail, Context};
+    let v: Vec<f32> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("{flag} {text:?}: expected X,Y,Z"))?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        bail!("{flag} {text:?}: expected three finite numbers X,Y,Z");
+    }
+    Ok(glam::Vec3::new(v[0], v[1], v[2]))
+}
+
+fn panel_config(a: PanelArgs) -> anyhow::Result<cli::panel_cmd::PanelConfig> {
+    use anyhow::{bail, Context};
+    use cli::panel_cmd::PanelLight;
+    use prtbake::sky;
+    let light = if let Some(path) = a.env {
+        PanelLight::Map { path, yaw_deg: a.yaw }
+    } else if a.sky {
+        let time = a.time.as_deref().context("--sky needs --time HH:MM")?;
+        let acropolis = sky::Site::acropolis();
+        let (lat, lon) = (a.lat.unwrap_or(acropolis.latitude_deg), a.lon.unwrap_or(acropolis.longitude_deg));
+        check_lat_lon(lat, lon)?;
+        if !(2.0..=10.0).contains(&a.turbidity) {
+            bail!("--turbidity {}: expected 2..=10", a.turbidity);
+        }
+        let (date, tz_minutes) = date_and_tz(a.date.as_deref(), a.tz.as_deref())?;
+        let site = sky::Site::new(lat, lon, acropolis.elevation_m);
+        PanelLight::Sky {
+            date,
+            minutes: sky::parse_hhmm(time).context("--time")?,
+            tz_minutes,
+            site,
+            turbidity: a.turbidity,
+            yaw_deg: a.yaw,
+        }
+    } else {
+        if !(a.lux.is_finite() && a.lux > 0.0) {
+            bail!("--lux {}: expected a positive illuminance", a.lux);
+        }
+        PanelLight::Overcast { lux: a.lux }
+    };
+    if !a.yaw.is_finite() {
+        bail!("--yaw {}: expected degrees", a.yaw);
+    }
+    let texels = match &a.texels {
+        None => None,
+        Some(text) => {
+            let parsed =
+                text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+            match parsed {
+                Some((w, h)) if (1..=4096).contains(&w) && (1..=4096).contains(&h) => Some((w, h)),
+                _ => bail!("--texels {text:?}: expected WxH, each 1..=4096"),
+            }
+        }
+    };
+    let (white, black) = (a.display_white, a.display_black);
+    if !(white.is_finite() && black.is_finite() && black >= 0.0 && white > black) {
+        bail!("--display-white {white} / --display-black {black}: expected 0 <= black < white (cd/m²)");
+    }
+    if !(a.threshold.is_finite() && a.threshold >= 1.0) {
+        bail!("--threshold {}: expected a contrast ratio >= 1", a.threshold);
+    }
+    let contrast = a.contrast.unwrap_or_else(|| cli::panel_cmd::contrast_path(&a.output));
+    Ok(cli::panel_cmd::PanelConfig {
+        bundle: a.bundle,
+        panel: a.panel,
+        eye: parse_xyz("--eye", &a.eye)?,
+        light,
+        brdf: (a.brdf != "antiglare").then(|| PathBuf::from(&a.brdf)),
+        texels,
+        samples: a.samples,
+        seed: a.seed,
+        display: prtbake::panel::Display { white_cd_m2: white, black_cd_m2: black },
+        threshold: a.threshold,
+        output: a.output,
+        contrast,
+        threads: a.threads,
+        json: a.json,
+        quiet: a.quiet,
+        force: a.force,
+    })
+}
+
 fn run(command: Command) -> anyhow::Result<Outcome> {
     match command {
         Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
@@ -721,6 +886,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),
+        Command::Panel(args) => cli::panel_cmd::run(&panel_config(args)?).map(|_| Outcome::Ok),
         Command::Merge { parts, output, layer, threads, force, json } => {
             cli::merge_cmd::run(&cli::merge_cmd::MergeConfig { parts, output, layer, threads, json, force }).map(|_| Outcome::Ok)
         }

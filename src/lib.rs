@@ -15,6 +15,7 @@ pub mod cli;
 pub mod files;
 pub mod fixtures;
 pub mod mesh;
+pub mod panel;
 pub mod sh;
 pub mod sky;
 pub mod verify;

@@ -148,3 +148,47 @@ fn window_patterns_are_stored_as_material_roles() {
     use prtbake::mesh::MaterialRole::{Opaque, Window};
     assert_eq!(roles, [("wall", Opaque, 1.0), ("Glass_Gray", Window, 0.6)]);
 }
+
+/// `prtbake panel` on the two-object scene (the ground as the panel): images
+/// and JSON at 1 and 2 threads, byte-identical; bad panels and eyes refused by name.
+#[test]
+fn panel_gathers_the_ground_and_refuses_bad_input() {
+    let dir = Scratch::new("panel");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let bundle = dir.path("scene.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", bundle.to_str().unwrap(), "--rays", "64", "--bounces", "1", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = |threads: &str, out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["panel", bundle.to_str().unwrap(), "--panel", "grey", "--overcast", "--texels", "16x12", "--samples", "8"];
+        args.extend(["--threads", threads, "-o", out.to_str().unwrap(), "--json"]);
+        args.extend(extra);
+        (prtbake(&args), out)
+    };
+    let (one, exr1) = run("1", "one.exr", &["--eye=1,2,3"]);
+    assert!(one.status.success(), "{}", String::from_utf8_lossy(&one.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
+    assert_eq!(doc["texels_on_panel"], 192);
+    assert_eq!(doc["mapping"], "planar");
+    let r = &doc["readability"];
+    assert!(r["min_contrast_ratio"].as_f64().unwrap() <= r["median_contrast_ratio"].as_f64().unwrap());
+    assert_eq!(r["window_share"], 0.0, "no windows in the open scene");
+    let (two, exr2) = run("2", "two.exr", &["--eye=1,2,3"]);
+    assert!(two.status.success());
+    assert_eq!(std::fs::read(&exr1).unwrap(), std::fs::read(&exr2).unwrap(), "EXR differs between 1 and 2 threads");
+    assert_eq!(std::fs::read(exr1.with_extension("cr.png")).unwrap(), std::fs::read(exr2.with_extension("cr.png")).unwrap());
+
+    let (behind, _) = run("1", "behind.exr", &["--eye=0,-1,0"]);
+    assert_eq!(behind.status.code(), Some(2));
+    let message = String::from_utf8_lossy(&behind.stderr);
+    assert!(message.contains("scene.prtb") && message.contains("behind the panel"), "{message}");
+    let mut args = vec!["panel", bundle.to_str().unwrap(), "--panel", "nav*", "--overcast", "--eye=1,2,3", "-o"];
+    let out = dir.path("none.exr");
+    args.push(out.to_str().unwrap());
+    let none = prtbake(&args);
+    assert_eq!(none.status.code(), Some(2));
+    let message = String::from_utf8_lossy(&none.stderr);
+    assert!(message.contains("scene.prtb") && message.contains("nav*") && message.contains("grey"), "{message}");
+    assert!(!out.exists() && !dir.path("behind.exr").exists(), "no output on error");
+}

@@ -24,7 +24,7 @@ pub mod microfacet;
 pub mod sampling;
 pub mod tabulated;
 #[cfg(test)]
-mod test_support;
+pub(crate) mod test_support;
 pub mod text_format;
 
 pub use analytic::AntiGlare;

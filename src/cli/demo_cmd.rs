@@ -1,6 +1,7 @@
 //! `prtbake demo`: the README's main job. Generates the demo cabin
 //! (src/fixtures/cabin.rs) with its injected defects, cleans it inline, bakes it in window mode and writes
-//! `cabin.prtb` and `summary.json` into the output folder.
+//! `cabin.prtb` and `summary.json` into the output folder, with the LCD panel's
+//! images under a low sun and an overcast sky (`demo_panel`, docs/panel.md).
 
 use std::path::Path;
 
@@ -32,7 +33,13 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
     std::fs::create_dir_all(output_dir).with_context(|| format!("cannot create {}", output_dir.display()))?;
     let bundle_path = output_dir.join("cabin.prtb");
     let summary_path = output_dir.join("summary.json");
-    super::check_outputs(&[], &[Output::new(&bundle_path, &["prtb"]), Output::new(&summary_path, &["json"])], false)?;
+    let panel_paths = super::demo_panel::paths(output_dir);
+    let mut outputs = vec![Output::new(&bundle_path, &["prtb"]), Output::new(&summary_path, &["json"])];
+    for (_, exr, png) in &panel_paths {
+        outputs.push(Output::new(exr, &["exr"]));
+        outputs.push(Output::new(png, &["png"]));
+    }
+    super::check_outputs(&[], &outputs, false)?;
     let started = std::time::Instant::now();
     let (mesh, defects) = cabin::generate_cabin(DEMO_DETAIL);
     if !quiet {
@@ -59,6 +66,9 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
     let mut staged = Staged::new();
     let meta = json!({ "source": "demo cabin", "defects_injected": defects, "clean": clean_report });
     let report = bake_to_bundle(&mesh, &config, meta, &mut staged)?;
+    let panel_started = std::time::Instant::now();
+    let panel = super::with_threads(threads, || super::demo_panel::run(&mesh, &report, &panel_paths, quiet || as_json, &mut staged))??;
+    let panel_seconds = panel_started.elapsed().as_secs_f64();
     let s = &report.result.stats;
     let summary = json!({
         "bundle": super::json_path(&report.output),
@@ -74,6 +84,8 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         "rays_per_second": s.rays_per_second,
         "total_seconds": started.elapsed().as_secs_f64(),
         "bundle_bytes": report.bundle_bytes,
+        "panel": panel,
+        "panel_seconds": panel_seconds,
     });
     staged
         .stage_bytes(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())

@@ -1,6 +1,7 @@
 //! Sun and sky for a day's time lapse: dates and time zones, the sun's
 //! position (NREL SPA), the steps of the day, a clear-sky model (Preetham et
-//! al. 1999) with the sun's colour, and the sky projected to SH.
+//! al. 1999) with the sun's colour, the CIE overcast sky (`overcast`), and the
+//! sky projected to SH.
 //!
 //! # World frame
 //! Right-handed. `up` is the zenith (default +Y; +Z for Z-up scenes) and
@@ -23,6 +24,7 @@
 //! elevation in degrees, elevation = 90° − zenith.
 
 pub mod day;
+pub mod overcast;
 pub mod preetham;
 pub mod sky_sh;
 pub mod solar;
@@ -32,6 +34,7 @@ pub mod time;
 pub mod timeline;
 
 pub use day::{day_directions, day_steps, elevation_azimuth, parse_directions, steps_from_directions, DirectionsError, SkyFrame};
+pub use overcast::{CieOvercast, TYPICAL_OVERCAST_LUX};
 pub use preetham::{PreethamSky, DEFAULT_TURBIDITY};
 pub use sky_sh::{preetham_sky, SunSky};
 pub use solar::{default_north, solar_position, sun_direction, Site, SolarPosition, DEFAULT_DELTA_T_S};

@@ -1,0 +1,55 @@
+//! Panel final-gather speed (docs/panel.md): a 400 × 300-texel gather of the
+//! demo cabin's LCD (the size seed 000 §3.1 names) at 40 samples per texel
+//! (the paper's rough image) and at 256, from the driver's eye under the
+//! demo's low sun (MIS: one BRDF ray and one sun-disk ray per sample, plus
+//! shadow rays toward the sun from lit interior hits). Criterion's
+//! elements/s are the gather's rays/s (BRDF and disk rays). The interior's
+//! PRT light is a constant here: it changes the values, not the rays.
+//!
+//! Run: `cargo bench --bench panel` (one case: `cargo bench --bench panel -- spp40`).
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use glam::Vec3;
+use prtbake::bake::{BuildQuality, Scene, Surfaces};
+use prtbake::brdf::PanelBrdf;
+use prtbake::fixtures::cabin::generate_cabin;
+use prtbake::panel::{select_panel, Environment, GatherOptions, Interior, PanelGather, PanelLayout};
+
+fn panel_gather(c: &mut Criterion) {
+    let (raw, _) = generate_cabin(64.0);
+    let (mesh, _) = prtbake::clean::clean_mesh(&raw, &prtbake::clean::CleanParams::cad()).unwrap();
+    let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+    let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+    let interior =
+        Interior { scene: &scene, mesh: &mesh, surfaces: &surfaces, vertex_light: vec![[100.0; 3]; mesh.vertex_count()], two_sided: true };
+    let triangles = select_panel(&mesh, Some("lcd_panel"), "cabin".as_ref()).unwrap();
+    let layout = PanelLayout::new(&mesh, &triangles, 400, 300, "cabin".as_ref()).unwrap();
+    let eye = Vec3::new(-0.42, 1.15, -0.4);
+    // The demo's sunny case: a sun 18° high, turned to glare (docs/panel.md).
+    let wo = (eye - layout.centre).normalize();
+    let mirror = 2.0 * wo.dot(layout.front) * layout.front - wo;
+    let env = Environment::clear_sky(mirror, 3.0, 0.0).unwrap();
+    let brdf = PanelBrdf::default();
+    let mut group = c.benchmark_group("panel_400x300");
+    group.sample_size(10);
+    for samples in [40u32, 256] {
+        let rays = {
+            let mut g = PanelGather::new(&interior, &env, &brdf, &layout, eye, GatherOptions::default());
+            g.refine(samples);
+            g.rays()
+        };
+        eprintln!("{} texels on the panel, {samples} samples: {rays} rays", layout.covered());
+        group.throughput(Throughput::Elements(rays));
+        group.bench_function(format!("spp{samples}"), |b| {
+            b.iter(|| {
+                let mut g = PanelGather::new(&interior, &env, &brdf, &layout, eye, GatherOptions::default());
+                g.refine(samples);
+                g.rays()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, panel_gather);
+criterion_main!(benches);

@@ -1,0 +1,152 @@
+//! What a reflected ray meets: the PRT-lit interior (seed 000 §4.3: "the
+//! luminance value is linearly interpolated based on the PRT computation for
+//! vertices of a mesh element intersected by the reflected ray"), glass that
+//! it passes through, and, beyond, the environment.
+//!
+//! A hit on an opaque triangle returns `albedo · Σ_c w_c E(v_c)`, the
+//! barycentric blend of the corners' `E(v) = Σ_i L_i t_i(v)` (the bundle's
+//! total transfer: every bounce), plus the sun's direct light at the hit
+//! point (a shadow ray through the glass), since the SH lighting holds the sky
+//! without the sun disk. The sun's light after one or more bounces inside is
+//! not included (it would need the sun in the transfer's lighting; docs/panel.md).
+
+use glam::Vec3;
+
+use super::environment::{Environment, Sun};
+use crate::bake::{Scene, Surfaces};
+use crate::mesh::Mesh;
+
+/// Panes of glass a ray may pass through before it counts as blocked
+/// (windscreen + a side window + a far window is three).
+pub const MAX_GLASS_LAYERS: u32 = 8;
+
+/// The radiance a ray brings back.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Arrival {
+    /// Radiance without the sun disk (environment or interior).
+    pub radiance: [f32; 3],
+    /// Product of the glass transmittances when the ray left the scene, 0 when it stopped on a surface.
+    pub sky_transmittance: f32,
+    /// The ray passed through at least one window.
+    pub through_window: bool,
+}
+
+/// The PRT-lit interior a gather reads.
+pub struct Interior<'a> {
+    pub scene: &'a Scene,
+    pub mesh: &'a Mesh,
+    pub surfaces: &'a Surfaces,
+    /// `E(v) = Σ_i L_i t_i(v)` per vertex, RGB.
+    pub vertex_light: Vec<[f32; 3]>,
+    /// Both sides of a surface carry its PRT light (a window-mode bake, whose
+    /// transfer is side-blind); otherwise, as the open-mode bake gathers, a
+    /// surface's back is black.
+    pub two_sided: bool,
+}
+
+/// `Σ_i L_i t_i(v)` for every vertex of a `[vertex][channel][coeff]` transfer
+/// with `channels` 1 or 3 (grey transfer applies to every colour channel).
+pub fn vertex_light(total: &[f32], order: usize, channels: usize, lighting: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    let n = order * order;
+    total
+        .chunks_exact(n * channels)
+        .map(|row| {
+            let mut e = [0.0f32; 3];
+            for (c, e) in e.iter_mut().enumerate() {
+                let t = &row[if channels == 3 { c * n } else { 0 }..][..n];
+                *e = t.iter().zip(lighting).map(|(t, l)| t * l[c]).sum();
+            }
+            e
+        })
+        .collect()
+}
+
+impl Interior<'_> {
+    /// Follows a ray from `origin` (on a surface of geometric normal
+    /// `face_normal`) along unit `dir` through up to [`MAX_GLASS_LAYERS`] windows.
+    pub fn trace(&self, env: &Environment, origin: Vec3, face_normal: Vec3, dir: Vec3) -> Arrival {
+        let mut from = self.scene.offset_origin(origin, face_normal, dir);
+        let mut transmittance = 1.0f32;
+        for layer in 0..=MAX_GLASS_LAYERS {
+            let Some(hit) = self.scene.closest_hit(from, dir, f32::INFINITY) else {
+                let radiance = env.radiance(dir).map(|c| c * transmittance);
+                return Arrival { radiance, sky_transmittance: transmittance, through_window: layer > 0 };
+            };
+            let point = from + dir * hit.t;
+            let normal = self.scene.face_normal(hit.triangle);
+            match self.surfaces.window_transmittance[hit.triangle as usize] {
+                Some(tau) if layer < MAX_GLASS_LAYERS => {
+                    transmittance *= tau;
+                    if transmittance <= 0.0 {
+                        break;
+                    }
+                    from = self.scene.offset_origin(point, normal, dir);
+                }
+                Some(_) => break,
+                None if hit.back_face && !self.two_sided => {
+                    return Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: layer > 0 };
+                }
+                None => {
+                    let mut radiance = self.surface_radiance(env, hit.triangle, hit.u, hit.v, point, normal, dir);
+                    radiance.iter_mut().for_each(|c| *c *= transmittance);
+                    return Arrival { radiance, sky_transmittance: 0.0, through_window: layer > 0 };
+                }
+            }
+        }
+        Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: true }
+    }
+
+    /// Radiance leaving opaque triangle `t` at barycentrics (u, v) toward the ray's origin.
+    #[allow(clippy::too_many_arguments)] // one hit's fields
+    fn surface_radiance(&self, env: &Environment, t: u32, u: f32, v: f32, point: Vec3, face_normal: Vec3, dir: Vec3) -> [f32; 3] {
+        let [a, b, c] = self.mesh.triangle(t as usize).map(|i| self.vertex_light[i as usize]);
+        let w0 = 1.0 - u - v;
+        let albedo = self.surfaces.albedo[t as usize];
+        let mut light = [0.0f32; 3];
+        for k in 0..3 {
+            light[k] = w0 * a[k] + u * b[k] + v * c[k];
+        }
+        if let Some(sun) = &env.sun {
+            // The side the ray sees.
+            let seen = if face_normal.dot(dir) < 0.0 { face_normal } else { -face_normal };
+            let cosine = seen.dot(sun.direction);
+            if cosine > 0.0 {
+                let (tau, _) = self.sky_transmittance(point, face_normal, sun.direction);
+                if tau > 0.0 {
+                    for k in 0..3 {
+                        light[k] += tau * cosine * sun.irradiance[k] / std::f32::consts::PI;
+                    }
+                }
+            }
+        }
+        [albedo[0] * light[0], albedo[1] * light[1], albedo[2] * light[2]]
+    }
+
+    /// Glass transmittance from a surface point toward unit `dir` out of the
+    /// scene (0 when an opaque surface blocks it), and whether it crossed glass.
+    pub fn sky_transmittance(&self, origin: Vec3, face_normal: Vec3, dir: Vec3) -> (f32, bool) {
+        let mut from = self.scene.offset_origin(origin, face_normal, dir);
+        let mut transmittance = 1.0f32;
+        for layer in 0..=MAX_GLASS_LAYERS {
+            let Some(hit) = self.scene.closest_hit(from, dir, f32::INFINITY) else {
+                return (transmittance, layer > 0);
+            };
+            match self.surfaces.window_transmittance[hit.triangle as usize] {
+                Some(tau) if layer < MAX_GLASS_LAYERS && tau > 0.0 => {
+                    transmittance *= tau;
+                    from = self.scene.offset_origin(from + dir * hit.t, self.scene.face_normal(hit.triangle), dir);
+                }
+                _ => break,
+            }
+        }
+        (0.0, true)
+    }
+
+    /// The sun strategy's light: the disk's radiance times the glass toward it.
+    pub fn sun_arrival(&self, sun: &Sun, origin: Vec3, face_normal: Vec3, dir: Vec3) -> (f32, bool) {
+        if !sun.contains(dir) {
+            return (0.0, false);
+        }
+        self.sky_transmittance(origin, face_normal, dir)
+    }
+}
