@@ -50,7 +50,15 @@ fn bake_json_reports_stats() {
     assert_eq!(s["rays_per_bounce"].as_array().unwrap().len(), 3);
     let rays: u64 = s["rays_per_bounce"].as_array().unwrap().iter().map(|r| r.as_u64().unwrap()).sum();
     assert_eq!(s["rays"].as_u64().unwrap(), rays);
-    assert!(s["rays_per_second"].as_f64().unwrap() > 0.0);
+    // The rate counts traced rays only; evaluations answered from the hit
+    // records (bounces 1 and 2 here) are reported apart, not as rays.
+    let traced = s["rays_traced"].as_u64().unwrap();
+    let (rate, seconds) = (s["rays_per_second"].as_f64().unwrap(), s["seconds"].as_f64().unwrap());
+    assert!((rate * seconds - traced as f64).abs() <= 1e-6 * traced as f64, "{rate} * {seconds} != {traced}");
+    let per_bounce: Vec<u64> = s["rays_per_bounce"].as_array().unwrap().iter().map(|r| r.as_u64().unwrap()).collect();
+    assert_eq!(s["rays_gathered"].as_u64().unwrap(), per_bounce[1] + per_bounce[2]);
+    let evaluations_rate = s["evaluations_per_second"].as_f64().unwrap();
+    assert!((evaluations_rate * seconds - rays as f64).abs() <= 1e-6 * rays as f64);
     assert!(doc["peak_memory_bytes"].as_u64().unwrap() > 0);
 }
 

@@ -198,8 +198,15 @@ pub struct BakeStats {
     pub rays: u64,
     /// Rays actually traced through the BVH (probe rays included).
     pub rays_traced: u64,
+    /// Evaluations of bounces ≥ 1 answered from bounce 0's hit records
+    /// (gathered, not traced); 0 when the bounces re-traced their rays.
+    pub rays_gathered: u64,
     pub seconds: f64,
+    /// Traced rays per second: `rays_traced / seconds`, comparable with a
+    /// raw ray rate (gathered evaluations are not rays and are not counted).
     pub rays_per_second: f64,
+    /// All evaluations per second (`rays / seconds`, gathered ones included).
+    pub evaluations_per_second: f64,
     /// How the scene ran its batches of rays (measured when it was built).
     pub batching: Batching,
 }

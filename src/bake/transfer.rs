@@ -594,7 +594,9 @@ pub fn bake_transfer_receivers(
     stats.vertices_without_samples = vertex_weight.iter().filter(|&&w| w <= 0.0).count() as u64;
     stats.rays = stats.rays_per_bounce.iter().sum();
     stats.seconds = started.elapsed().as_secs_f64();
-    stats.rays_per_second = stats.rays as f64 / stats.seconds.max(1e-9);
+    stats.rays_gathered = if use_cache { stats.rays_per_bounce.iter().skip(1).sum() } else { 0 };
+    stats.rays_per_second = stats.rays_traced as f64 / stats.seconds.max(1e-9);
+    stats.evaluations_per_second = stats.rays as f64 / stats.seconds.max(1e-9);
     Ok(TransferResult { order: params.order, channels, total, bounces: layers, stats })
 }
 

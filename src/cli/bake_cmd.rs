@@ -366,15 +366,17 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
         }));
     }
     println!(
-        "baked {}: {} triangles, {} vertices, {} points ({} rejected), {} rays in {:.2}s ({:.2} Mrays/s), order {}, {} channel(s), {} bytes",
+        "baked {}: {} triangles, {} vertices, {} points ({} rejected), {} rays traced in {:.2}s ({:.2} Mrays/s traced; {} evaluations, {} of them gathered from hit records), order {}, {} channel(s), {} bytes",
         report.output.display(),
         s.triangles,
         s.vertices,
         s.points,
         s.points_rejected,
-        s.rays,
+        s.rays_traced,
         s.seconds,
         s.rays_per_second / 1e6,
+        s.rays,
+        s.rays_gathered,
         report.result.order,
         report.result.channels,
         report.bundle_bytes

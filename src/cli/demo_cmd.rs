@@ -81,6 +81,8 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         "rays": s.rays,
         "points_rejected": s.points_rejected,
         "bake_seconds": s.seconds,
+        "rays_traced": s.rays_traced,
+        "rays_gathered": s.rays_gathered,
         "rays_per_second": s.rays_per_second,
         "total_seconds": started.elapsed().as_secs_f64(),
         "bundle_bytes": report.bundle_bytes,

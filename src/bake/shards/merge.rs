@@ -283,6 +283,8 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         points_rejected,
         vertices_without_samples: weights.iter().filter(|&&w| w <= 0.0).count() as u64,
         rays: rays_per_bounce.iter().sum(),
+        // Rounds ≥ 1 gather from each shard's hit records; they trace nothing.
+        rays_gathered: rays_per_bounce.iter().skip(1).sum(),
         rays_per_bounce,
         rays_traced,
         ..BakeStats::default()

@@ -294,8 +294,24 @@ mod tests {
                 }
                 let (m, w) = (&merged.stats, &whole.stats);
                 assert_eq!(
-                    (m.points, m.points_rejected, m.vertices_without_samples, &m.rays_per_bounce, m.rays, m.window_triangles),
-                    (w.points, w.points_rejected, w.vertices_without_samples, &w.rays_per_bounce, w.rays, w.window_triangles),
+                    (
+                        m.points,
+                        m.points_rejected,
+                        m.vertices_without_samples,
+                        &m.rays_per_bounce,
+                        m.rays,
+                        m.rays_gathered,
+                        m.window_triangles
+                    ),
+                    (
+                        w.points,
+                        w.points_rejected,
+                        w.vertices_without_samples,
+                        &w.rays_per_bounce,
+                        w.rays,
+                        w.rays_gathered,
+                        w.window_triangles
+                    ),
                     "{what}: stats"
                 );
             }
