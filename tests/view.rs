@@ -174,7 +174,7 @@ fn sphere_matches_cpu_shading_pixel_for_pixel() {
 
 /// Plane (41×41 vertices, side 4) with a sphere (radius 0.5, centre height 1)
 /// above it, and two time-lapse steps with the sun on opposite sides.
-fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
+pub fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
     let order = 2;
     let mut mesh = shapes::plane_grid(40, 4.0);
     let plane_vertices = mesh.vertex_count();

@@ -332,3 +332,17 @@ fn colonnade_at_noon_keeps_its_highlights() {
     eprintln!("colonnade at noon: clipped pixels photographic {:.1}%, Drago {:.1}%", 100.0 * fractions[0], 100.0 * fractions[1]);
     assert!(fractions[0] < 0.01, "{fractions:?}");
 }
+
+#[test]
+fn turning_the_car_under_a_time_lapse_is_refused() {
+    use crate::util::{prtbake, Scratch};
+    let scratch = Scratch::new("view-yaw");
+    let path = scratch.path("sun.prtb");
+    ::prtbake::bundle::write_bundle(&path, &crate::view::plane_and_sphere_time_lapse().0).unwrap();
+    let shot = scratch.path("x.png");
+    let run = prtbake(&["view", path.to_str().unwrap(), "--yaw", "10", "--screenshot", shot.to_str().unwrap()]);
+    assert_eq!(run.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.contains("sun masks") && stderr.contains("sun.prtb"), "{stderr}");
+    assert!(!shot.exists());
+}
