@@ -362,17 +362,21 @@ enum Command {
     /// Bake a day's sun-shadow bits per vertex, with per-step sun and sky, into a bundle.
     #[command(allow_negative_numbers = true)]
     Sun(SunArgs),
-    /// Write a generated scene (the colonnade monument) as .glb or .obj.
+    /// Write a generated scene (the colonnade monument, a street of them, or the demo cabin) as .glb or .obj.
     #[command(allow_negative_numbers = true)]
     Generate {
-        /// Scene name: colonnade.
-        #[arg(value_parser = ["colonnade"])]
+        /// Scene name: colonnade, or cabin (the demo cabin with its injected defects).
+        #[arg(value_parser = ["colonnade", "cabin"])]
         scene: String,
         #[arg(short, long)]
         output: PathBuf,
-        /// small (tests), monument (≈620k triangles), million (> 1M vertices).
-        #[arg(long, default_value = "monument", value_parser = ["small", "monument", "million"])]
-        detail: String,
+        /// Colonnade: small (tests), monument (≈786k triangles, the default), million (> 1M vertices).
+        /// Cabin: small (11,738 triangles once cleaned, tests), demo (≈333k triangles, the default).
+        #[arg(long, value_parser = ["small", "monument", "million", "demo"])]
+        detail: Option<String>,
+        /// Colonnades in a row along X, 46 m apart (a street; `--detail million --copies 2`: 5.05M triangles).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+        copies: u32,
         /// Replace read-only outputs, and an existing .mtl that prtbake did not write.
         #[arg(long)]
         force: bool,
@@ -709,8 +713,8 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
         Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
         Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
-        Command::Generate { scene: _, output, detail, force } => {
-            cli::generate_cmd::run_colonnade(&output, &detail, force).map(|_| Outcome::Ok)
+        Command::Generate { scene, output, detail, copies, force } => {
+            cli::generate_cmd::run(&scene, &output, detail.as_deref(), copies, force).map(|_| Outcome::Ok)
         }
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),

@@ -23,21 +23,10 @@ usage() {
 mesh=$1 out=$2 n=$3
 shift 3
 bake_args=("$@")
-case $n in '' | *[!0-9]*) usage ;; esac
-[ "$n" -ge 1 ] || usage
-case $out in *.prtb) ;; *) echo "$0: OUT must be a .prtb bundle" >&2 && exit 2 ;; esac
-
-# The rounds are the bounces: read --bounces from the bake args (default 0).
-bounces=0 threads_given=no prev=
-for arg in "${bake_args[@]}"; do
-    case $prev in --bounces) bounces=$arg ;; esac
-    case $arg in
-        --bounces=*) bounces=${arg#--bounces=} ;;
-        --threads | --threads=*) threads_given=yes ;;
-    esac
-    prev=$arg
-done
-[ "$threads_given" = yes ] || bake_args+=(--threads 1)
+. "$(dirname "$0")/shard-args.sh"
+check_operands "$out" "$n"
+bounces=$(bounces_of "$@")
+gives_threads "$@" || bake_args+=(--threads 1)
 
 prtbake=${PRTBAKE:-$(command -v prtbake || echo target/release/prtbake)}
 work=${WORK:-${out%.prtb}.shards}

@@ -10,7 +10,7 @@ use crate::util::{prtbake, Scratch};
 /// The demo cabin at low detail (11,738 triangles and 6,746 vertices once
 /// cleaned; 12,186 sample points, 34 of them inside geometry), with its
 /// injected defects (`bake --clean` repairs them in every process), as GLB.
-fn write_cabin(dir: &Scratch) -> PathBuf {
+pub fn write_cabin(dir: &Scratch) -> PathBuf {
     let (mesh, _) = prtbake::fixtures::cabin::generate_cabin(10.0);
     let path = dir.path("cabin.glb");
     prtbake::mesh::write_glb(&path, &mesh).unwrap();

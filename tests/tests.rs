@@ -8,6 +8,7 @@ mod cli;
 mod export;
 mod hostile_bake;
 mod safety;
+mod schedulers;
 mod shards;
 mod stability;
 mod storage;

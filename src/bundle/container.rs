@@ -330,7 +330,11 @@ fn check_zero_gap(bytes: &[u8], from: u64, to: u64, where_: &str) -> Result<(), 
 /// growing the buffer only as real output arrives (a hostile `raw_len` costs nothing).
 fn decompress_capped(stored: &[u8], raw_len: u64, tag: Tag) -> Result<Vec<u8>, BundleError> {
     let fail = |detail: String| BundleError::Decompress { tag, detail };
-    let decoder = zstd::stream::read::Decoder::with_buffer(stored).map_err(|e| fail(e.to_string()))?;
+    let mut decoder = zstd::stream::read::Decoder::with_buffer(stored).map_err(|e| fail(e.to_string()))?;
+    // A frame's window never needs to exceed its content (zstd's encoder sizes it so), and the
+    // decoder reserves the window up front: cap it by the declared length, or a hostile frame
+    // header alone could make it reserve zstd's default limit, 128 MiB.
+    decoder.window_log_max(window_log_for(raw_len)).map_err(|e| fail(e.to_string()))?;
     // Start modestly: zstd rarely exceeds 16:1 on our data; the Vec grows past that.
     let initial = raw_len.min(stored.len() as u64 * 16 + 4096) as usize;
     let mut out = Vec::with_capacity(initial);
@@ -340,6 +344,13 @@ fn decompress_capped(stored: &[u8], raw_len: u64, tag: Tag) -> Result<Vec<u8>, B
         return Err(fail(format!("declared raw length is {raw_len} bytes, zstd produced {produced}")));
     }
     Ok(out)
+}
+
+/// The smallest zstd window log that holds `raw_len` bytes, within zstd's
+/// decoding range (2^10 .. 2^31).
+fn window_log_for(raw_len: u64) -> u32 {
+    let needed = 64 - raw_len.saturating_sub(1).leading_zeros();
+    needed.clamp(10, 31)
 }
 
 /// Lays out tagged raw payloads as a complete container (header, table, payloads).
@@ -436,6 +447,30 @@ mod tests {
         assert!(matches!(c.payload(&info), Err(BundleError::Decompress { .. })));
         info.raw_len = u64::MAX; // must not try to allocate it
         assert!(matches!(c.payload(&info), Err(BundleError::Decompress { .. })));
+    }
+
+    /// A frame header may claim any window up to zstd's limit, which the decoder
+    /// would reserve before producing a byte: the window is capped by the
+    /// section's declared length, so such a frame is refused instead.
+    #[test]
+    fn zstd_window_larger_than_the_section_is_refused() {
+        use std::io::Write;
+        let raw = vec![7u8; 1000];
+        let frame = |window_log: u32| {
+            let mut encoder = zstd::stream::write::Encoder::new(Vec::new(), 3).unwrap();
+            encoder.window_log(window_log).unwrap();
+            encoder.include_contentsize(false).unwrap();
+            encoder.write_all(&raw).unwrap();
+            encoder.finish().unwrap()
+        };
+        let tag = Tag(*b"AAAA");
+        assert_eq!(window_log_for(1000), 10);
+        assert_eq!(decompress_capped(&frame(10), 1000, tag).unwrap(), raw);
+        let err = decompress_capped(&frame(27), 1000, tag).unwrap_err().to_string();
+        assert!(err.contains("memory") || err.contains("window"), "{err}");
+        // What our writer produces always fits: zstd sizes the window to the content.
+        let packed = zstd::bulk::compress(&vec![3u8; 300_000], 19).unwrap();
+        assert_eq!(decompress_capped(&packed, 300_000, tag).unwrap().len(), 300_000);
     }
 
     #[test]
