@@ -310,24 +310,24 @@ struct ViewArgs {
     /// Exposure in stops (radiance × 2^STOPS).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     exposure: f32,
-    /// Environment rotation about +Y, degrees.
+    /// Turn the car under the sky about +Y (world up), degrees, counter-clockwise seen from above; the environment turns the other way.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     yaw: f32,
-    /// Environment rotation about +X, degrees.
+    /// Turn the car about +X, degrees (right-handed).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pitch: f32,
-    /// Environment rotation about +Z, degrees.
+    /// Turn the car about +Z, degrees (right-handed).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     roll: f32,
-    /// Tone mapping: drago (adaptive logarithmic, seed 000) or linear (exposure + gamma, seed 001).
-    #[arg(long, default_value = "drago", value_parser = ["drago", "linear"])]
+    /// Tone mapping: photographic (key from the absolute adaptation luminance, filmic curve), drago (adaptive logarithmic, seed 000) or linear (exposure + gamma, seed 001).
+    #[arg(long, default_value = "photographic", value_parser = ["photographic", "drago", "linear"])]
     tonemap: String,
     #[arg(long, default_value_t = 2.2)]
     gamma: f32,
     /// Transfer layers: total, direct, indirect, or bounces like 0,2 (needs --store-bounces at bake time).
     #[arg(long, default_value = "total")]
     layers: String,
-    /// Do not draw materials or groups matching this glob (repeatable); window materials are never drawn.
+    /// Do not draw materials or groups matching this glob (repeatable), glass included.
     #[arg(long, value_name = "PATTERN")]
     hide: Vec<String>,
     /// Render one frame offscreen into this PNG and exit (no window system needed).
@@ -482,7 +482,7 @@ fn view_config(a: ViewArgs) -> cli::view_cmd::ViewConfig {
         step: a.step,
         tz: a.tz,
         exposure: a.exposure,
-        rotation_deg: [a.yaw, a.pitch, a.roll],
+        car_rotation_deg: [a.yaw, a.pitch, a.roll],
         tonemap: a.tonemap,
         gamma: a.gamma,
         layers: a.layers,

@@ -16,3 +16,5 @@ mod sun;
 mod util;
 #[cfg(feature = "viewer")]
 mod view;
+#[cfg(feature = "viewer")]
+mod view_backdrop;

@@ -9,16 +9,16 @@ use prtbake::sh;
 use prtbake::verify::shapes;
 use prtbake::view::scene::prepare_scene;
 use prtbake::view::tonemap::{self, ToneMap, ToneOperator};
-use prtbake::view::{reference, render_image, Camera, FrameSettings, Gpu, Image, LayerSelection, ViewError};
+use prtbake::view::{reference, render_image, Backdrop, Camera, FrameSettings, Gpu, Image, LayerSelection, ViewError};
 
 /// Largest allowed difference per channel, in 8-bit codes. Derivation: the
 /// HDR target is binary16 (relative error ≤ 2⁻¹¹, i.e. ≤ 0.06 codes after
 /// gamma 1/2.2 at exposure ≤ 1); f32 interpolation differences are far below
 /// that; each side rounds to the nearest code (≤ ½ code each). So ≤ 1 code,
 /// plus one code of margin for the rasteriser's fixed-point pixel positions.
-const MAX_CODE_DIFF: i32 = 2;
+pub const MAX_CODE_DIFF: i32 = 2;
 
-fn gpu_or_skip(test: &str) -> Option<Gpu> {
+pub fn gpu_or_skip(test: &str) -> Option<Gpu> {
     match Gpu::headless() {
         Ok(gpu) => {
             eprintln!("{test}: adapter {}", gpu.adapter_name());
@@ -33,7 +33,7 @@ fn gpu_or_skip(test: &str) -> Option<Gpu> {
 }
 
 /// Open-mode transfer of an unoccluded convex object: t_lm = (Â_l/π)·y_lm(n).
-fn unoccluded_transfer(mesh: &Mesh, order: usize) -> Vec<f32> {
+pub fn unoccluded_transfer(mesh: &Mesh, order: usize) -> Vec<f32> {
     let n2 = order * order;
     let mut y = vec![0.0f32; n2];
     let mut out = Vec::with_capacity(mesh.vertex_count() * n2);
@@ -44,7 +44,7 @@ fn unoccluded_transfer(mesh: &Mesh, order: usize) -> Vec<f32> {
     out
 }
 
-fn bundle_of(mesh: Mesh, order: usize, transfer: Vec<f32>, sun: Option<SunSeries>) -> Bundle {
+pub fn bundle_of(mesh: Mesh, order: usize, transfer: Vec<f32>, sun: Option<SunSeries>) -> Bundle {
     Bundle {
         meta: serde_json::json!({}),
         mesh,
@@ -58,12 +58,12 @@ fn bundle_of(mesh: Mesh, order: usize, transfer: Vec<f32>, sun: Option<SunSeries
     }
 }
 
-fn linear_tonemap(exposure_stops: f32) -> ToneMap {
+pub fn linear_tonemap(exposure_stops: f32) -> ToneMap {
     ToneMap { operator: ToneOperator::Linear, exposure_stops, gamma: 2.2, ..ToneMap::default() }
 }
 
 /// Möller–Trumbore: distance and barycentrics (of corners 1 and 2) of the nearest hit.
-fn nearest_hit(mesh: &Mesh, origin: Vec3, dir: Vec3) -> Option<(usize, f32, f32)> {
+pub fn nearest_hit(mesh: &Mesh, origin: Vec3, dir: Vec3) -> Option<(usize, f32, f32)> {
     let mut best: Option<(f32, usize, f32, f32)> = None;
     for t in 0..mesh.triangle_count() {
         let [a, b, c] = mesh.triangle_positions(t);
@@ -89,8 +89,8 @@ fn nearest_hit(mesh: &Mesh, origin: Vec3, dir: Vec3) -> Option<(usize, f32, f32)
 }
 
 fn background(image: &Image, x: u32, y: u32) -> bool {
-    // The tone-mapping pass writes the constant background (0.06, 0.065, 0.075) → (15, 17, 19).
-    image.pixel(x, y)[..3] == [15, 17, 19]
+    // A black backdrop: zero radiance → code 0.
+    image.pixel(x, y)[..3] == [0, 0, 0]
 }
 
 #[test]
@@ -114,7 +114,7 @@ fn sphere_matches_cpu_shading_pixel_for_pixel() {
         [0.0, 0.05, 0.1],
         [0.1, 0.0, -0.05],
     ];
-    let settings = FrameSettings { lighting: lighting.clone(), sun_step: None, tonemap: linear_tonemap(0.5) };
+    let settings = FrameSettings { lighting: lighting.clone(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(0.5) };
     let (width, height) = (128, 128);
     let camera = Camera::look_at(Vec3::new(0.8, 1.1, 2.8), Vec3::ZERO, scene.bounds);
     let image = render_image(&gpu, &scene, None, &camera, &settings, width, height).unwrap();
@@ -174,7 +174,7 @@ fn sphere_matches_cpu_shading_pixel_for_pixel() {
 
 /// Plane (41×41 vertices, side 4) with a sphere (radius 0.5, centre height 1)
 /// above it, and two time-lapse steps with the sun on opposite sides.
-fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
+pub fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
     let order = 2;
     let mut mesh = shapes::plane_grid(40, 4.0);
     let plane_vertices = mesh.vertex_count();
@@ -233,7 +233,8 @@ fn time_lapse_shadow_moves_where_the_bits_say() {
     let mut checked = 0;
     let images: Vec<Image> = (0..2)
         .map(|k| {
-            let settings = FrameSettings { lighting: lighting.clone(), sun_step: Some(k), tonemap: linear_tonemap(0.0) };
+            let settings =
+                FrameSettings { lighting: lighting.clone(), sun_step: Some(k), backdrop: Backdrop::Black, tonemap: linear_tonemap(0.0) };
             render_image(&gpu, &scene, Some(sun), &camera, &settings, width, height).unwrap()
         })
         .collect();
@@ -287,8 +288,8 @@ fn frame_settings_follow_the_step_sky() {
     sun.steps[0].sky_sh = vec![[1.0, 2.0, 3.0]];
     sun.steps[1].sky_sh = vec![[4.0, 5.0, 6.0]];
     let state = prtbake::view::ViewState {
-        source: prtbake::view::LightingSource::StepSky,
-        rotation_deg: [30.0, 0.0, 0.0],
+        source: prtbake::view::LightingSource::StepSky { up: Vec3::Y, turbidity: 3.0 },
+        car_rotation_deg: [0.0; 3],
         step: Some(1),
         sun_on: true,
         tonemap: ToneMap::default(),
@@ -297,6 +298,12 @@ fn frame_settings_follow_the_step_sky() {
     let settings = state.frame_settings(bundle.sun.as_ref(), 2);
     assert_eq!(settings.lighting, vec![[4.0, 5.0, 6.0], [0.0; 3], [0.0; 3], [0.0; 3]]);
     assert_eq!(settings.sun_step, Some(1));
+    // The backdrop is the step's sky with its sun disc, unturned; without the sun term, no disc.
+    let step = &bundle.sun.as_ref().unwrap().steps[1];
+    let Backdrop::Sky(sky) = settings.backdrop else { panic!("{:?}", settings.backdrop) };
+    assert_eq!((sky.sun, sky.sun_irradiance, sky.rotation), (Vec3::from(step.direction), Some(step.sun_rgb), glam::Mat3::IDENTITY));
+    let dark = prtbake::view::ViewState { sun_on: false, ..state }.frame_settings(bundle.sun.as_ref(), 2);
+    assert!(matches!(dark.backdrop, Backdrop::Sky(s) if s.sun_irradiance.is_none()));
 }
 
 #[test]

@@ -19,14 +19,14 @@ pub struct ViewConfig {
     /// UTC offset `+HH:MM` for `--time` (default: the sky module's, Athens at the equinox).
     pub tz: Option<String>,
     pub exposure: f32,
-    /// Environment yaw, pitch, roll in degrees.
-    pub rotation_deg: [f32; 3],
-    /// `drago` or `linear`.
+    /// The car's yaw, pitch, roll under the sky in degrees (the environment turns the other way).
+    pub car_rotation_deg: [f32; 3],
+    /// `photographic`, `drago` or `linear`.
     pub tonemap: String,
     pub gamma: f32,
     /// `total`, `direct`, `indirect` or bounce list `0,1`.
     pub layers: String,
-    /// Globs of materials or groups not to draw (window-role materials are never drawn).
+    /// Globs of materials or groups not to draw (glass included).
     pub hide: Vec<String>,
     pub screenshot: Option<PathBuf>,
     /// `WxH`.
@@ -70,12 +70,8 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     let transfer = bundle.transfer.as_ref().with_context(|| format!("{}: the bundle has no transfer to shade", path.display()))?;
     let order = transfer.order as usize;
     let layers = LayerSelection::parse(&config.layers, &transfer.stored_bounces()).map_err(anyhow::Error::msg)?;
-    // Glass chosen by `bake --window PATTERN[=TAU]` is hidden like window-role materials.
-    let mut hide = config.hide.clone();
-    if let Some(patterns) = bundle.meta.get("window_patterns").and_then(|p| p.as_array()) {
-        hide.extend(patterns.iter().filter_map(|p| p.as_str()).map(|p| p.rsplit_once('=').map_or(p, |(g, _)| g).to_string()));
-    }
-    let scene = view::scene::prepare_scene(&bundle, &layers, &hide).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    // Glass (window role, or `bake --window PATTERN[=TAU]` kept in META) is drawn as glass.
+    let mut scene = view::scene::prepare_scene(&bundle, &layers, &config.hide).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let size = parse_size(&config.size)?;
 
     // The time-lapse step, if any.
@@ -107,22 +103,38 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     };
     let source = match &config.env {
         Some(env) => {
-            LightingSource::Sh(view::lighting::env_map_sh(env, order).with_context(|| format!("cannot use {} as lighting", env.display()))?)
+            let (image, sh) = view::lighting::env_map(env, order).with_context(|| format!("cannot use {} as lighting", env.display()))?;
+            scene.environment = Some(image);
+            LightingSource::EnvMap(sh)
         }
-        None if bundle.sun.is_some() => LightingSource::StepSky,
-        None => LightingSource::Sh(view::lighting::default_sky_sh(order)),
+        None if bundle.sun.is_some() => {
+            let up = bundle.meta.pointer("/sun/up").and_then(|v| serde_json::from_value::<[f32; 3]>(v.clone()).ok());
+            let turbidity = bundle.meta.pointer("/sun/turbidity").and_then(|v| v.as_f64());
+            LightingSource::StepSky {
+                up: up.map_or(glam::Vec3::Y, glam::Vec3::from),
+                turbidity: turbidity.unwrap_or(crate::sky::DEFAULT_TURBIDITY) as f32,
+            }
+        }
+        None => {
+            let (sh, backdrop) = view::lighting::default_sky(order);
+            LightingSource::Sky { sh, backdrop }
+        }
     };
-    let operator = match config.tonemap.as_str() {
-        "linear" => ToneOperator::Linear,
-        "drago" => ToneOperator::Drago,
-        other => anyhow::bail!("--tonemap {other:?}: expected drago or linear"),
+    if matches!(source, LightingSource::StepSky { .. }) && config.car_rotation_deg != [0.0; 3] {
+        anyhow::bail!(
+            "{}: --yaw/--pitch/--roll turn the car under the sky, but the time lapse's sun masks are baked for the car as it stands (light it with --env MAP to turn it)",
+            path.display()
+        );
+    }
+    let Some(operator) = ToneOperator::parse(&config.tonemap) else {
+        anyhow::bail!("--tonemap {:?}: expected photographic, drago or linear", config.tonemap)
     };
     if !(config.gamma.is_finite() && config.gamma > 0.0 && config.exposure.is_finite()) {
         anyhow::bail!("--gamma must be positive and --exposure finite");
     }
     let state = ViewState {
         source,
-        rotation_deg: config.rotation_deg,
+        car_rotation_deg: config.car_rotation_deg,
         step,
         sun_on: step.is_some(),
         tonemap: ToneMap { operator, exposure_stops: config.exposure, gamma: config.gamma, ..ToneMap::default() },

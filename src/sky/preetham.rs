@@ -118,6 +118,21 @@ impl PreethamSky {
         })
     }
 
+    /// The three Perez distributions (luminance Y, chromaticity x, chromaticity
+    /// y) as `[A, B, C, D, E, s]` with value `s · F(θ, γ)`: what the viewer's
+    /// sky shader evaluates per pixel.
+    pub fn perez_parameters(&self) -> [[f64; 6]; 3] {
+        [self.luminance, self.chroma_x, self.chroma_y].map(|p| {
+            let [a, b, c, d, e] = p.coefficients;
+            [a, b, c, d, e, p.scale]
+        })
+    }
+
+    /// Unit zenith and unit direction toward the sun.
+    pub fn frame(&self) -> (DVec3, DVec3) {
+        (self.up, self.sun)
+    }
+
     /// Sky luminance Y (cd/m²) and chromaticity x, y seen along unit `dir`;
     /// `None` at or below the horizon.
     pub fn luminance_xy(&self, dir: DVec3) -> Option<[f64; 3]> {

@@ -77,6 +77,16 @@ impl Camera {
         projection * glam::camera::rh::view::look_at_mat4(self.eye, self.target, self.safe_up().normalize())
     }
 
+    /// Unit forward, and right and up scaled so that `forward + x·right + y·up`
+    /// is the view ray through NDC `(x, y)` (what the backdrop pass draws).
+    pub fn ray_basis(&self, aspect: f32) -> (Vec3, Vec3, Vec3) {
+        let forward = (self.target - self.eye).normalize_or(Vec3::NEG_Z);
+        let right = forward.cross(self.safe_up().normalize()).normalize();
+        let up = right.cross(forward);
+        let tan = (self.fov_y_deg.to_radians() * 0.5).tan();
+        (forward, right * (tan * aspect), up * tan)
+    }
+
     /// Pixel coordinates (x right, y down, pixel centres at +0.5) of a world
     /// point in a `width × height` image; `None` behind the camera.
     pub fn project(&self, point: Vec3, width: u32, height: u32) -> Option<(f32, f32)> {
@@ -170,6 +180,20 @@ mod tests {
         let (origin, dir) = camera.pixel_ray(x, y, 160, 90);
         let to_point = point - origin;
         assert!(to_point.cross(dir).length() < 1e-4 * to_point.length(), "ray misses the point");
+    }
+
+    #[test]
+    fn ray_basis_matches_pixel_rays() {
+        let bounds = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        let camera = Camera::look_at(Vec3::new(1.0, 2.0, 5.0), Vec3::new(0.2, 0.1, -0.3), bounds);
+        let (w, h) = (160, 90);
+        let (forward, right, up) = camera.ray_basis(w as f32 / h as f32);
+        for (x, y) in [(0.5, 0.5), (80.0, 45.0), (159.5, 12.25), (3.0, 89.5)] {
+            let (_, dir) = camera.pixel_ray(x, y, w, h);
+            let (ndc_x, ndc_y) = (x / w as f32 * 2.0 - 1.0, 1.0 - y / h as f32 * 2.0);
+            let from_basis = (forward + right * ndc_x + up * ndc_y).normalize();
+            assert!(from_basis.dot(dir) > 1.0 - 1e-6, "({x}, {y}): {from_basis} vs {dir}");
+        }
     }
 
     #[test]

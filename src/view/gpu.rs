@@ -1,20 +1,25 @@
-//! The GPU side: device, the scene's buffers, three pipelines and one frame's
+//! The GPU side: device, the scene's buffers, five pipelines and one frame's
 //! passes.
 //!
-//! A frame is: (1) scene pass, per-vertex PRT shading (shading.wgsl) into an
-//! `Rgba16Float` HDR target with a `Depth32Float` depth buffer, drawn
-//! two-sided (industrial meshes have inconsistent winding); (2) for Drago's
-//! operator, a one-workgroup compute pass over a 128×128 grid of the HDR
-//! target that updates the adapted luminance in a small storage buffer
-//! (luminance.wgsl); (3) a full-screen pass that tone-maps into the output
+//! A frame is: (1) the scene pass into an `Rgba16Float` HDR target with a
+//! `Depth32Float` depth buffer: the opaque draws with per-vertex PRT shading
+//! (shading.wgsl), drawn two-sided (industrial meshes have inconsistent
+//! winding); then the backdrop, a full-screen triangle at the far plane that
+//! fills what no geometry covers with the env map or the sky (backdrop.wgsl);
+//! then the window glass, which lowers the pixel's alpha to its transmittance
+//! (min blend, no depth write); (2) for the adaptive operators, a
+//! one-workgroup compute pass over a 128×128 grid of the HDR target that
+//! updates the adapted luminance in a small storage buffer (luminance.wgsl);
+//! (3) a full-screen pass that tone-maps `rgb · alpha` into the output
 //! (tonemap.wgsl). Per frame the CPU writes only the frame uniform (camera,
-//! lighting SH, sun) and two tiny parameter blocks.
+//! lighting SH, sun), the backdrop uniform and two tiny parameter blocks.
 
 use wgpu::util::DeviceExt;
 
+use super::backdrop;
 use super::camera::Camera;
-use super::scene::{PreparedScene, GPU_VERTEX_BYTES};
-use super::tonemap::{ToneOperator, ADAPT_TAU_BRIGHTEN_S, ADAPT_TAU_DARKEN_S};
+use super::scene::{DrawKind, MaterialDraw, PreparedScene, GPU_VERTEX_BYTES};
+use super::tonemap::{ADAPT_TAU_BRIGHTEN_S, ADAPT_TAU_DARKEN_S};
 use super::{FrameSettings, ViewError};
 use crate::bundle::SunSeries;
 
@@ -26,8 +31,6 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 const MAX_COEFFS: usize = 256;
 /// Frame uniform: mat4 + 3 vec4 + 256 vec4.
 const FRAME_BYTES: usize = 64 + 3 * 16 + MAX_COEFFS * 16;
-/// Background of uncovered pixels (display values).
-const BACKGROUND: [f32; 3] = [0.06, 0.065, 0.075];
 
 /// An adapter, its device and queue.
 pub struct Gpu {
@@ -77,6 +80,8 @@ impl Gpu {
 pub struct GpuMemory {
     /// Vertex, index, transfer, mask and uniform buffers.
     pub buffers: u64,
+    /// The environment map texture drawn as the backdrop (16 B per texel).
+    pub environment: u64,
     /// Of which the transfer storage buffer.
     pub transfer: u64,
     /// HDR colour target and depth buffer (not the output image).
@@ -96,6 +101,13 @@ struct Targets {
 /// Draws a prepared scene: pipelines, buffers and targets.
 pub struct Renderer {
     scene_pipeline: wgpu::RenderPipeline,
+    glass_pipeline: wgpu::RenderPipeline,
+    backdrop_pipeline: wgpu::RenderPipeline,
+    backdrop_bind: wgpu::BindGroup,
+    backdrop_buffer: wgpu::Buffer,
+    /// Size of the uploaded environment map (1×1 placeholder without one).
+    env_size: (u32, u32),
+    draws: Vec<MaterialDraw>,
     luminance_pipeline: wgpu::ComputePipeline,
     tonemap_pipeline: wgpu::RenderPipeline,
     luminance_layout: wgpu::BindGroupLayout,
@@ -110,7 +122,6 @@ pub struct Renderer {
     adapt_params: wgpu::Buffer,
     tone_buffer: wgpu::Buffer,
     targets: Targets,
-    index_count: u32,
     order: u32,
     channels: u32,
     words_per_vertex: u32,
@@ -240,37 +251,122 @@ impl Renderer {
             immediate_size: 0,
         });
         let vertex_attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Uint32];
-        let scene_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("scene"),
-            layout: Some(&scene_pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &shading,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: GPU_VERTEX_BYTES as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &vertex_attributes,
-                })],
-            },
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shading,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(HDR_FORMAT.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
+        let vertex_layout = [Some(wgpu::VertexBufferLayout {
+            array_stride: GPU_VERTEX_BYTES as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &vertex_attributes,
+        })];
+        // Every pass of the scene: same targets, its own shaders, depth rule and blend.
+        let hdr_pipeline = |label: &str,
+                            layout: &wgpu::PipelineLayout,
+                            module: &wgpu::ShaderModule,
+                            entry_points: (&str, &str),
+                            buffers: &[Option<wgpu::VertexBufferLayout>],
+                            depth: (bool, wgpu::CompareFunction),
+                            target: wgpu::ColorTargetState| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState { module, entry_point: Some(entry_points.0), compilation_options: Default::default(), buffers },
+                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(depth.0),
+                    depth_compare: Some(depth.1),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module,
+                    entry_point: Some(entry_points.1),
+                    compilation_options: Default::default(),
+                    targets: &[Some(target)],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let opaque = (true, wgpu::CompareFunction::Less);
+        let scene_pipeline =
+            hdr_pipeline("scene", &scene_pipeline_layout, &shading, ("vs_main", "fs_main"), &vertex_layout, opaque, HDR_FORMAT.into());
+        // Glass: alpha ← min(alpha, τ); colour untouched.
+        let min = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Min,
+        };
+        let glass_target = wgpu::ColorTargetState {
+            format: HDR_FORMAT,
+            blend: Some(wgpu::BlendState { color: min, alpha: min }),
+            write_mask: wgpu::ColorWrites::ALPHA,
+        };
+        let behind_nothing = (false, wgpu::CompareFunction::Less);
+        let glass_pipeline =
+            hdr_pipeline("glass", &scene_pipeline_layout, &shading, ("vs_glass", "fs_glass"), &vertex_layout, behind_nothing, glass_target);
+
+        // Backdrop: its uniform and the environment map (full resolution, f32, loaded texel by texel).
+        let backdrop_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("backdrop"),
+            entries: &[buffer_entry(0, vs_fs, wgpu::BufferBindingType::Uniform), hdr_texture_entry(1, wgpu::ShaderStages::FRAGMENT)],
         });
+        let backdrop_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("backdrop"),
+            size: backdrop::UNIFORM_BYTES,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let placeholder = crate::sh::EquirectImage { width: 1, height: 1, rgb: vec![[0.0; 3]] };
+        let environment = match &scene.environment {
+            Some(image) => backdrop::fit_to_texture(image, limits.max_texture_dimension_2d),
+            None => std::borrow::Cow::Borrowed(&placeholder),
+        };
+        let env_size = (environment.width, environment.height);
+        let env_texels: Vec<u32> = environment.rgb.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]).map(f32::to_bits).collect();
+        let env_texture = device.create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("environment"),
+                size: wgpu::Extent3d { width: env_size.0, height: env_size.1, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            &words_to_bytes(&env_texels),
+        );
+        let env_view = env_texture.create_view(&Default::default());
+        let backdrop_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("backdrop"),
+            layout: &backdrop_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: backdrop_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&env_view) },
+            ],
+        });
+        let backdrop_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("backdrop.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("backdrop.wgsl").into()),
+        });
+        let backdrop_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("backdrop"),
+            bind_group_layouts: &[Some(&backdrop_layout)],
+            immediate_size: 0,
+        });
+        // At the far plane, where the depth buffer is still clear: only what no geometry covers.
+        let at_far_plane = (false, wgpu::CompareFunction::LessEqual);
+        let backdrop_pipeline = hdr_pipeline(
+            "backdrop",
+            &backdrop_pipeline_layout,
+            &backdrop_module,
+            ("vs_backdrop", "fs_backdrop"),
+            &[],
+            at_far_plane,
+            HDR_FORMAT.into(),
+        );
 
         // Luminance (compute) pipeline.
         let luminance_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -355,7 +451,12 @@ impl Renderer {
             adapt_params,
             tone_buffer,
             targets,
-            index_count: scene.indices.len() as u32,
+            glass_pipeline,
+            backdrop_pipeline,
+            backdrop_bind,
+            backdrop_buffer,
+            env_size,
+            draws: scene.draws.clone(),
             order: scene.order,
             channels: scene.channels,
             words_per_vertex: scene.words_per_vertex,
@@ -446,12 +547,14 @@ impl Renderer {
             &self.adapt_state,
             &self.adapt_params,
             &self.tone_buffer,
+            &self.backdrop_buffer,
         ]
         .iter()
         .map(|b| b.size())
         .sum();
         let pixels = self.targets.width as u64 * self.targets.height as u64;
-        GpuMemory { buffers, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
+        let environment = self.env_size.0 as u64 * self.env_size.1 as u64 * 16;
+        GpuMemory { buffers, environment, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
     }
 
     /// The frame uniform's bytes for `camera`, `settings` and the sun series.
@@ -494,10 +597,17 @@ impl Renderer {
     ) -> wgpu::SubmissionIndex {
         let queue = &gpu.queue;
         queue.write_buffer(&self.frame_buffer, 0, &self.frame_bytes(camera, settings, sun));
+        let aspect = self.targets.width as f32 / self.targets.height as f32;
+        let backdrop_words = backdrop::uniform_words(&settings.backdrop, self.env_size, camera.ray_basis(aspect));
+        queue.write_buffer(&self.backdrop_buffer, 0, &words_to_bytes(&backdrop_words));
         let t = &settings.tonemap;
-        let drago = t.operator == ToneOperator::Drago;
-        let mut tone = vec![t.exposure_stops.exp2().to_bits(), t.gamma.to_bits(), drago as u32, self.srgb_output as u32];
-        tone.extend([BACKGROUND[0], BACKGROUND[1], BACKGROUND[2], 1.0, t.bias, t.display_max, 0.0, 0.0].map(f32::to_bits));
+        let mode = match t.operator {
+            super::ToneOperator::Linear => 0u32,
+            super::ToneOperator::Drago => 1,
+            super::ToneOperator::Photographic => 2,
+        };
+        let mut tone = vec![t.exposure_stops.exp2().to_bits(), t.gamma.to_bits(), mode, self.srgb_output as u32];
+        tone.extend([t.bias, t.display_max, 0.0, 0.0].map(f32::to_bits));
         queue.write_buffer(&self.tone_buffer, 0, &words_to_bytes(&tone));
         let adapt = [dt.max(0.0).to_bits(), ADAPT_TAU_BRIGHTEN_S.to_bits(), ADAPT_TAU_DARKEN_S.to_bits(), reset_adaptation as u32];
         queue.write_buffer(&self.adapt_params, 0, &words_to_bytes(&adapt));
@@ -521,13 +631,23 @@ impl Renderer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.scene_pipeline);
             pass.set_bind_group(0, &self.scene_bind, &[]);
             pass.set_vertex_buffer(0, self.vertex_buffer.slice(..));
             pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..self.index_count, 0, 0..1);
+            pass.set_pipeline(&self.scene_pipeline);
+            for draw in self.draws.iter().filter(|d| d.kind == DrawKind::Opaque) {
+                pass.draw_indexed(draw.indices.clone(), 0, 0..1);
+            }
+            pass.set_pipeline(&self.backdrop_pipeline);
+            pass.set_bind_group(0, &self.backdrop_bind, &[]);
+            pass.draw(0..3, 0..1);
+            pass.set_pipeline(&self.glass_pipeline);
+            pass.set_bind_group(0, &self.scene_bind, &[]);
+            for draw in self.draws.iter().filter(|d| d.kind != DrawKind::Opaque) {
+                pass.draw_indexed(draw.indices.clone(), 0, 0..1);
+            }
         }
-        if drago {
+        if t.operator.adapts() {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("luminance"), timestamp_writes: None });
             pass.set_pipeline(&self.luminance_pipeline);
             pass.set_bind_group(0, &self.targets.luminance_bind, &[]);

@@ -125,7 +125,7 @@ fn check_size(width: u32, height: u32, gpu: &Gpu) -> Result<(), ViewError> {
 }
 
 /// Renders one frame of `scene` offscreen at `width × height` and reads it back.
-/// The adaptation of Drago's operator starts at this frame's luminance.
+/// The adaptation of the adaptive operators starts at this frame's luminance.
 pub fn render_image(
     gpu: &Gpu,
     scene: &PreparedScene,

@@ -1,34 +1,36 @@
 //! Lighting as SH vectors: an environment map projected once, a default
-//! Preetham sky, or a time-lapse step's sky from the bundle; rotated per frame.
+//! Preetham sky, or a time-lapse step's sky from the bundle; turned with the
+//! car per frame.
 
 use std::path::Path;
 
 use glam::{EulerRot, Mat3, Vec3};
 
+use super::backdrop::SkyBackdrop;
 use super::ViewError;
 use crate::bundle::SunSeries;
-use crate::sh::{coeff_count, load_equirect, project_equirect, ShRotation};
+use crate::sh::{coeff_count, load_equirect, project_equirect, EquirectImage, ShRotation};
 
-/// Projects the equirect map at `path` (.exr or .hdr, conventions of
-/// [`crate::sh::equirect_direction`]) onto `order²` RGB coefficients.
-pub fn env_map_sh(path: &Path, order: usize) -> Result<Vec<[f32; 3]>, ViewError> {
+/// Loads the equirect map at `path` (.exr or .hdr, conventions of
+/// [`crate::sh::equirect_direction`]) and projects it onto `order²` RGB
+/// coefficients; the image is kept for the backdrop.
+pub fn env_map(path: &Path, order: usize) -> Result<(EquirectImage, Vec<[f32; 3]>), ViewError> {
     let image = load_equirect(path)?;
-    Ok(project_equirect(&image, order))
+    let sh = project_equirect(&image, order);
+    Ok((image, sh))
 }
 
 /// The default lighting when neither a map nor a time lapse is given: the
-/// Preetham sky (turbidity 3, sun 35° high toward +X−Z) without its sun disc,
-/// scaled to a mean sky radiance of about 1 so exposure 0 with Drago looks right.
-pub fn default_sky_sh(order: usize) -> Vec<[f32; 3]> {
+/// Preetham sky (turbidity 3, sun 35° high toward +X−Z) in its own units
+/// (cd/m², as a time lapse's sky), without the sun (no masks: the SH has no
+/// sun term, so the backdrop draws no disc either). Returns the SH and the backdrop.
+pub fn default_sky(order: usize) -> (Vec<[f32; 3]>, SkyBackdrop) {
     let elevation = 35f32.to_radians();
     let sun = Vec3::new(elevation.cos() * 0.6, elevation.sin(), -elevation.cos() * 0.8).normalize();
-    let mut sky = crate::sky::preetham_sky(sun, Vec3::Y, 3.0, order.max(1)).sky_sh;
-    // L_00 = √(4π) · mean radiance.
-    let mean = crate::view::tonemap::luminance(sky[0]) / (4.0 * std::f32::consts::PI).sqrt();
-    if mean > 0.0 {
-        sky.iter_mut().for_each(|c| *c = c.map(|x| x / mean));
-    }
-    fit_order(&sky, order)
+    let turbidity = crate::sky::DEFAULT_TURBIDITY as f32;
+    let sky = crate::sky::preetham_sky(sun, Vec3::Y, f64::from(turbidity), order.max(1)).sky_sh;
+    let backdrop = SkyBackdrop { sun, up: Vec3::Y, turbidity, scale: 1.0, sun_irradiance: None, rotation: Mat3::IDENTITY };
+    (fit_order(&sky, order), backdrop)
 }
 
 /// `coeffs` truncated or zero-padded to `order²` entries.
@@ -42,6 +44,15 @@ pub fn fit_order(coeffs: &[[f32; 3]], order: usize) -> Vec<[f32; 3]> {
 /// (`R = R_y · R_x · R_z`). A light at direction d moves to R·d.
 pub fn env_rotation(yaw_deg: f32, pitch_deg: f32, roll_deg: f32) -> Mat3 {
     Mat3::from_euler(EulerRot::YXZ, yaw_deg.to_radians(), pitch_deg.to_radians(), roll_deg.to_radians())
+}
+
+/// The environment's rotation for the car turned by yaw (about +Y, world up),
+/// pitch (about +X) and roll (about +Z), degrees, right-handed (positive yaw
+/// turns the car counter-clockwise seen from above): the car turning by
+/// `C = R_y·R_x·R_z` under a fixed sky is the sky turning by `Cᵀ` around the
+/// car, so a light at direction d is seen from the car at `Cᵀ·d`.
+pub fn car_to_env_rotation(yaw_deg: f32, pitch_deg: f32, roll_deg: f32) -> Mat3 {
+    env_rotation(yaw_deg, pitch_deg, roll_deg).transpose()
 }
 
 /// `coeffs` (order `order`) rotated by `rotation` (see [`ShRotation`]).
@@ -106,6 +117,18 @@ mod tests {
         assert_eq!(step_nearest_time(&s, 7 * 60 + 10, 120), Some(0));
         assert_eq!(step_nearest_time(&s, 11 * 60, 120), Some(1));
         assert_eq!(step_local_time(&s, 1, 120), "12:00");
+    }
+
+    #[test]
+    fn turning_the_car_left_moves_the_sky_right() {
+        // The car's nose points along −Z; after yaw +90° (counter-clockwise from
+        // above) it points along −X. The light that was ahead (−Z, world) must now
+        // be on the car's right: car-frame +X.
+        let rotation = car_to_env_rotation(90.0, 0.0, 0.0);
+        let seen = rotation * Vec3::NEG_Z;
+        assert!((seen - Vec3::X).length() < 1e-6, "{seen}");
+        let nose = env_rotation(90.0, 0.0, 0.0) * Vec3::NEG_Z;
+        assert!((nose - Vec3::NEG_X).length() < 1e-6, "{nose}");
     }
 
     #[test]

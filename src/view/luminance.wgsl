@@ -1,6 +1,8 @@
-// Luminance pass for Drago's operator (see tonemap.rs): log-average and maximum
-// luminance of the covered pixels of the HDR frame on a GRID×GRID point-sampled
-// grid (the "low-resolution pass" of seed 000 §4.2), then temporal adaptation.
+// Luminance pass for the adaptive operators (see tonemap.rs): log-average and
+// maximum luminance of the HDR frame (geometry, backdrop and what is seen
+// through glass: radiance rgb · alpha; pixels of zero radiance left out) on a
+// GRID×GRID point-sampled grid (the
+// "low-resolution pass" of seed 000 §4.2), then temporal adaptation.
 
 const GRID: u32 = 128u;
 const THREADS: u32 = 256u;
@@ -31,10 +33,12 @@ fn luminance(c: vec3<f32>) -> f32 {
     return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
 }
 
-fn grid_sample(j: u32, dims: vec2<u32>) -> vec4<f32> {
+// Luminance of grid point j.
+fn grid_sample(j: u32, dims: vec2<u32>) -> f32 {
     let g = vec2<u32>(j % GRID, j / GRID);
     let p = vec2<u32>((vec2<f32>(g) + 0.5) * vec2<f32>(dims) / f32(GRID));
-    return textureLoad(hdr, min(p, dims - 1u), 0);
+    let c = textureLoad(hdr, min(p, dims - 1u), 0);
+    return luminance(max(c.rgb * c.a, vec3<f32>(0.0)));
 }
 
 @compute @workgroup_size(256)
@@ -44,10 +48,7 @@ fn cs_luminance(@builtin(local_invocation_index) i: u32) {
     // Maximum first: dark pixels are floored relative to it.
     var m = 0.0;
     for (var s = 0u; s < per_thread; s++) {
-        let p = grid_sample(i * per_thread + s, dims);
-        if (p.a > 0.5) {
-            m = max(m, luminance(max(p.rgb, vec3<f32>(0.0))));
-        }
+        m = max(m, grid_sample(i * per_thread + s, dims));
     }
     partial_max[i] = m;
     workgroupBarrier();
@@ -62,9 +63,11 @@ fn cs_luminance(@builtin(local_invocation_index) i: u32) {
     var sum = 0.0;
     var count = 0.0;
     for (var s = 0u; s < per_thread; s++) {
-        let p = grid_sample(i * per_thread + s, dims);
-        if (p.a > 0.5) {
-            sum += log(max(luminance(max(p.rgb, vec3<f32>(0.0))), floor_l));
+        // Zero radiance is no scene at all (a black backdrop, the sky below the
+        // horizon): it would drag the average to the floor, so it does not count.
+        let l = grid_sample(i * per_thread + s, dims);
+        if (l > 0.0) {
+            sum += log(max(l, floor_l));
             count += 1.0;
         }
     }

@@ -9,9 +9,10 @@
 //! radiance(x) = albedo(x) · E                               (fragment, per triangle's material)
 //! ```
 //!
-//! then exposure `2^stops` and either gamma (seed 001) or Drago's adaptive
-//! logarithmic mapping driven by a low-resolution log-average luminance with
-//! temporal adaptation (seed 000 §5). Transfer is per unit albedo
+//! then exposure `2^stops` and a tone operator: the photographic one (key from
+//! the absolute adaptation luminance, filmic curve; the default), Drago's
+//! adaptive logarithmic mapping (seed 000 §5), both driven by a low-resolution
+//! log-average luminance with temporal adaptation, or gamma alone (seed 001). Transfer is per unit albedo
 //! (docs/conventions.md), the sun irradiance is in the sky module's units, so
 //! `albedo/π · E` is radiance in the same units as the sky's. In window-mode
 //! bundles the sun cosine is two-sided, `|n·s|`, like the bake's.
@@ -20,15 +21,21 @@
 //! is projected once and rotated with [`crate::sh::ShRotation`]; a time-lapse
 //! step brings its own sky SH. The viewer reads only the bundle and the map.
 //!
+//! Behind the geometry the backdrop pass draws the env map itself (full
+//! resolution) or the Preetham sky, turned like the lighting; window glass
+//! lets τ of it through ([`backdrop`]).
+//!
 //! - [`scene`]: bundle → GPU-ready arrays (vertices split by material, layer sums).
-//! - [`lighting`]: env map / sky / step → SH vectors.
+//! - [`lighting`]: env map / sky / step → SH vectors; the car's turn.
+//! - [`backdrop`]: env map / sky behind the geometry, and its CPU reference.
 //! - [`camera`]: look-at camera, orbit and fly controls.
 //! - [`tonemap`]: tone-mapping parameters and their CPU reference.
 //! - [`reference`]: the shading formula on the CPU (tests compare the GPU with it).
-//! - `gpu`: device, buffers, pipelines, one frame's passes (shading.wgsl, tonemap.wgsl).
+//! - `gpu`: device, buffers, pipelines, one frame's passes (shading.wgsl, backdrop.wgsl, luminance.wgsl, tonemap.wgsl).
 //! - [`headless`]: offscreen frame → RGBA8 → PNG, frame timing.
 //! - [`window`]: the interactive winit app.
 
+pub mod backdrop;
 pub mod camera;
 mod gpu;
 pub mod headless;
@@ -38,6 +45,7 @@ pub mod scene;
 pub mod tonemap;
 pub mod window;
 
+pub use backdrop::{Backdrop, SkyBackdrop};
 pub use camera::Camera;
 pub use gpu::{Gpu, GpuMemory, Renderer};
 pub use headless::{render_image, time_frames, FrameTiming, Image};
@@ -75,26 +83,34 @@ pub struct FrameSettings {
     /// Time-lapse step whose sun term is added; `None` = no sun. Ignored when the
     /// bundle has no sun series or the step is out of range.
     pub sun_step: Option<usize>,
+    /// What is drawn behind the geometry and seen through the glass.
+    pub backdrop: Backdrop,
     pub tonemap: ToneMap,
 }
 
-/// Where the SH lighting comes from.
+/// Where the lighting (and the backdrop) comes from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LightingSource {
-    /// A fixed SH vector (an env map projected once, or the default sky), rotated by
-    /// [`ViewState::rotation_deg`] every frame.
+    /// An env map projected once; the map itself ([`PreparedScene::environment`])
+    /// is the backdrop. Turned with the car ([`ViewState::car_rotation_deg`]).
+    EnvMap(Vec<[f32; 3]>),
+    /// The default Preetham sky: its SH (no sun term) and its backdrop. Turned with the car.
+    Sky { sh: Vec<[f32; 3]>, backdrop: SkyBackdrop },
+    /// A fixed SH vector with a black backdrop (synthetic lighting). Turned with the car.
     Sh(Vec<[f32; 3]>),
-    /// The current time-lapse step's sky SH from the bundle (not rotated: the
-    /// sun masks are baked for the sky as it is).
-    StepSky,
+    /// The current time-lapse step's sky SH from the bundle, and its Preetham
+    /// sky and sun disc as the backdrop (`up`, `turbidity`: META `sun`). Not
+    /// turned: the sun masks are baked for the car as it stands.
+    StepSky { up: glam::Vec3, turbidity: f32 },
 }
 
 /// The interactive state that a frame's settings derive from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ViewState {
     pub source: LightingSource,
-    /// Environment yaw, pitch, roll in degrees ([`lighting::env_rotation`]).
-    pub rotation_deg: [f32; 3],
+    /// The car's yaw, pitch, roll under the sky, degrees ([`lighting::car_to_env_rotation`]):
+    /// turning the car by R is the environment turning by Rᵀ.
+    pub car_rotation_deg: [f32; 3],
     /// Current time-lapse step (`None`: no sun term).
     pub step: Option<usize>,
     /// Sun term on (when a step is selected).
@@ -106,14 +122,32 @@ pub struct ViewState {
 impl ViewState {
     /// This state's frame settings for a transfer of `order`.
     pub fn frame_settings(&self, sun: Option<&crate::bundle::SunSeries>, order: usize) -> FrameSettings {
-        let lighting = match (&self.source, sun) {
-            (LightingSource::StepSky, Some(series)) => lighting::step_sky_sh(series, self.step.unwrap_or(0), order),
-            (LightingSource::StepSky, None) => vec![[0.0; 3]; crate::sh::coeff_count(order)],
-            (LightingSource::Sh(base), _) => {
-                let [yaw, pitch, roll] = self.rotation_deg;
-                lighting::rotate_sh(base, order, lighting::env_rotation(yaw, pitch, roll))
+        let [yaw, pitch, roll] = self.car_rotation_deg;
+        let rotation = lighting::car_to_env_rotation(yaw, pitch, roll);
+        let sun_step = if self.sun_on { self.step } else { None };
+        let (lighting, backdrop) = match (&self.source, sun) {
+            (LightingSource::StepSky { up, turbidity }, Some(series)) => {
+                let k = self.step.unwrap_or(0);
+                let backdrop = series.steps.get(k).map_or(Backdrop::Black, |s| {
+                    Backdrop::Sky(SkyBackdrop {
+                        sun: glam::Vec3::from(s.direction),
+                        up: *up,
+                        turbidity: *turbidity,
+                        scale: 1.0,
+                        // The disc is drawn when the sun term lights the scene.
+                        sun_irradiance: sun_step.map(|_| s.sun_rgb),
+                        rotation: glam::Mat3::IDENTITY,
+                    })
+                });
+                (lighting::step_sky_sh(series, k, order), backdrop)
             }
+            (LightingSource::StepSky { .. }, None) => (vec![[0.0; 3]; crate::sh::coeff_count(order)], Backdrop::Black),
+            (LightingSource::EnvMap(base), _) => (lighting::rotate_sh(base, order, rotation), Backdrop::EnvMap { rotation }),
+            (LightingSource::Sky { sh, backdrop }, _) => {
+                (lighting::rotate_sh(sh, order, rotation), Backdrop::Sky(SkyBackdrop { rotation, ..*backdrop }))
+            }
+            (LightingSource::Sh(base), _) => (lighting::rotate_sh(base, order, rotation), Backdrop::Black),
         };
-        FrameSettings { lighting, sun_step: if self.sun_on { self.step } else { None }, tonemap: self.tonemap }
+        FrameSettings { lighting, sun_step, backdrop, tonemap: self.tonemap }
     }
 }

@@ -5,14 +5,14 @@
 use std::collections::HashMap;
 
 use crate::bundle::{Bundle, SunSeries, Transfer};
-use crate::mesh::MaterialRole;
 
 /// One GPU vertex: 40 bytes, `source` indexes the bundle's per-vertex data.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpuVertex {
     pub position: [f32; 3],
     pub normal: [f32; 3],
-    /// Albedo of the material of the triangles using this copy, clamped to 0..1 as the bake does.
+    /// Albedo of the material of the triangles using this copy, clamped to 0..1
+    /// as the bake does; for glass copies (τ, τ, τ), the glass transmittance.
     pub albedo: [f32; 3],
     /// Bundle vertex whose transfer and sun bits this copy uses.
     pub source: u32,
@@ -83,12 +83,38 @@ impl LayerSelection {
     }
 }
 
+/// How a run of triangles is drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DrawKind {
+    /// PRT-shaded, opaque.
+    Opaque,
+    /// Window glass: transmits τ of what is behind it (the env, or the car
+    /// body seen through it), adds nothing.
+    Glass { transmittance: f32 },
+}
+
+/// A contiguous range of [`PreparedScene::indices`] with one material and one
+/// way of drawing. This is the seam for per-material drawing: a later pass
+/// (the LCD panel's final-gathered texture) finds its material's range here
+/// and draws it with its own pipeline instead of the PRT one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaterialDraw {
+    /// Index into the bundle mesh's materials.
+    pub material: u32,
+    pub kind: DrawKind,
+    /// Range of `indices` (multiples of 3).
+    pub indices: std::ops::Range<u32>,
+}
+
 /// The bundle in the form the renderer uploads.
 #[derive(Clone, Debug)]
 pub struct PreparedScene {
     pub vertices: Vec<GpuVertex>,
-    /// Triangles over `vertices`, u32, counter-clockwise (drawn two-sided).
+    /// Triangles over `vertices`, u32, counter-clockwise (drawn two-sided),
+    /// grouped by [`MaterialDraw`] (bundle triangle order within a draw).
     pub indices: Vec<u32>,
+    /// The draws, opaque ones first.
+    pub draws: Vec<MaterialDraw>,
     /// SH order n of the transfer.
     pub order: u32,
     /// 1 or 3.
@@ -102,6 +128,9 @@ pub struct PreparedScene {
     pub two_sided_sun: bool,
     /// Bounds of the drawn geometry.
     pub bounds: (glam::Vec3, glam::Vec3),
+    /// The equirect map drawn behind the geometry ([`super::backdrop::Backdrop::EnvMap`]),
+    /// uploaded once at full resolution; `None` for a sky or no backdrop.
+    pub environment: Option<crate::sh::EquirectImage>,
 }
 
 /// Whether the bundle was baked in window mode (its META `params.mode`).
@@ -109,11 +138,18 @@ pub fn is_window_mode(bundle: &Bundle) -> bool {
     bundle.meta.pointer("/params/mode").and_then(|m| m.as_str()) == Some("window")
 }
 
+/// The bake's `--window` patterns kept in META `window_patterns`.
+pub fn window_patterns(bundle: &Bundle) -> Vec<String> {
+    let patterns = bundle.meta.get("window_patterns").and_then(|p| p.as_array());
+    patterns.map(|list| list.iter().filter_map(|p| p.as_str().map(str::to_string)).collect()).unwrap_or_default()
+}
+
 /// Prepares `bundle` for drawing.
 ///
-/// Triangles whose material has the window role, or whose material or group
-/// name matches a glob of `hide`, are not drawn (glass would hide the cabin it
-/// lights). Errors when the bundle has no transfer, a pattern is malformed, or
+/// Windows (the window role, or the bake's `--window` patterns from META, by
+/// material or group name, with their transmittance) are drawn as glass.
+/// Triangles whose material or group name matches a glob of `hide` are not
+/// drawn. Errors when the bundle has no transfer, a pattern is malformed, or
 /// the selected layers are absent.
 pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) -> Result<PreparedScene, String> {
     let transfer = bundle.transfer.as_ref().ok_or("the bundle has no transfer to shade (bake it first)")?;
@@ -134,45 +170,65 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
         .map(|p| glob::Pattern::new(p).map_err(|e| format!("invalid --hide pattern {p:?}: {e}")))
         .collect::<Result<Vec<_>, _>>()?;
     let mesh = &bundle.mesh;
-    let hidden_material: Vec<bool> =
-        mesh.materials.iter().map(|m| m.role == MaterialRole::Window || patterns.iter().any(|p| p.matches(&m.name))).collect();
+    let surfaces = crate::bake::Surfaces::resolve(mesh, &window_patterns(bundle)).map_err(|e| format!("META window_patterns: {e}"))?;
+    let hidden_material: Vec<bool> = mesh.materials.iter().map(|m| patterns.iter().any(|p| p.matches(&m.name))).collect();
     let hidden_group: Vec<bool> = mesh.groups.iter().map(|g| patterns.iter().any(|p| p.matches(g))).collect();
 
-    // One GPU vertex per (bundle vertex, material) pair in first-use order.
-    let mut first_copy: Vec<(u32, u16)> = vec![(u32::MAX, 0); mesh.vertex_count()];
-    let mut other_copies: HashMap<(u32, u16), u32> = HashMap::new();
-    let mut vertices = Vec::new();
-    let mut indices = Vec::with_capacity(mesh.indices.len());
-    let (mut lo, mut hi) = (glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY));
+    // Each drawn triangle's draw: (material, kind), numbered in first-use order.
+    let mut draw_keys: Vec<(u32, DrawKind)> = Vec::new();
+    let mut triangles_of_draw: Vec<Vec<u32>> = Vec::new();
     for t in 0..mesh.triangle_count() {
-        let material = mesh.tri_material[t];
+        let material = u32::from(mesh.tri_material[t]);
         if hidden_material[material as usize] || hidden_group[mesh.tri_group[t] as usize] {
             continue;
         }
-        for v in mesh.triangle(t) {
-            let mut new_copy = || {
-                let position = mesh.positions[v as usize];
-                lo = lo.min(position);
-                hi = hi.max(position);
-                vertices.push(GpuVertex {
-                    position: position.to_array(),
-                    normal: mesh.normals[v as usize].to_array(),
-                    albedo: mesh.materials[material as usize].albedo.map(|a| a.clamp(0.0, 1.0)),
-                    source: v,
+        let kind = surfaces.window_transmittance[t].map_or(DrawKind::Opaque, |transmittance| DrawKind::Glass { transmittance });
+        let draw = match draw_keys.iter().position(|&key| key == (material, kind)) {
+            Some(d) => d,
+            None => {
+                draw_keys.push((material, kind));
+                triangles_of_draw.push(Vec::new());
+                draw_keys.len() - 1
+            }
+        };
+        triangles_of_draw[draw].push(t as u32);
+    }
+    // Opaque draws first (the backdrop and the glass are drawn after them).
+    let mut order: Vec<usize> = (0..draw_keys.len()).collect();
+    order.sort_by_key(|&d| matches!(draw_keys[d].1, DrawKind::Glass { .. }));
+
+    // One GPU vertex per (bundle vertex, draw) pair in first-use order.
+    let mut copies: HashMap<(u32, usize), u32> = HashMap::new();
+    let mut vertices = Vec::new();
+    let mut indices = Vec::with_capacity(mesh.indices.len());
+    let mut draws = Vec::with_capacity(order.len());
+    let (mut lo, mut hi) = (glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY));
+    for d in order {
+        let (material, kind) = draw_keys[d];
+        // Glass copies carry (τ, τ, τ) where opaque ones carry the albedo.
+        let colour = match kind {
+            DrawKind::Opaque => mesh.materials[material as usize].albedo.map(|a| a.clamp(0.0, 1.0)),
+            DrawKind::Glass { transmittance } => [transmittance; 3],
+        };
+        let first = indices.len() as u32;
+        for &t in &triangles_of_draw[d] {
+            for v in mesh.triangle(t as usize) {
+                let index = *copies.entry((v, d)).or_insert_with(|| {
+                    let position = mesh.positions[v as usize];
+                    lo = lo.min(position);
+                    hi = hi.max(position);
+                    vertices.push(GpuVertex {
+                        position: position.to_array(),
+                        normal: mesh.normals[v as usize].to_array(),
+                        albedo: colour,
+                        source: v,
+                    });
+                    vertices.len() as u32 - 1
                 });
-                vertices.len() as u32 - 1
-            };
-            let index = match first_copy[v as usize] {
-                (u32::MAX, _) => {
-                    let i = new_copy();
-                    first_copy[v as usize] = (i, material);
-                    i
-                }
-                (i, m) if m == material => i,
-                _ => *other_copies.entry((v, material)).or_insert_with(new_copy),
-            };
-            indices.push(index);
+                indices.push(index);
+            }
         }
+        draws.push(MaterialDraw { material, kind, indices: first..indices.len() as u32 });
     }
     if indices.is_empty() {
         (lo, hi) = mesh.bounds();
@@ -184,6 +240,7 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
     Ok(PreparedScene {
         vertices,
         indices,
+        draws,
         order: transfer.order,
         channels: transfer.channels,
         transfer: layers.combine(transfer),
@@ -191,5 +248,6 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
         words_per_vertex,
         two_sided_sun: is_window_mode(bundle),
         bounds: (lo, hi),
+        environment: None,
     })
 }

@@ -1,7 +1,8 @@
 // Per-vertex PRT shading (seeds 000 §4.2, 001 §4).
 //
 // Vertex: E = Σ_i L_i t_i(v)  +  bit(v, step) · cos · sun_rgb / π   (cos = max(n·s,0), or |n·s| two-sided)
-// Fragment: radiance = albedo · E, written to an HDR target; alpha 1 marks covered pixels.
+// Fragment: radiance = albedo · E, written to an HDR target; alpha is the transmittance
+// of the glass in front (1 here; the glass pass lowers it).
 
 const PI: f32 = 3.14159265358979;
 const MAX_COEFFS: u32 = 256u;
@@ -76,4 +77,29 @@ fn vs_main(v: VertexIn) -> VertexOut {
 @fragment
 fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     return vec4<f32>(in.albedo * in.light, 1.0);
+}
+
+// Window glass (drawn after the backdrop, depth test "less", no depth write):
+// it adds nothing and lets τ of what is behind it through. It writes only
+// alpha with a "min" blend, so the HDR pixel's alpha is the smallest τ of the
+// glass in front of it and the tone-mapping pass scales the colour by it:
+// coincident twin panes (double-sided CAD glass) do not square τ, as a ray
+// through a window counts τ once in the bake. For glass copies the vertex
+// albedo holds (τ, τ, τ).
+struct GlassOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) transmittance: f32,
+};
+
+@vertex
+fn vs_glass(v: VertexIn) -> GlassOut {
+    var out: GlassOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.transmittance = v.albedo.x;
+    return out;
+}
+
+@fragment
+fn fs_glass(in: GlassOut) -> @location(0) vec4<f32> {
+    return vec4<f32>(0.0, 0.0, 0.0, in.transmittance);
 }

@@ -17,7 +17,21 @@
 //!   0.5 s when brightening and 2 s when darkening (the eye adapts to light
 //!   faster than to dark; a simple stand-in for Pattanaik et al. 2000).
 //!
-//! `Y` is Rec. 709 luminance `0.2126 R + 0.7152 G + 0.0722 B`.
+//! - **Photographic** (the default): Reinhard et al. 2002's scaling `c · a / L_a`
+//!   with the key `a` chosen from the *absolute* adaptation luminance `L_a`
+//!   (cd/m², the same adapted log-average as Drago's) as Krawczyk, Myszkowski
+//!   and Seidel 2005 do, `a = 1.03 − 2 / (2 + log10(L_a + 1))`: about 0.03 for
+//!   a night scene, 0.16 at 1 cd/m², 0.63 at 10³, 0.70 at 10⁴ (daylight). A night
+//!   stays dark and a sunny scene keeps its highlights, where Drago's mapping
+//!   (scale-invariant: only `L/L_a` matters) makes both look alike. Then
+//!   `2^stops`, the ACES filmic fit of Narkowicz 2015 per channel,
+//!   `f(x) = x(2.51x + 0.03) / (x(2.43x + 0.59) + 0.14)` (a toe, a shoulder,
+//!   display white only from x ≈ 7.2, i.e. ≈ 10–40× the adaptation
+//!   luminance), clamp, gamma.
+//!
+//! `Y` is Rec. 709 luminance `0.2126 R + 0.7152 G + 0.0722 B`. Every operator
+//! reads the HDR pixel's radiance as `rgb · alpha` (alpha: the transmittance of
+//! the window glass in front of it, 1 elsewhere).
 
 /// Which tone-mapping operator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -26,6 +40,34 @@ pub enum ToneOperator {
     Linear,
     /// Drago's adaptive logarithmic mapping with temporal adaptation (seed 000).
     Drago,
+    /// Key from the absolute adaptation luminance, filmic curve, temporal adaptation (the default).
+    Photographic,
+}
+
+impl ToneOperator {
+    /// The operator named `text` (`photographic`, `drago`, `linear`).
+    pub fn parse(text: &str) -> Option<ToneOperator> {
+        match text {
+            "photographic" => Some(ToneOperator::Photographic),
+            "drago" => Some(ToneOperator::Drago),
+            "linear" => Some(ToneOperator::Linear),
+            _ => None,
+        }
+    }
+
+    /// The next operator (the window's `M` key): photographic → Drago → linear → photographic.
+    pub fn next(self) -> ToneOperator {
+        match self {
+            ToneOperator::Photographic => ToneOperator::Drago,
+            ToneOperator::Drago => ToneOperator::Linear,
+            ToneOperator::Linear => ToneOperator::Photographic,
+        }
+    }
+
+    /// Whether the operator needs the luminance pass (adapted log-average).
+    pub fn adapts(self) -> bool {
+        self != ToneOperator::Linear
+    }
 }
 
 /// Tone-mapping parameters.
@@ -44,7 +86,7 @@ pub struct ToneMap {
 
 impl Default for ToneMap {
     fn default() -> Self {
-        ToneMap { operator: ToneOperator::Drago, exposure_stops: 0.0, gamma: 2.2, bias: 0.85, display_max: 100.0 }
+        ToneMap { operator: ToneOperator::Photographic, exposure_stops: 0.0, gamma: 2.2, bias: 0.85, display_max: 100.0 }
     }
 }
 
@@ -78,6 +120,23 @@ pub fn drago(c: [f32; 3], t: &ToneMap, l_a: f32, l_max: f32) -> [f32; 3] {
     c.map(|x| (x * scale * ratio).clamp(0.0, 1.0).powf(1.0 / t.gamma))
 }
 
+/// The photographic key for adaptation luminance `l_a` (cd/m²), Krawczyk et al. 2005.
+pub fn photographic_key(l_a: f32) -> f32 {
+    1.03 - 2.0 / (2.0 + (l_a + 1.0).log10())
+}
+
+/// The ACES filmic fit (Narkowicz 2015) of one channel.
+pub fn filmic(x: f32) -> f32 {
+    (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
+}
+
+/// The photographic operator on the CPU for adaptation luminance `l_a`, as tonemap.wgsl computes it.
+pub fn photographic(c: [f32; 3], t: &ToneMap, l_a: f32) -> [f32; 3] {
+    let l_a = l_a.max(1e-20);
+    let scale = t.exposure_stops.exp2() * photographic_key(l_a) / l_a;
+    c.map(|x| filmic(x.max(0.0) * scale).clamp(0.0, 1.0).powf(1.0 / t.gamma))
+}
+
 /// A display value in 0..1 as an 8-bit code, rounded to nearest like a UNORM8 store.
 pub fn to_u8(x: f32) -> u8 {
     (x.clamp(0.0, 1.0) * 255.0).round() as u8
@@ -92,6 +151,35 @@ mod tests {
         assert_eq!(linear([0.0, 1.0, 4.0], 0.0, 2.2), [0.0, 1.0, 1.0]);
         let half = linear([0.25, 0.25, 0.25], 1.0, 2.2)[0];
         assert!((half - 0.5f32.powf(1.0 / 2.2)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn photographic_key_keeps_night_dark_and_day_bright() {
+        // Closed forms: L_a = 0 → 1.03 − 1 = 0.03; L_a = 9 → 1.03 − 2/3; monotonic in between and beyond.
+        assert!((photographic_key(0.0) - 0.03).abs() < 1e-6);
+        assert!((photographic_key(9.0) - (1.03 - 2.0 / 3.0)).abs() < 1e-6);
+        let keys: Vec<f32> = [1e-4f32, 1e-2, 1.0, 1e2, 1e4, 1e6].iter().map(|&l| photographic_key(l)).collect();
+        assert!(keys.windows(2).all(|w| w[1] > w[0]), "{keys:?}");
+        // The same scene 10⁶ times dimmer maps darker: the operator is not scale-invariant.
+        let t = ToneMap { gamma: 1.0, ..ToneMap::default() };
+        let day = photographic([1e4; 3], &t, 1e4)[0];
+        let night = photographic([1e-2; 3], &t, 1e-2)[0];
+        assert!(day > 3.0 * night, "day {day}, night {night}");
+    }
+
+    #[test]
+    fn filmic_curve_is_an_s_curve_reaching_white_near_seven() {
+        assert_eq!(filmic(0.0), 0.0);
+        // Toe: slope at 0 is 0.03/0.14 < 1; white (1.0) is reached at the root of 0.08x² − 0.56x − 0.14.
+        let white = (0.56 + (0.56f32 * 0.56 + 4.0 * 0.08 * 0.14).sqrt()) / 0.16;
+        assert!((filmic(white) - 1.0).abs() < 1e-5, "{white}");
+        assert!(filmic(0.9 * white) < 1.0);
+        let mut last = 0.0;
+        for k in 1..200 {
+            let v = filmic(k as f32 * 0.05);
+            assert!(v > last);
+            last = v;
+        }
     }
 
     #[test]

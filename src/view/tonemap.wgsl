@@ -1,12 +1,13 @@
 // Tone mapping (see tonemap.rs for the formulas): exposure, then linear + gamma
-// (seed 001) or Drago's adaptive logarithmic mapping (seed 000 §5).
+// (seed 001), Drago's adaptive logarithmic mapping (seed 000 §5), or the
+// photographic operator (key from the absolute adaptation luminance, filmic curve).
+// The HDR pixel's radiance is rgb · alpha (alpha: transmittance of the glass in front).
 
 struct Tone {
     exposure: f32,       // 2^stops
     gamma: f32,
-    mode: u32,           // 0 linear, 1 Drago
+    mode: u32,           // 0 linear, 1 Drago, 2 photographic
     srgb_target: u32,    // 1: the target encodes sRGB itself; output linear
-    background: vec4<f32>,
     drago: vec4<f32>,    // x bias, y L_dmax
 };
 
@@ -48,21 +49,34 @@ fn drago(c: vec3<f32>) -> vec3<f32> {
     return c * scale * ratio;
 }
 
+// Key value from the absolute adaptation luminance (Krawczyk et al. 2005).
+fn photographic_key(l_a: f32) -> f32 {
+    return 1.03 - 2.0 / (2.0 + log(l_a + 1.0) / log(10.0));
+}
+
+// ACES filmic fit (Narkowicz 2015), per channel.
+fn filmic(x: vec3<f32>) -> vec3<f32> {
+    return (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14);
+}
+
+fn photographic(c: vec3<f32>) -> vec3<f32> {
+    let l_a = max(adapted.values[0], 1e-20);
+    return filmic(c * (tone.exposure * photographic_key(l_a) / l_a));
+}
+
 @fragment
 fn fs_tonemap(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
     let p = textureLoad(hdr_in, vec2<i32>(position.xy), 0);
-    var display: vec3<f32>;
-    if (p.a < 0.5) {
-        display = tone.background.rgb;
+    let c = max(p.rgb * p.a, vec3<f32>(0.0));
+    var mapped: vec3<f32>;
+    if (tone.mode == 1u) {
+        mapped = drago(c);
+    } else if (tone.mode == 2u) {
+        mapped = photographic(c);
     } else {
-        var mapped: vec3<f32>;
-        if (tone.mode == 1u) {
-            mapped = drago(max(p.rgb, vec3<f32>(0.0)));
-        } else {
-            mapped = p.rgb * tone.exposure;
-        }
-        display = pow(clamp(mapped, vec3<f32>(0.0), vec3<f32>(1.0)), vec3<f32>(1.0 / tone.gamma));
+        mapped = c * tone.exposure;
     }
+    var display = pow(clamp(mapped, vec3<f32>(0.0), vec3<f32>(1.0)), vec3<f32>(1.0 / tone.gamma));
     if (tone.srgb_target == 1u) {
         display = srgb_to_linear(display);
     }

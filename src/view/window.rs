@@ -3,7 +3,7 @@
 //! Keys (also printed by `H`, documented in docs/viewer.md): mouse left drag
 //! orbit, right drag look around, wheel dolly; `W A S D` fly, `Q E` down/up;
 //! `Space` play/pause the time lapse; `← →` (or `, .`) step; `+ −` exposure ±½
-//! stop; `[ ]` turn the environment ∓15°, `R` auto-turn; `T` all light, `B`
+//! stop; `[ ]` turn the car ∓15° under the sky, `R` auto-turn; `T` all light, `B`
 //! (or `0`) direct, `I` indirect, `0–9` bounce N; `U` sun term; `M` tone
 //! operator; `C` print the camera as `--camera`; `H` help; `Esc` quit.
 
@@ -20,21 +20,20 @@ use winit::window::{Window, WindowId};
 use super::camera::{Camera, CameraControl};
 use super::gpu::{Gpu, Renderer};
 use super::scene::{LayerSelection, PreparedScene};
-use super::tonemap::ToneOperator;
-use super::{lighting, ViewError, ViewState};
+use super::{lighting, LightingSource, ViewError, ViewState};
 use crate::bundle::Bundle;
 
 /// Seconds per time-lapse step when playing (92 steps ≈ 30 s, as in seed 001 §6).
 const STEP_SECONDS: f32 = 0.33;
-/// Environment auto-turn speed, degrees per second.
+/// Car auto-turn speed under the sky, degrees per second.
 const TURN_DEG_PER_S: f32 = 20.0;
 
 /// The key help printed by `H` and at start.
 pub const HELP: &str = "\
 mouse: left drag orbit, right drag look, wheel dolly | W A S D fly, Q E down/up
 Space play/pause time lapse | <- -> (or , .) step | + - exposure 1/2 stop
-[ ] turn environment, R auto-turn | T all light, B (or 0) direct, I indirect, 0-9 bounce N
-U sun term | M tone operator (Drago/linear) | C print camera | H help | Esc quit";
+[ ] turn the car under the sky, R auto-turn | T all light, B (or 0) direct, I indirect, 0-9 bounce N
+U sun term | M tone operator (photographic/Drago/linear) | C print camera | H help | Esc quit";
 
 struct Surface {
     window: Arc<Window>,
@@ -184,6 +183,21 @@ impl App {
         self.state.step = Some((current + delta).rem_euclid(count) as usize);
     }
 
+    /// The car can turn under an env map or the default sky, not under a time
+    /// lapse (its sun masks are baked for the car as it stands).
+    fn can_turn(&self) -> bool {
+        !matches!(self.state.source, LightingSource::StepSky { .. })
+    }
+
+    /// Turns the car by `degrees` about +Y (counter-clockwise from above).
+    fn turn(&mut self, degrees: f32) {
+        if self.can_turn() {
+            self.state.car_rotation_deg[0] = (self.state.car_rotation_deg[0] + degrees) % 360.0;
+        } else {
+            eprintln!("the time lapse's sun masks are baked for the car as it stands: it cannot turn (view with --env to turn it)");
+        }
+    }
+
     fn on_key(&mut self, event_loop: &ActiveEventLoop, key: &Key) {
         match key.as_ref() {
             Key::Named(NamedKey::Escape) => event_loop.exit(),
@@ -203,10 +217,11 @@ impl App {
             }
             Key::Character("+") | Key::Character("=") => self.state.tonemap.exposure_stops += 0.5,
             Key::Character("-") | Key::Character("_") => self.state.tonemap.exposure_stops -= 0.5,
-            Key::Character("[") => self.state.rotation_deg[0] -= 15.0,
-            Key::Character("]") => self.state.rotation_deg[0] += 15.0,
+            Key::Character("[") => self.turn(-15.0),
+            Key::Character("]") => self.turn(15.0),
             Key::Character(c) => match c.to_ascii_lowercase().as_str() {
-                "r" => self.auto_turn = !self.auto_turn,
+                "r" if self.can_turn() => self.auto_turn = !self.auto_turn,
+                "r" => self.turn(0.0),
                 "t" => self.set_layers(LayerSelection::Total),
                 "b" => self.toggle_bounces(&[0]),
                 "i" => {
@@ -215,10 +230,8 @@ impl App {
                 }
                 "u" => self.state.sun_on = !self.state.sun_on,
                 "m" => {
-                    self.state.tonemap.operator = match self.state.tonemap.operator {
-                        ToneOperator::Drago => ToneOperator::Linear,
-                        ToneOperator::Linear => ToneOperator::Drago,
-                    };
+                    self.state.tonemap.operator = self.state.tonemap.operator.next();
+                    eprintln!("tone operator: {:?}", self.state.tonemap.operator);
                     self.first_frame = true;
                 }
                 "c" => println!("--camera {}", self.control.camera.to_arg()),
@@ -245,11 +258,11 @@ impl App {
         };
         let ms = if self.frame_times.is_empty() { 0.0 } else { self.frame_times.iter().sum::<f32>() / self.frame_times.len() as f32 * 1e3 };
         format!(
-            "prtbake view | {:?} {:+.1} EV | {} | env yaw {:.0}°{step} | {ms:.1} ms",
+            "prtbake view | {:?} {:+.1} EV | {} | car yaw {:.0}°{step} | {ms:.1} ms",
             self.state.tonemap.operator,
             self.state.tonemap.exposure_stops,
             self.state.layers.describe(),
-            self.state.rotation_deg[0]
+            self.state.car_rotation_deg[0]
         )
     }
 
@@ -270,7 +283,7 @@ impl App {
             }
         }
         if self.auto_turn {
-            self.state.rotation_deg[0] = (self.state.rotation_deg[0] + TURN_DEG_PER_S * dt) % 360.0;
+            self.turn(TURN_DEG_PER_S * dt);
         }
         let axis = |plus: KeyCode, minus: KeyCode| self.keys.contains(&plus) as i32 as f32 - self.keys.contains(&minus) as i32 as f32;
         let (forward, right, up) =
