@@ -82,7 +82,7 @@ struct BakeArgs {
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
-    /// Interior samples per vertex on average (spread by area, ≥ 1 per triangle).
+    /// Interior samples per vertex on average (spread by area in rotation triples, ≥ 3 per triangle).
     #[arg(long, default_value_t = 2.0)]
     samples_per_vertex: f32,
     /// Colour channels: 1, 3, or auto (1 when every material is grey).
@@ -259,7 +259,7 @@ struct SunArgs {
     /// SH order of the stored sky (bands l < n; 0 = no sky).
     #[arg(long, default_value_t = 3)]
     sky_order: usize,
-    /// Interior samples per vertex on average (spread by area, ≥ 1 per triangle).
+    /// Interior samples per vertex on average (spread by area in rotation triples, ≥ 3 per triangle).
     #[arg(long, default_value_t = 2.0)]
     samples_per_vertex: f32,
     /// Seed of the sample placement (the same seed as `bake` gives the same points).

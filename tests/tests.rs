@@ -5,6 +5,7 @@ mod bake_props;
 mod chart;
 mod clean_props;
 mod cli;
+mod estimator;
 mod export;
 mod hostile_bake;
 mod safety;

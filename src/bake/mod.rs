@@ -40,7 +40,8 @@ pub enum Mode {
 #[serde(rename_all = "lowercase", tag = "kind")]
 pub enum Sampling {
     /// Stratified points inside each triangle, about `samples_per_vertex` × vertex count
-    /// in all, spread by area (at least one, at most `max_per_triangle`, per triangle).
+    /// in all, spread by area, in rotation triples (at least one triple, at most
+    /// `max_per_triangle` points, per triangle).
     Interior { samples_per_vertex: f32, max_per_triangle: u32 },
     /// The vertices themselves (leaks shadows where triangles overlap; for comparison).
     Vertex,

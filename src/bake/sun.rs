@@ -8,7 +8,8 @@
 //!    window mode skips this test (it is two-sided, like its transfer), and
 //! 3. the sun reaches the surface around v: of the interior samples of v's
 //!    adjacent triangles (the same points the transfer bake uses), weighted
-//!    by their barycentric weight for v, a strict majority see the sun.
+//!    as the transfer weights them (hat value for v times the area a sample
+//!    stands for), a strict majority see the sun.
 //!
 //! A sample sees the sun when (open mode) its interpolated shading normal
 //! faces the sun and a ray toward `s_k`, from the sample pushed off its
@@ -35,7 +36,7 @@ use rayon::prelude::*;
 use super::progress::Progress;
 use super::scene::Scene;
 use super::surfaces::Surfaces;
-use super::transfer::{interior_layout, sampled_triangles, triangle_sample, InteriorLayout};
+use super::transfer::{interior_layout, sample_weights, sampled_triangles, triangle_area, triangle_sample, InteriorLayout};
 use super::{BakeError, DirectionPattern, Mode};
 use crate::mesh::Mesh;
 
@@ -63,7 +64,7 @@ pub enum LoopOrder {
 pub struct SunParams {
     /// Open (escape = lit, one-sided) or window (first hit a window = lit, two-sided).
     pub mode: Mode,
-    /// Interior samples per vertex on average (spread by area, ≥ 1 per triangle).
+    /// Interior samples per vertex on average (spread by area in rotation triples, ≥ 3 per triangle).
     pub samples_per_vertex: f32,
     /// At most this many samples per triangle.
     pub max_per_triangle: u32,
@@ -331,11 +332,14 @@ impl<'a> SunPlan<'a> {
     /// Barycentrics of sample `s` of layout item `item`.
     #[inline]
     fn barycentrics(&self, item: usize, s: u32) -> [f32; 3] {
-        sample_barycentrics(self.params, &self.layout, item, s)
+        sample_barycentrics(self.mesh, self.params, &self.layout, item, s)
     }
 
-    /// Sums, for vertex `v`, the barycentric weight of its samples that see
-    /// the sun at each step into `lit_weight` (overwritten); returns the total weight.
+    /// Sums, for vertex `v`, the weight of its samples that see the sun at
+    /// each step into `lit_weight` (overwritten); returns the total weight.
+    /// The weights are the transfer's (hat value times the area a sample
+    /// stands for), so the vote estimates whether the sunlit part of the
+    /// hat-weighted one-ring is a majority, whatever the sample counts.
     fn vote(&self, v: usize, adjacency: &VertexAdjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
         lit_weight.fill(0.0);
         let mut total = 0.0f32;
@@ -343,8 +347,9 @@ impl<'a> SunPlan<'a> {
         for &(item, corner) in &adjacency.entries[range] {
             let item = item as usize;
             let first = self.layout.first_sample[item] as usize;
-            for s in 0..self.layout.counts[item] {
-                let w = self.barycentrics(item, s)[corner as usize];
+            let (count, area) = (self.layout.counts[item], triangle_area(self.mesh, self.layout.triangles[item]));
+            for s in 0..count {
+                let w = sample_weights(self.barycentrics(item, s), area, count)[corner as usize];
                 total += w;
                 let bits = &sample_bits[(first + s as usize) * self.words..][..self.words];
                 for (word_index, &word) in bits.iter().enumerate() {
@@ -363,8 +368,9 @@ impl<'a> SunPlan<'a> {
 
 /// Barycentrics of sample `s` of layout item `item`: the transfer bake's points.
 #[inline]
-fn sample_barycentrics(params: &SunParams, layout: &InteriorLayout, item: usize, s: u32) -> [f32; 3] {
-    triangle_sample(DirectionPattern::Sobol, params.seed, layout.triangles[item], s, layout.counts[item])
+fn sample_barycentrics(mesh: &Mesh, params: &SunParams, layout: &InteriorLayout, item: usize, s: u32) -> [f32; 3] {
+    let t = layout.triangles[item];
+    triangle_sample(DirectionPattern::Sobol, params.seed, t, mesh.triangle(t as usize), s)
 }
 
 /// For each vertex, the (layout item, corner) pairs of the sampled triangles around it, in item order.
@@ -414,7 +420,7 @@ impl Tracer<'_> {
     /// Barycentrics of sample `s` of layout item `item`.
     #[inline]
     fn barycentrics(&self, item: usize, s: u32) -> [f32; 3] {
-        sample_barycentrics(self.params, self.layout, item, s)
+        sample_barycentrics(self.mesh, self.params, self.layout, item, s)
     }
 
     /// Traces the samples of layout items `start..end` at every day step into

@@ -8,7 +8,10 @@
 //! each ray's weight is a constant: 1/N (hemisphere) or 2/N (sphere).
 //!
 //! Points: stratified samples inside each triangle (seed 000 §4.1.1) whose
-//! results go to the triangle's vertices by barycentric weight, or the vertices
+//! results go to the triangle's vertices by barycentric weight times the area
+//! each sample stands for ([`sample_weights`]): a vertex's value estimates the
+//! hat-weighted mean of the transfer over its one-ring (docs/conventions.md),
+//! whatever the sample density. Or the vertices
 //! themselves (`Sampling::Vertex`, kept for comparison: it leaks shadows where
 //! triangles overlap). Accumulation runs in fixed item order, so the bytes do
 //! not depend on the thread count.
@@ -26,6 +29,13 @@ use super::surfaces::Surfaces;
 use super::{BakeError, BakeParams, BakeStats, Mode, Sampling, TransferResult};
 use crate::mesh::Mesh;
 use crate::sh;
+
+/// What a vertex's transfer means, recorded in every bundle's META
+/// (`conventions.vertex_transfer`): bundles before it (no such key) averaged
+/// samples by barycentric weight alone, with one centroid sample on small
+/// triangles, so their values depended on the sample density.
+pub const VERTEX_ESTIMATOR: &str =
+    "estimator 2: hat-weighted mean of the transfer over the vertex's one-ring, parts inside geometry excluded (docs/conventions.md)";
 
 /// Stream tags that keep the random streams of different uses apart.
 const TAG_POSITION: u32 = 0x5053_0001;
@@ -362,7 +372,7 @@ pub(crate) struct RangeSums {
     /// `[vertex][channel][coeff]` for every vertex; filled for the vertices
     /// whose first item is in the range (all of them in a whole bake).
     pub(crate) sums: Vec<f32>,
-    /// Bounce 0: each vertex's barycentric weight, as `sums`.
+    /// Bounce 0: each vertex's summed sample weight ([`sample_weights`]), as `sums`.
     pub(crate) weights: Vec<f32>,
     pub(crate) late: LateSums,
     /// Global indices of the points found inside geometry (bounce 0).
@@ -687,7 +697,7 @@ impl InteriorLayout {
 }
 
 /// Spreads about `samples_per_vertex × vertex count` samples over `triangles`
-/// by area (at least one, at most `max_per_triangle`, per triangle; see
+/// by area (at least three, at most `max_per_triangle`, per triangle; see
 /// [`samples_in_triangle`]). The one placement rule transfer and sun masks share.
 pub(crate) fn interior_layout(mesh: &Mesh, triangles: Vec<u32>, samples_per_vertex: f32, max_per_triangle: u32) -> InteriorLayout {
     let total_area: f64 = triangles.iter().map(|&t| triangle_area(mesh, t) as f64).sum();
@@ -715,45 +725,63 @@ pub(crate) fn check_point_count(points: u64) -> Result<(), BakeError> {
     Ok(())
 }
 
-/// Barycentrics of sample `s` (of `count`) in mesh triangle `t` for a bake
-/// seeded with `seed`: the same points whatever pass asks (transfer, sun masks).
-#[inline]
-pub(crate) fn triangle_sample(pattern: super::DirectionPattern, seed: u32, t: u32, s: u32, count: u32) -> [f32; 3] {
-    interior_sample(pattern, s, count, hash_seed(&[seed, TAG_POSITION, t]))
-}
-
-/// Sample count for a triangle that should get `expected` samples: one at the
-/// centroid when fewer than two are due, else a multiple of three (see
-/// [`interior_sample`]), at most `max` (rounded down to a multiple of three).
+/// Sample count for a triangle that should get `expected` samples: the
+/// nearest multiple of three, at least three (one rotation triple, see
+/// [`triangle_sample`]) and at most `max` rounded down to a multiple of
+/// three (but three when `max` is smaller). The count sets only the noise:
+/// each sample is weighted by the area it stands for ([`sample_weights`]),
+/// and a whole triple gives each corner exactly a third of that area, so
+/// the normalising weights are exact at every density. (A lone uniform
+/// point would leave its weight to chance: a ratio estimator's bias and
+/// more noise; a lone centroid would estimate the centroid's value.)
 fn samples_in_triangle(expected: f64, max: u32) -> u32 {
-    if expected < 2.0 || max < 3 {
-        return 1;
-    }
     let triples = (expected / 3.0).round().max(1.0) as u32;
-    3 * triples.min(max / 3)
+    3 * triples.min((max / 3).max(1))
 }
 
-/// Barycentrics of sample `s` of a triangle with `count` samples.
+/// Barycentrics of sample `s` in mesh triangle `t` (vertex indices
+/// `corners`) for a bake seeded with `seed`: the same points whatever pass
+/// asks (transfer, sun masks).
+///
+/// The points are laid out on the corners sorted by vertex index, then
+/// mapped back: a triangle whose winding is flipped (its corners listed in
+/// another order) gets the same points, so window mode stays side-blind.
 ///
 /// Samples come as the three cyclic rotations of one Owen-scrambled Sobol
-/// point (a lone sample sits at the centroid). The set is then symmetric in
-/// the corners, so the barycentric-weighted mean position that each corner
-/// receives leans toward no neighbour: on a regular fan it is the vertex
-/// itself, and smooth transfer is reproduced to second order. Independent
-/// points leave a first-order bias (measured: 1.1e-2 in band 1 on the
-/// 2,562-vertex icosphere, against 1.5e-4 at the vertices).
+/// point (each uniform over the triangle). A symmetric set gives each
+/// corner the same total barycentric weight (a third of the samples), so the
+/// normalising weights are exact, and the mean position each corner receives
+/// leans toward no neighbour: smooth transfer is reproduced to second order.
+/// Independent points leave a first-order bias (measured: 1.1e-2 in band 1
+/// on the 2,562-vertex icosphere, against 1.5e-4 at the vertices).
 #[inline]
-pub(crate) fn interior_sample(pattern: super::DirectionPattern, s: u32, count: u32, seed: u32) -> [f32; 3] {
-    if count == 1 {
-        return [1.0 / 3.0; 3];
-    }
-    let (u1, u2) = sample_2d(pattern, s / 3, 0, seed);
+pub(crate) fn triangle_sample(pattern: super::DirectionPattern, seed: u32, t: u32, corners: [u32; 3], s: u32) -> [f32; 3] {
+    let (u1, u2) = sample_2d(pattern, s / 3, 0, hash_seed(&[seed, TAG_POSITION, t]));
     let b = square_to_triangle(u1, u2);
-    match s % 3 {
+    let sorted = match s % 3 {
         0 => b,
         1 => [b[1], b[2], b[0]],
         _ => [b[2], b[0], b[1]],
+    };
+    let mut order = [0usize, 1, 2];
+    order.sort_unstable_by_key(|&k| corners[k]);
+    let mut out = [0.0; 3];
+    for (rank, &corner) in order.iter().enumerate() {
+        out[corner] = sorted[rank];
     }
+    out
+}
+
+/// What a sample at barycentrics `b`, one of `count` in a triangle of area
+/// `area`, adds to each corner's weight: its hat value there times the area
+/// it stands for. Over the samples, Σ w·t / Σ w estimates each vertex's
+/// hat-weighted mean of the transfer over its one-ring (docs/conventions.md,
+/// "Per-vertex transfer"), whatever the sample counts; the transfer and the
+/// sun vote share it.
+#[inline]
+pub(crate) fn sample_weights(b: [f32; 3], area: f32, count: u32) -> [f32; 3] {
+    let share = area / count as f32;
+    b.map(|x| x * share)
 }
 
 pub(crate) fn triangle_area(mesh: &Mesh, t: u32) -> f32 {
@@ -804,13 +832,14 @@ impl Pass<'_> {
                     let [pa, pb, pc] = self.mesh.triangle_positions(t as usize);
                     let [na, nb, nc] = [ia, ib, ic].map(|i| self.mesh.normals[i as usize]);
                     let face_normal = self.scene.face_normal(t);
+                    let area = triangle_area(self.mesh, t);
                     for s in 0..counts[item] {
                         let global = first_sample[item] + s;
                         if bounce > 0 && self.rejected[global as usize] {
                             continue;
                         }
-                        let b =
-                            triangle_sample(self.params.pattern, self.params.point_seed.unwrap_or(self.params.seed), t, s, counts[item]);
+                        let seed = self.params.point_seed.unwrap_or(self.params.seed);
+                        let b = triangle_sample(self.params.pattern, seed, t, [ia, ib, ic], s);
                         point_result.fill(0.0);
                         let (traced, inside) = if self.gather_cached(global as u64, &mut point_result) {
                             (0, false)
@@ -829,10 +858,10 @@ impl Pass<'_> {
                             out.rejected.push(global);
                             continue;
                         }
-                        for corner in 0..3 {
-                            out.weights[local * 3 + corner] += b[corner];
+                        for (corner, w) in sample_weights(b, area, counts[item]).into_iter().enumerate() {
+                            out.weights[local * 3 + corner] += w;
                             let dst = &mut out.sums[(local * 3 + corner) * stride..][..stride];
-                            dst.iter_mut().zip(&point_result).for_each(|(d, r)| *d += b[corner] * r);
+                            dst.iter_mut().zip(&point_result).for_each(|(d, r)| *d += w * r);
                         }
                     }
                 }
@@ -883,8 +912,11 @@ impl Pass<'_> {
         let ray_weight = self.ray_weight();
         // The first rays of bounce 0 also decide whether the point lies inside
         // geometry (most of them hit back faces close by): they are traced with
-        // closest hit once, and serve both purposes.
-        let probe = if check_inside { ray_count.min(INSIDE_PROBE_RAYS) } else { 0 };
+        // closest hit once, and serve both purposes. Always the same
+        // INSIDE_PROBE_RAYS directions, even when fewer rays are asked for
+        // (those past `ray_count` only probe), so a point's verdict does not
+        // depend on `--rays`.
+        let probe = if check_inside { INSIDE_PROBE_RAYS } else { 0 };
         // With window sampling, bounce 0's light comes from rays aimed at the
         // glass; cosine rays are traced only to probe and to record hits.
         let sample_windows = bounce == 0 && self.windows.is_some();
@@ -915,6 +947,7 @@ impl Pass<'_> {
             }
             let mut inside_hits = 0u32;
             for (i, query) in scratch.queries.iter().enumerate() {
+                let probe_only = batch.start + i as u32 >= ray_count;
                 if bounce > 0 {
                     if let (Some(hit), Some(gather)) = (scratch.hits[i], &self.gather) {
                         if self.gathers_from(&hit) {
@@ -929,6 +962,9 @@ impl Pass<'_> {
                     let hit = scratch.hits[i];
                     if batch.start < probe && matches!(hit, Some(h) if h.back_face && h.t < self.reject_distance) {
                         inside_hits += 1;
+                    }
+                    if probe_only {
+                        continue;
                     }
                     if self.record_hits {
                         hits.push(match hit {
@@ -1018,7 +1054,7 @@ impl Pass<'_> {
             return false;
         }
         if self.record_hits {
-            hits.truncate(hits.len() - probe as usize);
+            hits.truncate(hits.len() - probe.min(self.params.rays) as usize);
             hits.extend(std::iter::repeat_n(NO_HIT, self.params.rays as usize));
         }
         true

@@ -69,6 +69,7 @@ pub fn conventions() -> serde_json::Value {
         "world": "right-handed, +Y up, metres as in the source file",
         "transfer": "per unit albedo of the receiver: L_out = albedo * sum_i L_i t_i, L_i = integral of L(w) y_i(w) dw",
         "layout": "vertex-major [vertex][channel][coeff]",
+        "vertex_transfer": crate::bake::transfer::VERTEX_ESTIMATOR,
         "sun_masks": "step k of vertex v: bit k%32 of word v*words_per_vertex + k/32",
     })
 }

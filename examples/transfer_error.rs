@@ -1,0 +1,44 @@
+//! The DC error of bundles against a reference bundle of the same mesh, as
+//! docs/speed-accuracy.md reports it for the Ferrari.
+//!
+//! cargo run --release --example transfer_error -- REFERENCE.prtb BUNDLE.prtb…
+//!
+//! Over the vertices the reference lights (total DC > 0): the relative RMS
+//! error of DC, sqrt(Σ (b − r)² / Σ r²) (as `budget::relative_rms`), the mean
+//! ratio Σ b / Σ r, and how many of them the bundle leaves black (DC = 0).
+
+use prtbake::bundle::read_bundle;
+
+fn dc_of(path: &str) -> Vec<f64> {
+    let bundle = read_bundle(path.as_ref()).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let transfer = bundle.transfer.unwrap_or_else(|| panic!("{path}: no transfer section"));
+    let stride = transfer.values_per_vertex() as usize;
+    transfer.total().chunks_exact(stride).map(|v| v[0] as f64).collect()
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some((reference_path, others)) = args.split_first().filter(|(_, o)| !o.is_empty()) else {
+        eprintln!("usage: transfer_error REFERENCE.prtb BUNDLE.prtb…");
+        std::process::exit(2);
+    };
+    let reference = dc_of(reference_path);
+    let lit: Vec<usize> = (0..reference.len()).filter(|&v| reference[v] > 0.0).collect();
+    println!("reference {reference_path}: {} vertices, {} lit", reference.len(), lit.len());
+    println!("| bundle | relative RMS DC | mean ratio | black of lit |");
+    println!("|---|---:|---:|---:|");
+    for path in others {
+        let dc = dc_of(path);
+        assert_eq!(dc.len(), reference.len(), "{path}: vertex count differs from the reference's");
+        let (mut error, mut norm, mut sum, mut reference_sum, mut black) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
+        for &v in &lit {
+            error += (dc[v] - reference[v]).powi(2);
+            norm += reference[v].powi(2);
+            sum += dc[v];
+            reference_sum += reference[v];
+            black += usize::from(dc[v] == 0.0);
+        }
+        let share = 100.0 * black as f64 / lit.len() as f64;
+        println!("| {path} | {:.3} | {:.3} | {black} ({share:.1}%) |", (error / norm).sqrt(), sum / reference_sum);
+    }
+}
