@@ -15,6 +15,7 @@
 //! lengths before allocation and every failure is a [`BundleError`] naming the
 //! section and the problem.
 
+mod assemble;
 mod container;
 mod cursor;
 mod error;
@@ -31,6 +32,7 @@ mod tests;
 
 use std::path::Path;
 
+pub use assemble::{conventions, make_bundle, make_bundle_stored, storage_meta};
 pub use container::{
     Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC, STORED_CRC_SINCE_MINOR,
 };

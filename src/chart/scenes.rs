@@ -244,7 +244,7 @@ fn cabin(size: Size, cache: &Path) -> anyhow::Result<Scene> {
             eprintln!("chart: baking the cabin reference ({} rays, {} bounces) into {}", params.rays, params.bounces, cache.display());
             let (result, _, _) = bake_mesh(&mesh, &params, &[])?;
             let meta = serde_json::json!({ "chart_reference": key });
-            let bundle = crate::cli::bake_cmd::make_bundle(&mesh, &result, &params, meta);
+            let bundle = crate::bundle::make_bundle(&mesh, &result, &params, meta);
             crate::bundle::write_bundle(cache, &bundle)?;
             (result.order, result.channels, result.total)
         }

@@ -7,7 +7,7 @@ use serde_json::json;
 
 use crate::bake::{self, BakeParams, TransferResult};
 use crate::budget;
-use crate::bundle::{self, Bundle, LayerKind, Quantization, Transfer, TransferLayer};
+use crate::bundle::{self, make_bundle_stored, storage_meta, Quantization};
 use crate::files::Staged;
 use crate::mesh::{Mesh, UpAxis};
 
@@ -260,84 +260,6 @@ fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bak
     let receivers = (config.params.bounces == 0).then_some(visible.as_slice());
     let result = bake::bake_transfer_receivers(mesh, &scene, &surfaces, &config.params, receivers)?;
     Ok((result, surfaces, scene.build_time.as_secs_f64(), Some((visible, report))))
-}
-
-/// Assembles a bundle from a bake. Only deterministic values go into it
-/// (no timings), so equal inputs give equal bytes.
-pub fn make_bundle(mesh: &Mesh, result: &TransferResult, params: &BakeParams, extra_meta: serde_json::Value) -> Bundle {
-    make_bundle_stored(mesh, result, params, extra_meta, None)
-}
-
-/// [`make_bundle`] storing the transfer as `choice` says (order and channels
-/// reduced, quantization set) and recording the choice and its measured
-/// error under META `storage`. `None` stores the bake as it is, in f32.
-pub fn make_bundle_stored(
-    mesh: &Mesh,
-    result: &TransferResult,
-    params: &BakeParams,
-    extra_meta: serde_json::Value,
-    choice: Option<&budget::Choice>,
-) -> Bundle {
-    let storage = choice.map(|c| c.chosen.storage).unwrap_or(budget::Storage {
-        order: result.order,
-        channels: result.channels,
-        quantization: Quantization::F32,
-    });
-    let stored = |data: &[f32]| budget::reduce(data, result.order, result.channels, &storage);
-    let mut layers = vec![TransferLayer { kind: LayerKind::Total, data: stored(&result.total) }];
-    for (b, layer) in result.bounces.iter().enumerate() {
-        layers.push(TransferLayer { kind: LayerKind::Bounce(b as u32), data: stored(layer) });
-    }
-    let s = &result.stats;
-    let mut meta = json!({
-        "tool": "prtbake",
-        "version": env!("CARGO_PKG_VERSION"),
-        "command": "bake",
-        "params": params,
-        "stats": {
-            "triangles": s.triangles, "vertices": s.vertices, "window_triangles": s.window_triangles,
-            "points": s.points, "points_rejected": s.points_rejected,
-            "vertices_without_samples": s.vertices_without_samples,
-            "rays_per_bounce": s.rays_per_bounce, "rays": s.rays,
-        },
-        "conventions": super::conventions(),
-    });
-    if let (Some(m), serde_json::Value::Object(extra)) = (meta.as_object_mut(), extra_meta) {
-        m.extend(extra);
-    }
-    if let Some(c) = choice {
-        meta["storage"] = storage_meta(c, result);
-    }
-    Bundle {
-        meta,
-        mesh: mesh.clone(),
-        transfer: Some(Transfer {
-            order: storage.order as u32,
-            channels: storage.channels as u32,
-            quantization: storage.quantization,
-            layers,
-        }),
-        sun: None,
-    }
-}
-
-/// META `storage`: what was kept, what it measured, against what.
-pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::Value {
-    let baked = budget::Storage { order: result.order, channels: result.channels, quantization: Quantization::F32 };
-    json!({
-        "order": c.chosen.storage.order,
-        "channels": c.chosen.storage.channels,
-        "quantization": c.chosen.storage.quantization.name(),
-        "bytes_per_vertex_per_layer": c.chosen.bytes_per_vertex,
-        "f32_bytes_per_vertex_per_layer": budget::bytes_per_vertex(&baked),
-        "baked_order": result.order,
-        "baked_channels": result.channels,
-        "max_error": c.budget,
-        "shaded_error": c.chosen.shaded_error,
-        "quantization_max_abs": c.chosen.quantization_max_abs,
-        "error_metric": "worst relative RMS of shaded radiance per unit albedo (sum_i L_i t_i) over vertices and RGB, \
-                         against the baked f32 transfer, under 12 clear Preetham skies (elevations 10/35/65 deg, 4 azimuths)",
-    })
 }
 
 /// Prints the final stats line, or the JSON document with `--json`.

@@ -126,7 +126,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             json!({
                 "kind": "bundle", "round": round, "vertices": s.vertices, "triangles": s.triangles, "points": s.points,
                 "points_rejected": s.points_rejected, "rays": s.rays, "order": result.order, "channels": result.channels,
-                "storage": choice.as_ref().map(|c| super::bake_cmd::storage_meta(c, &result)),
+                "storage": choice.as_ref().map(|c| crate::bundle::storage_meta(c, &result)),
             })
         }
     };

@@ -62,18 +62,6 @@ pub fn print_json(value: &serde_json::Value) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The conventions every bundle's metadata records.
-pub fn conventions() -> serde_json::Value {
-    serde_json::json!({
-        "sh": "real orthonormal SH without the Condon-Shortley phase; index i = l(l+1)+m; order n = bands l < n; polar axis +Z",
-        "world": "right-handed, +Y up, metres as in the source file",
-        "transfer": "per unit albedo of the receiver: L_out = albedo * sum_i L_i t_i, L_i = integral of L(w) y_i(w) dw",
-        "layout": "vertex-major [vertex][channel][coeff]",
-        "vertex_transfer": crate::bake::transfer::VERTEX_ESTIMATOR,
-        "sun_masks": "step k of vertex v: bit k%32 of word v*words_per_vertex + k/32",
-    })
-}
-
 /// Loads a mesh file with the path in every error, prints its warnings, and
 /// refuses `outputs` that are any file the loader read (`.mtl` libraries,
 /// glTF buffers), as [`check_outputs`] does for the mesh file itself.

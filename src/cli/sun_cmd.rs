@@ -211,7 +211,7 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
                 "command": "sun",
                 "source": input.source_name,
                 "sun": sun_meta,
-                "conventions": super::conventions(),
+                "conventions": crate::bundle::conventions(),
             });
             bundle::encode_bundle(&Bundle { meta, mesh: input.mesh.clone(), transfer: None, sun: Some(series.clone()) })
         }
