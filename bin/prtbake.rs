@@ -94,8 +94,9 @@ struct BakeArgs {
     /// Direction pattern (random is for comparison only).
     #[arg(long, value_enum, default_value_t = PatternArg::Sobol)]
     pattern: PatternArg,
-    /// Window mode: sample bounce 0's rays toward points on the glass (next-event
-    /// estimation; better for small distant windows, worse for large close ones).
+    /// Window mode: bounce 0 also aims `--rays` rays at the glass (panes by area,
+    /// directions by solid angle), combined with the cosine rays by multiple
+    /// importance sampling: far less noise where windows are small or far.
     #[arg(long)]
     window_sampling: bool,
     /// Memory for bounce 0's hit cache (8 bytes a ray), in MiB. Bounces ≥ 1

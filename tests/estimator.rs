@@ -41,23 +41,42 @@ fn basis(w: DVec3) -> [f64; COEFFS] {
     [0.5 / PI.sqrt(), c1 * w.y, c1 * w.z, c1 * w.x]
 }
 
-fn roof_corners() -> [DVec3; 4] {
-    let (x, z, h) = (ROOF_X, ROOF_Z, ROOF_HEIGHT);
+/// A horizontal rectangle above the plane: the roof, or a window.
+#[derive(Clone, Copy)]
+struct Rect {
+    x: [f64; 2],
+    z: [f64; 2],
+    height: f64,
+}
+
+const ROOF: Rect = Rect { x: ROOF_X, z: ROOF_Z, height: ROOF_HEIGHT };
+
+fn corners(r: Rect) -> [DVec3; 4] {
+    let (x, z, h) = (r.x, r.z, r.height);
     [DVec3::new(x[0], h, z[0]), DVec3::new(x[1], h, z[0]), DVec3::new(x[1], h, z[1]), DVec3::new(x[0], h, z[1])]
+}
+
+fn roof_corners() -> [DVec3; 4] {
+    corners(ROOF)
 }
 
 /// The plane, then the roof facing down (its own samples are not scored).
 fn scene() -> Mesh {
+    scene_with(ROOF, Material::opaque("roof", 0.5))
+}
+
+/// The plane, then a rectangle of `material` facing down.
+fn scene_with(rect: Rect, material: Material) -> Mesh {
     let mut mesh = shapes::plane_grid(CELLS, SIZE);
     let base = mesh.positions.len() as u32;
-    mesh.positions.extend(roof_corners().map(|p| p.as_vec3()));
+    mesh.positions.extend(corners(rect).map(|p| p.as_vec3()));
     mesh.normals.extend([Vec3::NEG_Y; 4]);
     // Counter-clockwise seen from below.
     mesh.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
     mesh.tri_material.extend([1, 1]);
     mesh.tri_group.extend([1, 1]);
-    mesh.materials.push(Material::opaque("roof", 0.5));
-    mesh.groups.push("roof".into());
+    mesh.groups.push(material.name.clone());
+    mesh.materials.push(material);
     mesh
 }
 
@@ -89,19 +108,24 @@ fn gauss_legendre_8() -> [(f64, f64); 8] {
 /// of dA is (ω·Y) dA / r² (the roof is horizontal), so the integrand is
 /// y_i(ω) h² / r⁴. Composite 8-point Gauss–Legendre on 16×16 panels.
 fn roof_integrals(x: DVec3) -> [f64; COEFFS] {
+    rect_integrals(x, ROOF)
+}
+
+/// ∫_rect y_i(ω) (ω·Y) dω from `x` (see [`roof_integrals`]).
+fn rect_integrals(x: DVec3, r: Rect) -> [f64; COEFFS] {
     let panels = 16;
     let rule = gauss_legendre_8();
-    let (dx, dz) = ((ROOF_X[1] - ROOF_X[0]) / panels as f64, (ROOF_Z[1] - ROOF_Z[0]) / panels as f64);
+    let (dx, dz) = ((r.x[1] - r.x[0]) / panels as f64, (r.z[1] - r.z[0]) / panels as f64);
     let mut out = [0.0; COEFFS];
     for i in 0..panels {
         for &(u, wu) in &rule {
-            let px = ROOF_X[0] + (i as f64 + u) * dx;
+            let px = r.x[0] + (i as f64 + u) * dx;
             for j in 0..panels {
                 for &(v, wv) in &rule {
-                    let pz = ROOF_Z[0] + (j as f64 + v) * dz;
-                    let d = DVec3::new(px, ROOF_HEIGHT, pz) - x;
+                    let pz = r.z[0] + (j as f64 + v) * dz;
+                    let d = DVec3::new(px, r.height, pz) - x;
                     let r2 = d.length_squared();
-                    let weight = wu * wv * dx * dz * ROOF_HEIGHT * ROOF_HEIGHT / (r2 * r2);
+                    let weight = wu * wv * dx * dz * r.height * r.height / (r2 * r2);
                     let y = basis(d / r2.sqrt());
                     out.iter_mut().zip(y).for_each(|(o, y)| *o += weight * y);
                 }
@@ -292,5 +316,78 @@ fn estimator_converges_to_the_hat_weighted_mean_at_every_density() {
     }
     for (a, b, z, worst_z) in pairs {
         assert!(z < 1.3 && worst_z < 7.0, "spv {a} vs {b}: RMS z {z:.2}, worst {worst_z:.1}");
+    }
+}
+
+/// Window mode, bounce 0, on the same plane lit only through one window
+/// (a rectangle facing down, transmittance 1): a plane point's exact
+/// transfer is (1/π) ∫_window y_i(ω) (ω·Y) dω, the hat-weighted vertex
+/// values as above. Per bake, the RMS error of DC over the plane vertices
+/// (relative to the RMS exact DC); over 16 seeds, its mean for cosine rays
+/// alone at 2N rays and for MIS (N cosine + N aimed at the glass, the same
+/// traced rays), and MIS's z-scores.
+fn window_errors(window: Rect, rays: u32) -> (f64, f64, f64) {
+    let mut glass = Material::opaque("glass", 0.0);
+    glass.role = prtbake::mesh::MaterialRole::Window;
+    let mesh = scene_with(window, glass);
+    let plane_vertices = ((CELLS + 1) * (CELLS + 1)) as usize;
+    let exact = exact_vertex_values(&mesh, plane_vertices, 6, |x| rect_integrals(x, window).map(|v| v / PI));
+    let exact_rms = (exact.iter().map(|e| e[0] * e[0]).sum::<f64>() / plane_vertices as f64).sqrt();
+    let bake = |seed: u32, rays: u32, window_sampling: bool| {
+        let params = BakeParams {
+            order: 2,
+            rays,
+            seed,
+            mode: Mode::Window,
+            window_sampling,
+            sampling: Sampling::Interior { samples_per_vertex: 16.0, max_per_triangle: 256 },
+            ..BakeParams::default()
+        };
+        let result = bake_mesh(&mesh, &params, &[]).unwrap().0;
+        (0..plane_vertices).map(|v| result.coefficients(v, 0)[0] as f64).collect::<Vec<f64>>()
+    };
+    let rms_error =
+        |dc: &[f64]| (dc.iter().zip(&exact).map(|(d, e)| (d - e[0]).powi(2)).sum::<f64>() / plane_vertices as f64).sqrt() / exact_rms;
+    let (mut cosine, mut mis) = (0.0, 0.0);
+    let mut mis_values = vec![Vec::new(); plane_vertices];
+    for seed in 1..=SEEDS {
+        cosine += rms_error(&bake(seed, 2 * rays, false)) / SEEDS as f64;
+        let dc = bake(seed, rays, true);
+        mis += rms_error(&dc) / SEEDS as f64;
+        mis_values.iter_mut().zip(&dc).for_each(|(l, &d)| l.push(d));
+    }
+    let n = SEEDS as f64;
+    let z2: f64 = mis_values
+        .iter()
+        .zip(&exact)
+        .map(|(l, e)| {
+            let mean = l.iter().sum::<f64>() / n;
+            let se = (l.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt().max(ERROR_FLOOR);
+            ((mean - e[0]) / se).powi(2)
+        })
+        .sum();
+    (cosine, mis, (z2 / plane_vertices as f64).sqrt())
+}
+
+/// Window sampling (`--window-sampling`: panes by area, directions by
+/// solid angle, MIS with the cosine rays) is unbiased, and at the same
+/// traced rays never worse than cosine rays alone (measured: 0.68× their
+/// error, asserted ≤ 1×) under a large
+/// window close to the plane (the roof's rectangle 0.6 m up, where the old
+/// area-sampled estimator's 1/r² weights blew up) and far better under a
+/// small high one (0.4 × 0.3 m, 2.5 m up), where few cosine rays find it
+/// (measured 0.013×, asserted ≤ 0.1×).
+#[test]
+fn window_sampling_is_unbiased_and_never_worse_than_cosine_rays() {
+    let large_close = ROOF;
+    let small_high = Rect { x: [-0.6, -0.2], z: [0.3, 0.6], height: 2.5 };
+    for (name, window, most_ratio) in [("large close", large_close, 1.0), ("small high", small_high, 0.1)] {
+        let (cosine, mis, z) = window_errors(window, 32);
+        eprintln!(
+            "{name} window: relative RMS error of DC, cosine 64 rays {cosine:.4}, MIS 32 + 32 {mis:.4} (ratio {:.2}), MIS RMS z {z:.2}",
+            mis / cosine
+        );
+        assert!(z < 1.3, "{name}: MIS seed means off the exact values, RMS z {z:.2}");
+        assert!(mis < most_ratio * cosine, "{name}: MIS {mis:.4} against cosine {cosine:.4}");
     }
 }

@@ -26,6 +26,7 @@ use super::progress::Progress;
 use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
 use super::scene::{Batching, RayQuery, Scene};
 use super::surfaces::Surfaces;
+use super::window_light::WindowLights;
 use super::{BakeError, BakeParams, BakeStats, Mode, Sampling, TransferResult};
 use crate::mesh::Mesh;
 use crate::sh;
@@ -80,8 +81,8 @@ struct Scratch {
     queries: Vec<RayQuery>,
     hits: Vec<Option<super::Hit>>,
     occluded: Vec<bool>,
-    /// Per window-light query: the window triangle aimed at and the squared distance to the target.
-    targets: Vec<(u32, f32)>,
+    /// Per window-light query: the window triangle aimed at and the light pdf of its direction.
+    targets: Vec<(u32, f64)>,
 }
 
 /// One point rays leave from.
@@ -189,41 +190,6 @@ pub(crate) struct Pass<'a> {
     record_hits: bool,
     /// Window triangles to sample directly for bounce 0 (window mode).
     windows: Option<&'a WindowLights>,
-}
-
-/// The window triangles of a scene as light sources: bounce 0 in window mode
-/// samples points on them by area (next-event estimation) instead of waiting
-/// for cosine-distributed rays to find the glass, which is a small target.
-pub(crate) struct WindowLights {
-    triangles: Vec<u32>,
-    /// Cumulative area fractions, last = 1.
-    cdf: Vec<f64>,
-    total_area: f64,
-}
-
-impl WindowLights {
-    fn new(mesh: &Mesh, surfaces: &Surfaces) -> Option<WindowLights> {
-        let triangles: Vec<u32> = (0..mesh.triangle_count() as u32)
-            .filter(|&t| surfaces.window_transmittance[t as usize].is_some_and(|tau| tau > 0.0) && triangle_area(mesh, t) > 0.0)
-            .collect();
-        let mut cdf = Vec::with_capacity(triangles.len());
-        let mut sum = 0.0f64;
-        for &t in &triangles {
-            sum += triangle_area(mesh, t) as f64;
-            cdf.push(sum);
-        }
-        if sum <= 0.0 {
-            return None;
-        }
-        cdf.iter_mut().for_each(|c| *c /= sum);
-        Some(WindowLights { triangles, cdf, total_area: sum })
-    }
-
-    /// The window triangle whose cumulative area interval holds `u` ∈ [0,1).
-    fn pick(&self, u: f32) -> u32 {
-        let i = self.cdf.partition_point(|&c| c <= u as f64).min(self.triangles.len() - 1);
-        self.triangles[i]
-    }
 }
 
 /// What one task returns: per item and corner, weighted coefficient sums and weights.
@@ -917,10 +883,11 @@ impl Pass<'_> {
         // (those past `ray_count` only probe), so a point's verdict does not
         // depend on `--rays`.
         let probe = if check_inside { INSIDE_PROBE_RAYS } else { 0 };
-        // With window sampling, bounce 0's light comes from rays aimed at the
-        // glass; cosine rays are traced only to probe and to record hits.
-        let sample_windows = bounce == 0 && self.windows.is_some();
-        let cosine_rays = if sample_windows && !self.record_hits { probe } else { ray_count };
+        // With window sampling, bounce 0's light through the glass is
+        // estimated by the cosine rays and as many rays aimed at the glass,
+        // combined by MIS (`window_light`).
+        let sample_windows = if bounce == 0 { self.windows } else { None };
+        let cosine_rays = ray_count;
         let mut traced = 0u64;
         // The rays go to the scene a batch at a time (so it can walk several
         // at once): the probe rays first, whose verdict may end the point,
@@ -983,9 +950,15 @@ impl Pass<'_> {
                 } else {
                     1.0
                 };
-                if visibility > 0.0 && !sample_windows {
+                if visibility > 0.0 {
+                    let w = match (sample_windows, scratch.hits.get(i).copied().flatten()) {
+                        (Some(windows), Some(hit)) if closest => {
+                            let pdf = windows.pdf(self.mesh, point.position, hit.triangle, query.direction, hit.t);
+                            visibility * self.window_mis_weight(point, query.direction, pdf)
+                        }
+                        _ => visibility * ray_weight,
+                    };
                     sh::eval_basis(params.order, query.direction, &mut scratch.basis);
-                    let w = visibility * ray_weight;
                     result.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
                 }
             }
@@ -993,54 +966,61 @@ impl Pass<'_> {
                 return (traced, true);
             }
         }
-        if let (true, Some(windows)) = (sample_windows, self.windows) {
+        if let Some(windows) = sample_windows {
             traced += self.add_window_light(point, windows, result, scratch);
         }
         (traced, false)
     }
 
-    /// Bounce 0 in window mode by sampling the glass: N points on the window
-    /// triangles (by area); a point counts when the first hit toward it is
-    /// its own triangle. Estimator of (1/π) ∫ y τ |n·ω| dω over directions
-    /// through windows: y(ω) τ |n·ω| · A |cos θ_w| / (π r² N). Returns rays traced.
+    /// The light through the glass per unit transmittance and SH basis value
+    /// that one of bounce 0's rays toward `direction` carries, when the
+    /// light strategy's pdf of that direction is `light_pdf`: the balance
+    /// heuristic over N cosine rays (pdf |n·ω|/2π over the sphere) and N
+    /// rays aimed at the glass, `(|n·ω|/π) / (N |n·ω|/2π + N p_l)`. With
+    /// `light_pdf` = 0 it is the cosine rays' own weight, 2/N.
+    #[inline]
+    fn window_mis_weight(&self, point: &Point, direction: Vec3, light_pdf: f64) -> f32 {
+        let n = f64::from(self.params.rays);
+        let cosine = f64::from(point.normal.dot(direction).abs());
+        let cosine_pdf = cosine / (2.0 * std::f64::consts::PI);
+        if cosine_pdf <= 0.0 {
+            return 0.0;
+        }
+        (cosine / std::f64::consts::PI / (n * cosine_pdf + n * light_pdf)) as f32
+    }
+
+    /// Bounce 0 in window mode, the light strategy: N directions toward the
+    /// glass (`WindowLights::draw`: a pane by area, a direction uniform
+    /// over its solid angle); a draw counts when the first hit along it is
+    /// the pane drawn, weighted by [`Pass::window_mis_weight`]. Returns rays traced.
     fn add_window_light(&self, point: &Point, windows: &WindowLights, result: &mut [f32], scratch: &mut Scratch) -> u64 {
-        let rays = self.params.rays;
-        let scale = (windows.total_area / std::f64::consts::PI / rays as f64) as f32;
         scratch.queries.clear();
         scratch.targets.clear();
-        for k in 0..rays {
+        for k in 0..self.params.rays {
             let (u_pick, _) = sample_2d(self.params.pattern, k, 2, point.seed);
             let (u1, u2) = sample_2d(self.params.pattern, k, 1, point.seed);
-            let triangle = windows.pick(u_pick);
-            let [a, b, c] = self.mesh.triangle_positions(triangle as usize);
-            let bary = square_to_triangle(u1, u2);
-            let target = a * bary[0] + b * bary[1] + c * bary[2];
-            let offset = target - point.position;
-            let distance_squared = offset.length_squared();
-            if distance_squared <= (16.0 * self.scene.origin_offset).powi(2) {
+            let Some(draw) = windows.draw(self.mesh, point.position, u_pick, u1, u2) else { continue };
+            // A pane touching the point: the offset origin may lie past it.
+            if draw.distance <= 16.0 * self.scene.origin_offset {
                 continue;
             }
-            let distance = distance_squared.sqrt();
-            let direction = offset / distance;
-            let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
-            let reach = distance * 1.001 + 4.0 * self.scene.tie_distance;
-            scratch.queries.push(RayQuery { origin, direction, t_max: reach });
-            scratch.targets.push((triangle, distance_squared));
+            let origin = self.scene.offset_origin(point.position, point.face_normal, draw.direction);
+            let reach = draw.distance * 1.001 + 4.0 * self.scene.tie_distance;
+            scratch.queries.push(RayQuery { origin, direction: draw.direction, t_max: reach });
+            scratch.targets.push((draw.triangle, draw.pdf));
         }
         scratch.hits.resize(scratch.queries.len(), None);
         self.scene.closest_hits(&scratch.queries, &mut scratch.hits);
-        for ((query, &(triangle, distance_squared)), hit) in scratch.queries.iter().zip(&scratch.targets).zip(&scratch.hits) {
+        for ((query, &(triangle, pdf)), hit) in scratch.queries.iter().zip(&scratch.targets).zip(&scratch.hits) {
             if !matches!(hit, Some(h) if h.triangle == triangle) {
                 continue;
             }
-            let direction = query.direction;
             let tau = self.surfaces.window_transmittance[triangle as usize].unwrap_or(0.0);
-            let cos_window = self.scene.face_normal(triangle).dot(direction).abs();
-            let w = tau * point.normal.dot(direction).abs() * cos_window * scale / distance_squared;
-            sh::eval_basis(self.params.order, direction, &mut scratch.basis);
+            let w = tau * self.window_mis_weight(point, query.direction, pdf);
+            sh::eval_basis(self.params.order, query.direction, &mut scratch.basis);
             result.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
         }
-        rays as u64
+        scratch.queries.len() as u64
     }
 
     /// Decides, from the `probe` first rays, whether a point lies inside
