@@ -41,11 +41,13 @@
 //! (the baker shades both sides with |n·ω| and pushes ray origins off the surface),
 //! see [`duplicates`]; `keep_two_sided` keeps one triangle per winding.
 //!
-//! **Area:** `area_before` in the report is the area of the union the input
-//! describes: the input's total area minus the triangles removed as degenerate,
-//! duplicate or covered. Cleaning keeps that area (flips and splits are exact);
-//! zipping changes it only by the crack it closes (a band of the crack's width; on
-//! the Ferrari, +1.8e-5 relative, as thin triangles along boundaries collapse).
+//! **Area:** the report's `area_before` is the input's total area and
+//! `area_after` the output's; `redundant_area_removed` is the area of the
+//! triangles removed as degenerate, duplicate or covered (copies of surface
+//! that stays). The rest of the change is the repairs': flips and splits are
+//! exact, zipping changes the area only by the crack it closes (a band of the
+//! crack's width; on the Ferrari, +1.8e-5 relative, as thin triangles along
+//! boundaries collapse).
 //!
 //! Not done (yet): general self-intersections (non-coplanar), hole filling.
 
@@ -318,7 +320,8 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32]) -> Round {
     let (boundary, non_manifold) = count_boundary_and_non_manifold(&work);
     r.boundary_edges_after = boundary;
     r.non_manifold_edges = non_manifold;
-    r.area_before = input_area - removed_area;
+    r.area_before = input_area;
+    r.redundant_area_removed = removed_area;
     r.area_after = work.total_area();
     let out = write_mesh(&work, mesh);
     r.output_triangles = out.triangle_count();

@@ -93,8 +93,13 @@ pub struct CleanReport {
     pub boundary_edges_after: usize,
     /// Edges with three or more triangles, after.
     pub non_manifold_edges: usize,
-    /// Input area minus the redundant triangles removed (the union's area; see the module doc).
+    /// The input's total area (every triangle, duplicates and overlaps included).
     pub area_before: f64,
+    /// The area of the triangles removed as duplicates, covered coplanar
+    /// overlaps or degenerate: redundant copies of surface the output keeps.
+    pub redundant_area_removed: f64,
+    /// The output's total area. `area_before − redundant_area_removed −
+    /// area_after` is what the repairs themselves changed (closing cracks).
     pub area_after: f64,
     /// Worst remaining defects: a few of each kind, worst first.
     pub worst: Vec<DefectReport>,
@@ -158,7 +163,7 @@ impl CleanReport {
         self.sliver_flips += later.sliver_flips;
         self.triangles_flipped += later.triangles_flipped;
         self.coplanar_pairs_enumerated += later.coplanar_pairs_enumerated;
-        self.area_before -= removed_area;
+        self.redundant_area_removed += removed_area;
         self.output_triangles = later.output_triangles;
         self.output_vertices = later.output_vertices;
         self.partial_overlaps = later.partial_overlaps.clone();
@@ -211,8 +216,17 @@ impl CleanReport {
             self.boundary_edges_before, self.boundary_edges_after, self.non_manifold_edges
         );
         let _ = writeln!(s, "rounds                 {} ({})", self.rounds, self.convergence());
-        let rel = if self.area_before > 0.0 { (self.area_after - self.area_before) / self.area_before } else { 0.0 };
-        let _ = writeln!(s, "area                   {:.6e} -> {:.6e} ({:+.2e} relative)", self.area_before, self.area_after, rel);
+        // (+ 0.0: no "-0.00e0" for nothing removed.)
+        let relative = |x: f64| if self.area_before > 0.0 { x / self.area_before + 0.0 } else { 0.0 };
+        let _ = writeln!(
+            s,
+            "area                   {:.6e} -> {:.6e} ({:+.2e} relative: {:+.2e} redundant copies removed, {:+.2e} by the repairs)",
+            self.area_before,
+            self.area_after,
+            relative(self.area_after - self.area_before),
+            relative(-self.redundant_area_removed),
+            relative(self.area_after - self.area_before + self.redundant_area_removed)
+        );
         for o in self.partial_overlaps.iter().take(WORST_PER_KIND) {
             let _ = writeln!(s, "  overlap of triangles {} and {}: area {:.3e} at {:?}", o.tri_a, o.tri_b, o.area, o.location);
         }

@@ -92,6 +92,15 @@ fn check_properties(f: &Fixture, out: &Mesh, r: &CleanReport) {
     let rel = (area - f.expected.area).abs() / f.expected.area;
     assert!(rel <= AREA_REL_TOL, "{n}: area {area} vs designed {} (rel {rel:e})", f.expected.area);
     assert!(((r.area_after - area) / area).abs() <= AREA_REL_TOL, "{n}: reported area");
+    let input_area = mesh_area(&f.mesh);
+    assert!(
+        ((r.area_before - input_area) / input_area).abs() <= AREA_REL_TOL,
+        "{n}: reported input area {} vs {input_area}",
+        r.area_before
+    );
+    let by_repairs = (r.area_after - r.area_before + r.redundant_area_removed) / input_area;
+    // Only closing a crack changes the area (by the crack's band: 1.0e-5 on the cylinder).
+    assert!(by_repairs.abs() <= 2e-5, "{n}: the repairs changed the area by {by_repairs:+.2e} of the input's");
     // Attributes survive: tables, roles, per-triangle (material, group) pairs, UVs, colours.
     assert_eq!(out.materials, f.mesh.materials, "{n}: materials");
     assert_eq!(out.groups, f.mesh.groups, "{n}: groups");
