@@ -328,6 +328,14 @@ fn view_command_writes_a_screenshot_and_refuses_bad_input() {
     assert_eq!(bad_size.status.code(), Some(2));
     let bad_layers = prtbake(&["view", &s(&sun_path), "--layers", "direct", "--screenshot", &s(&scratch.path("x.png"))]);
     assert!(String::from_utf8_lossy(&bad_layers.stderr).contains("--store-bounces"));
+    let no_panel = prtbake(&["view", &s(&sun_path), "--panel", "lcd*", "--screenshot", &s(&scratch.path("x.png"))]);
+    let message = String::from_utf8_lossy(&no_panel.stderr);
+    assert_eq!(no_panel.status.code(), Some(2), "{message}");
+    assert!(message.contains("sun.prtb") && message.contains("lcd*"), "{message}");
+    let bad_texels = prtbake(&["view", &s(&sun_path), "--panel-texels", "0x8", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(bad_texels.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad_texels.stderr).contains("--panel-texels"));
+    assert!(!scratch.path("x.png").exists());
 
     if gpu_or_skip("view_command_writes_a_screenshot").is_none() {
         return;
@@ -407,8 +415,14 @@ fn render_panel(
 
 const PANEL_SIZE: (u32, u32) = (160, 120);
 
-fn panel_camera(bounds: (Vec3, Vec3)) -> Camera {
-    Camera::look_at(Vec3::new(0.25, 0.15, 1.6), Vec3::ZERO, bounds)
+/// The panel scene, a camera in front of the panel and the frame settings
+/// (the panel sky, black backdrop, linear curve at −1 stop).
+fn panel_fixture() -> (Bundle, prtbake::view::panel::PanelMapping, Camera, FrameSettings) {
+    let (bundle, mapping) = panel_scene();
+    let bounds = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap().bounds;
+    let camera = Camera::look_at(Vec3::new(0.25, 0.15, 1.6), Vec3::ZERO, bounds);
+    let settings = FrameSettings { lighting: panel_lighting(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(-1.0) };
+    (bundle, mapping, camera, settings)
 }
 
 /// Per pixel: the panel hit's texture coordinate and PRT light (`None` off the panel).
@@ -459,10 +473,7 @@ fn inner_panel_pixels(pixels: &[Option<(glam::Vec2, [f32; 3])>], texels: (u32, u
 #[test]
 fn panel_texels_match_the_cpu_shading_plus_the_gathered_texture() {
     let Some(gpu) = gpu_or_skip("panel_texels_match_the_cpu_shading_plus_the_gathered_texture") else { return };
-    let (bundle, mapping) = panel_scene();
-    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
-    let camera = panel_camera(scene.bounds);
-    let settings = FrameSettings { lighting: panel_lighting(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(-1.0) };
+    let (bundle, mapping, camera, settings) = panel_fixture();
     let texture = panel_texture(&bundle, &mapping, &settings, camera.eye, 4);
     let image = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(4));
     let pixels = panel_pixels(&bundle, &mapping, &camera, &settings.lighting);
@@ -493,10 +504,7 @@ fn panel_texels_match_the_cpu_shading_plus_the_gathered_texture() {
 #[test]
 fn panel_noise_falls_with_more_passes() {
     let Some(gpu) = gpu_or_skip("panel_noise_falls_with_more_passes") else { return };
-    let (bundle, mapping) = panel_scene();
-    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
-    let camera = panel_camera(scene.bounds);
-    let settings = FrameSettings { lighting: panel_lighting(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(-1.0) };
+    let (bundle, mapping, camera, settings) = panel_fixture();
     let pixels = panel_pixels(&bundle, &mapping, &camera, &settings.lighting);
     let inner = inner_panel_pixels(&pixels, (16, 8));
     // Reference: 1024 samples per texel (pass 36).
@@ -528,11 +536,9 @@ fn panel_noise_falls_with_more_passes() {
 #[test]
 fn panel_texture_leaves_every_other_pixel_unchanged() {
     let Some(gpu) = gpu_or_skip("panel_texture_leaves_every_other_pixel_unchanged") else { return };
-    let (bundle, mapping) = panel_scene();
+    // Linear tone mapping (the fixture's): the adaptive operators' exposure follows the whole frame, panel included.
+    let (bundle, mapping, camera, settings) = panel_fixture();
     let plain_scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
-    let camera = panel_camera(plain_scene.bounds);
-    // Linear tone mapping: the adaptive operators' exposure follows the whole frame, panel included.
-    let settings = FrameSettings { lighting: panel_lighting(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(-1.0) };
     let plain = render_image(&gpu, &plain_scene, None, &camera, &settings, PANEL_SIZE.0, PANEL_SIZE.1).unwrap();
     let untextured = render_panel(&gpu, &bundle, &mapping, &camera, &settings, None);
     let textured = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(3));
@@ -559,4 +565,41 @@ fn panel_texture_leaves_every_other_pixel_unchanged() {
     }
     eprintln!("panel texture: {changed} panel pixels changed, {other} others identical");
     assert!(changed > 2000 && other > 5000, "{changed} {other}");
+}
+
+/// The window's worker (no GPU needed): it refines to 256 samples per texel and
+/// hands back the very texture a screenshot computes after as many passes; a
+/// new eye restarts it, and its textures carry the new request's generation.
+#[test]
+fn panel_worker_refines_to_the_screenshot_texture_and_restarts_on_a_new_eye() {
+    use prtbake::view::panel::{passes_for, PanelRequest, PanelSource, INTERACTIVE_SAMPLES};
+    use prtbake::view::panel_worker::PanelWorker;
+    let (bundle, mapping, camera, settings) = panel_fixture();
+    let worker = PanelWorker::start(PanelSource::new(&bundle, &mapping, None).unwrap(), 2).unwrap();
+    let wait_for = |generation: u64| {
+        let started = std::time::Instant::now();
+        let mut seen = Vec::new();
+        loop {
+            if let Some(texture) = worker.latest(generation) {
+                seen.push(texture.samples);
+                if texture.samples == INTERACTIVE_SAMPLES {
+                    return (texture, seen);
+                }
+            }
+            assert!(started.elapsed().as_secs() < 120, "the worker stalled at {seen:?}");
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+    };
+    let eyes = [camera.eye, camera.eye + Vec3::new(-0.4, 0.1, 0.0)];
+    for (k, eye) in eyes.into_iter().enumerate() {
+        let request = PanelRequest::new(eye, &settings, &LayerSelection::Total, k as u64 + 1);
+        worker.request(request.clone());
+        let (texture, seen) = wait_for(k as u64 + 1);
+        assert!(seen.windows(2).all(|w| w[0] < w[1]), "samples must only grow within a request: {seen:?}");
+        assert_eq!(texture.generation, k as u64 + 1);
+        let mut headless = PanelSource::new(&bundle, &mapping, None).unwrap().texture(&request, passes_for(INTERACTIVE_SAMPLES));
+        headless.generation = texture.generation;
+        assert!(texture == headless, "eye {k}: the window's texture differs from the screenshot's");
+        eprintln!("worker, eye {k}: textures seen at {seen:?} samples per texel");
+    }
 }

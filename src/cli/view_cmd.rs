@@ -177,6 +177,9 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     let settings = state.frame_settings(bundle.sun.as_ref(), order);
     let (width, height) = size;
     let passes = config.panel_passes.unwrap_or_else(|| view::panel::passes_for(view::panel::INTERACTIVE_SAMPLES));
+    if panel.is_none() && config.panel_passes.is_some_and(|p| p > 0) && !config.json {
+        eprintln!("--panel-passes: the bundle has no panel (no material has the panel role; name it with --panel GLOB)");
+    }
     let panel_report = match (&panel, &mut scene.panel) {
         (Some(mapping), Some(draws)) if passes > 0 => {
             let started = std::time::Instant::now();

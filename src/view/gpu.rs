@@ -79,7 +79,7 @@ impl Gpu {
 /// GPU memory the renderer allocated, in bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct GpuMemory {
-    /// Vertex, index, transfer, mask and uniform buffers.
+    /// Vertex, index, transfer, mask and uniform buffers (and the panel's texture coordinates).
     pub buffers: u64,
     /// The environment map texture drawn as the backdrop (16 B per texel).
     pub environment: u64,
@@ -607,7 +607,8 @@ impl Renderer {
         ]
         .iter()
         .map(|b| b.size())
-        .sum();
+        .sum::<u64>()
+            + self.panel.as_ref().map_or(0, |p| p.texcoords.size());
         let pixels = self.targets.width as u64 * self.targets.height as u64;
         let environment = self.env_size.0 as u64 * self.env_size.1 as u64 * 16;
         GpuMemory { buffers, environment, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
