@@ -77,8 +77,15 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     let order = transfer.order as usize;
     let layers = LayerSelection::parse(&config.layers, &transfer.stored_bounces()).map_err(anyhow::Error::msg)?;
     // The LCD panel (role panel, or --panel), drawn with its final-gathered texture.
-    let panel =
-        view::panel::PanelMapping::find(&bundle.mesh, config.panel.as_deref(), config.panel_texels, path).map_err(anyhow::Error::msg)?;
+    let panel = match view::panel::PanelMapping::find(&bundle.mesh, config.panel.as_deref(), config.panel_texels, path) {
+        Ok(panel) => panel,
+        Err(e) if config.panel.is_none() => {
+            // A panel-role material the gather cannot lay texels over (no area, facing both ways) does not stop the viewer.
+            eprintln!("warning: {e}; the panel is drawn without its gathered reflection");
+            None
+        }
+        Err(e) => anyhow::bail!(e),
+    };
     // Glass (window role, or `bake --window PATTERN[=TAU]` kept in META) is drawn as glass.
     let mut scene = view::scene::prepare_scene_with_panel(&bundle, &layers, &config.hide, panel.as_ref())
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;

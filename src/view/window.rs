@@ -70,9 +70,12 @@ struct PanelState {
     worker: PanelWorker,
     /// The texture is drawn (`P` toggles).
     on: bool,
-    /// The last request sent and the samples per texel of the texture shown.
+    /// The last request sent (`None` after a toggle: send one), the samples per
+    /// texel of the texture shown, and the requests sent so far (never reused, so a
+    /// late texture of an older request is never shown).
     sent: Option<PanelRequest>,
     samples: u32,
+    generation: u64,
 }
 
 /// Opens a window on `bundle` and runs until it is closed.
@@ -91,9 +94,13 @@ pub fn run_window(
     let bounds = scene.bounds;
     let playing = state.step.is_some() && bundle.sun.is_some();
     let panel = match panel {
-        Some(source) => {
-            Some(PanelState { worker: PanelWorker::start(source, 0).map_err(ViewError::Invalid)?, on: true, sent: None, samples: 0 })
-        }
+        Some(source) => Some(PanelState {
+            worker: PanelWorker::start(source, 0).map_err(ViewError::Invalid)?,
+            on: true,
+            sent: None,
+            samples: 0,
+            generation: 0,
+        }),
         None => None,
     };
     let mut app = App {
@@ -293,14 +300,13 @@ impl App {
         if !panel.on {
             return;
         }
-        let generation = panel.sent.as_ref().map_or(0, |r| r.generation);
-        let request = PanelRequest::new(self.control.camera.eye, settings, &self.state.layers, generation + 1);
+        let request = PanelRequest::new(self.control.camera.eye, settings, &self.state.layers, panel.generation + 1);
         if panel.sent.as_ref().is_none_or(|sent| !sent.same_gather(&request)) {
+            panel.generation = request.generation;
             panel.worker.request(request.clone());
             panel.sent = Some(request);
         }
-        let current = panel.sent.as_ref().map_or(0, |r| r.generation);
-        if let Some(texture) = panel.worker.latest(current) {
+        if let Some(texture) = panel.worker.latest(panel.generation) {
             panel.samples = texture.samples;
             s.renderer.set_panel_texture(&s.gpu, Some(&texture));
         }
