@@ -268,6 +268,36 @@ impl PanelSource {
 mod tests {
     use super::*;
 
+    /// The sky the panel reflects is the sky the backdrop draws: same radiance
+    /// along every car-frame direction (the disc aside), the sun where the disc is, for a turned car.
+    #[test]
+    fn reflected_sky_is_the_drawn_sky() {
+        let rotation = super::super::lighting::car_to_env_rotation(40.0, 10.0, -5.0);
+        let sun = Vec3::new(0.3, 0.5, -0.8).normalize();
+        let sky = SkyBackdrop { sun, up: Vec3::Y, turbidity: 3.0, scale: 1.0, sun_irradiance: Some([9e4, 8e4, 7e4]), rotation };
+        let env = sky_environment(&sky, &[[0.0; 3]], 1);
+        let drawn = Backdrop::Sky(sky);
+        let disc = env.sun.expect("the disc is drawn, so it is reflected");
+        assert!(disc.direction.dot(rotation * sun) > 1.0 - 1e-6);
+        assert_eq!(disc.irradiance, [9e4, 8e4, 7e4]);
+        let mut compared = 0;
+        for k in 0..500u32 {
+            let (a, b) = crate::bake::sampling::sample_2d(crate::bake::sampling::DirectionPattern::Sobol, k, 0, 7);
+            let z = 1.0 - 2.0 * a;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let d = Vec3::new(r * (std::f32::consts::TAU * b).cos(), r * (std::f32::consts::TAU * b).sin(), z);
+            if disc.contains(d) {
+                continue;
+            }
+            let (want, got) = (super::super::backdrop::radiance(&drawn, None, d), env.radiance(d));
+            for c in 0..3 {
+                assert!((want[c] - got[c]).abs() <= 1e-4 * want[c].abs().max(1.0), "{d}: drawn {want:?}, reflected {got:?}");
+            }
+            compared += 1;
+        }
+        assert!(compared > 490);
+    }
+
     #[test]
     fn passes_double_then_add_at_most_the_increment() {
         let schedule: Vec<u32> = (0..=12).map(samples_after).collect();
