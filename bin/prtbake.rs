@@ -346,6 +346,15 @@ struct ViewArgs {
     /// With --screenshot: render N timed frames and report frame time and GPU memory.
     #[arg(long, default_value_t = 0)]
     frames: u32,
+    /// The LCD panel drawn with its final-gathered reflection: materials or groups matching this glob (default: materials with the panel role, if any).
+    #[arg(long, value_name = "PATTERN")]
+    panel: Option<String>,
+    /// Texels of the panel's texture, WxH (default: 128 along the panel's long side, square texels).
+    #[arg(long, value_name = "WxH")]
+    panel_texels: Option<String>,
+    /// With --screenshot: gather passes before the frame (pass 1: 2 samples per texel, each later pass doubles, at most +32; 0 = no panel texture). Default 12 (256 samples per texel).
+    #[arg(long, value_name = "N")]
+    panel_passes: Option<u32>,
     #[arg(long)]
     json: bool,
 }
@@ -474,8 +483,18 @@ enum Command {
     },
 }
 
-fn view_config(a: ViewArgs) -> cli::view_cmd::ViewConfig {
-    cli::view_cmd::ViewConfig {
+/// A panel's texels `WxH` (each 1..=4096), named by `flag` in the error.
+fn parse_texels(flag: &str, text: Option<&str>) -> anyhow::Result<Option<(u32, u32)>> {
+    let Some(text) = text else { return Ok(None) };
+    let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+    match parsed {
+        Some((w, h)) if (1..=4096).contains(&w) && (1..=4096).contains(&h) => Ok(Some((w, h))),
+        _ => anyhow::bail!("{flag} {text:?}: expected WxH, each 1..=4096"),
+    }
+}
+
+fn view_config(a: ViewArgs) -> anyhow::Result<cli::view_cmd::ViewConfig> {
+    Ok(cli::view_cmd::ViewConfig {
         bundle: a.bundle,
         env: a.env,
         sky: a.sky,
@@ -493,8 +512,11 @@ fn view_config(a: ViewArgs) -> cli::view_cmd::ViewConfig {
         camera: a.camera,
         fov_deg: a.fov,
         frames: a.frames,
+        panel: a.panel,
+        panel_texels: parse_texels("--panel-texels", a.panel_texels.as_deref())?,
+        panel_passes: a.panel_passes,
         json: a.json,
-    }
+    })
 }
 
 fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
@@ -835,17 +857,7 @@ fn panel_config(a: PanelArgs) -> anyhow::Result<cli::panel_cmd::PanelConfig> {
     if !a.yaw.is_finite() {
         bail!("--yaw {}: expected degrees", a.yaw);
     }
-    let texels = match &a.texels {
-        None => None,
-        Some(text) => {
-            let parsed =
-                text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
-            match parsed {
-                Some((w, h)) if (1..=4096).contains(&w) && (1..=4096).contains(&h) => Some((w, h)),
-                _ => bail!("--texels {text:?}: expected WxH, each 1..=4096"),
-            }
-        }
-    };
+    let texels = parse_texels("--texels", a.texels.as_deref())?;
     let (white, black) = (a.display_white, a.display_black);
     if !(white.is_finite() && black.is_finite() && black >= 0.0 && white > black) {
         bail!("--display-white {white} / --display-black {black}: expected 0 <= black < white (cd/m²)");
@@ -886,7 +898,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
         Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
-        Command::View(args) => cli::view_cmd::run(&view_config(args)).map(|_| Outcome::Ok),
+        Command::View(args) => cli::view_cmd::run(&view_config(args)?).map(|_| Outcome::Ok),
         Command::Panel(args) => cli::panel_cmd::run(&panel_config(args)?).map(|_| Outcome::Ok),
         Command::Merge { parts, output, layer, threads, force, json } => {
             cli::merge_cmd::run(&cli::merge_cmd::MergeConfig { parts, output, layer, threads, json, force }).map(|_| Outcome::Ok)

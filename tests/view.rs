@@ -328,6 +328,14 @@ fn view_command_writes_a_screenshot_and_refuses_bad_input() {
     assert_eq!(bad_size.status.code(), Some(2));
     let bad_layers = prtbake(&["view", &s(&sun_path), "--layers", "direct", "--screenshot", &s(&scratch.path("x.png"))]);
     assert!(String::from_utf8_lossy(&bad_layers.stderr).contains("--store-bounces"));
+    let no_panel = prtbake(&["view", &s(&sun_path), "--panel", "lcd*", "--screenshot", &s(&scratch.path("x.png"))]);
+    let message = String::from_utf8_lossy(&no_panel.stderr);
+    assert_eq!(no_panel.status.code(), Some(2), "{message}");
+    assert!(message.contains("sun.prtb") && message.contains("lcd*"), "{message}");
+    let bad_texels = prtbake(&["view", &s(&sun_path), "--panel-texels", "0x8", "--screenshot", &s(&scratch.path("x.png"))]);
+    assert_eq!(bad_texels.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad_texels.stderr).contains("--panel-texels"));
+    assert!(!scratch.path("x.png").exists());
 
     if gpu_or_skip("view_command_writes_a_screenshot").is_none() {
         return;
@@ -340,4 +348,258 @@ fn view_command_writes_a_screenshot_and_refuses_bad_input() {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png_path).unwrap()));
     let info = decoder.read_info().unwrap().info().clone();
     assert_eq!((info.width, info.height), (96, 64));
+}
+
+/// The LCD panel scene: a 1 × 0.5 m panel (role panel, albedo 0.05, no UVs:
+/// planar texels) facing +Z at z = 0, a bright wall (albedo 0.9) behind the
+/// camera that the panel reflects, under a synthetic SH sky; open-mode transfer
+/// of unoccluded surfaces. Returns the bundle and its panel mapping (16 × 8 texels).
+fn panel_scene() -> (Bundle, prtbake::view::panel::PanelMapping) {
+    use prtbake::fixtures::builder::MeshBuilder;
+    use prtbake::mesh::{Material, MaterialRole};
+    let material = |name: &str, albedo: f32, role| Material { name: name.into(), albedo: [albedo; 3], role, transmittance: 1.0 };
+    let mut b = MeshBuilder::new(vec![material("lcd", 0.05, MaterialRole::Panel), material("wall", 0.9, MaterialRole::Opaque)]);
+    let (lcd, wall) = (b.material("lcd"), b.material("wall"));
+    b.grid("screen", Vec3::new(-0.5, -0.25, 0.0), Vec3::X, Vec3::Y * 0.5, 8, 4, |_, _| lcd);
+    b.grid("wall", Vec3::new(3.0, -2.0, 3.5), -Vec3::X * 6.0, Vec3::Y * 4.0, 6, 4, |_, _| wall);
+    let mesh = b.mesh;
+    mesh.validate().unwrap();
+    let order = 3;
+    let transfer = unoccluded_transfer(&mesh, order);
+    let bundle = bundle_of(mesh, order, transfer, None);
+    let mapping = prtbake::view::panel::PanelMapping::find(&bundle.mesh, None, Some((16, 8)), "panel.prtb".as_ref()).unwrap().unwrap();
+    (bundle, mapping)
+}
+
+/// A sky brightest toward +Z (where the panel faces) and some colour.
+fn panel_lighting() -> Vec<[f32; 3]> {
+    vec![
+        [2.0, 1.9, 1.7],
+        [0.3, 0.3, 0.3],
+        [0.2, 0.25, 0.3],
+        [0.0, 0.05, 0.1],
+        [0.0; 3],
+        [0.05, 0.0, 0.0],
+        [-0.1, -0.1, -0.1],
+        [0.0; 3],
+        [0.0; 3],
+    ]
+}
+
+/// The panel's texture after `passes` gather passes from `eye`.
+fn panel_texture(
+    bundle: &Bundle,
+    mapping: &prtbake::view::panel::PanelMapping,
+    settings: &FrameSettings,
+    eye: Vec3,
+    passes: u32,
+) -> prtbake::view::panel::PanelTexture {
+    let mut source = prtbake::view::panel::PanelSource::new(bundle, mapping, None).unwrap();
+    let request = prtbake::view::panel::PanelRequest::new(eye, settings, &LayerSelection::Total, 0);
+    source.texture(&request, passes)
+}
+
+/// Renders the panel scene with the texture of `passes` passes (`None`: no texture).
+fn render_panel(
+    gpu: &Gpu,
+    bundle: &Bundle,
+    mapping: &prtbake::view::panel::PanelMapping,
+    camera: &Camera,
+    settings: &FrameSettings,
+    passes: Option<u32>,
+) -> Image {
+    let mut scene = prtbake::view::scene::prepare_scene_with_panel(bundle, &LayerSelection::Total, &[], Some(mapping)).unwrap();
+    scene.panel.as_mut().unwrap().texture = passes.map(|p| panel_texture(bundle, mapping, settings, camera.eye, p));
+    render_image(gpu, &scene, None, camera, settings, PANEL_SIZE.0, PANEL_SIZE.1).unwrap()
+}
+
+const PANEL_SIZE: (u32, u32) = (160, 120);
+
+/// The panel scene, a camera in front of the panel and the frame settings
+/// (the panel sky, black backdrop, linear curve at −1 stop).
+fn panel_fixture() -> (Bundle, prtbake::view::panel::PanelMapping, Camera, FrameSettings) {
+    let (bundle, mapping) = panel_scene();
+    let bounds = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap().bounds;
+    let camera = Camera::look_at(Vec3::new(0.25, 0.15, 1.6), Vec3::ZERO, bounds);
+    let settings = FrameSettings { lighting: panel_lighting(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(-1.0) };
+    (bundle, mapping, camera, settings)
+}
+
+/// Per pixel: the panel hit's texture coordinate and PRT light (`None` off the panel).
+fn panel_pixels(
+    bundle: &Bundle,
+    mapping: &prtbake::view::panel::PanelMapping,
+    camera: &Camera,
+    lighting: &[[f32; 3]],
+) -> Vec<Option<(glam::Vec2, [f32; 3])>> {
+    let mesh = &bundle.mesh;
+    let scene = prepare_scene(bundle, &LayerSelection::Total, &[]).unwrap();
+    let (width, height) = PANEL_SIZE;
+    (0..width * height)
+        .map(|i| {
+            let (origin, dir) = camera.pixel_ray((i % width) as f32 + 0.5, (i / width) as f32 + 0.5, width, height);
+            let (t, u, v) = nearest_hit(mesh, origin, dir)?;
+            mapping.triangles.binary_search(&(t as u32)).ok()?;
+            let w = [1.0 - u - v, u, v];
+            let corners = mesh.triangle(t);
+            let texcoord = corners.iter().zip(w).map(|(&c, w)| glam::Vec2::from(mapping.texcoord(mesh, c)) * w).sum();
+            let light = corners.iter().zip(w).fold([0.0f32; 3], |acc, (&c, w)| {
+                let e = reference::vertex_light(&scene, lighting, None, c as usize, mesh.normals[c as usize].to_array());
+                std::array::from_fn(|k| acc[k] + e[k] * w)
+            });
+            Some((texcoord, light))
+        })
+        .collect()
+}
+
+/// Pixels whose 3 × 3 neighbourhood is all panel (no silhouette) and whose
+/// texel is unambiguous (the coordinate ≥ 0.02 texel from a texel edge).
+fn inner_panel_pixels(pixels: &[Option<(glam::Vec2, [f32; 3])>], texels: (u32, u32)) -> Vec<usize> {
+    let (w, h) = (PANEL_SIZE.0 as i64, PANEL_SIZE.1 as i64);
+    let edge = |x: f32| (x - x.round()).abs() < 0.02;
+    (0..pixels.len())
+        .filter(|&i| {
+            let (x, y) = (i as i64 % w, i as i64 / w);
+            let inside = (-1..=1).all(|dy| {
+                (-1..=1).all(|dx| {
+                    (0..w).contains(&(x + dx)) && (0..h).contains(&(y + dy)) && pixels[((y + dy) * w + x + dx) as usize].is_some()
+                })
+            });
+            inside && pixels[i].is_some_and(|(c, _)| !edge(c.x * texels.0 as f32) && !edge(c.y * texels.1 as f32))
+        })
+        .collect()
+}
+
+#[test]
+fn panel_texels_match_the_cpu_shading_plus_the_gathered_texture() {
+    let Some(gpu) = gpu_or_skip("panel_texels_match_the_cpu_shading_plus_the_gathered_texture") else { return };
+    let (bundle, mapping, camera, settings) = panel_fixture();
+    let texture = panel_texture(&bundle, &mapping, &settings, camera.eye, 4);
+    let image = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(4));
+    let pixels = panel_pixels(&bundle, &mapping, &camera, &settings.lighting);
+    let albedo = bundle.mesh.materials[0].albedo;
+    let (mut max_diff, mut reflected_share) = (0, 0.0f64);
+    let inner = inner_panel_pixels(&pixels, (16, 8));
+    for &i in &inner {
+        let (texcoord, light) = pixels[i].unwrap();
+        let prt = reference::radiance(albedo, light);
+        let reflected = texture.at(texcoord);
+        let want = tonemap::linear(std::array::from_fn(|k| prt[k] + reflected[k]), -1.0, 2.2).map(tonemap::to_u8);
+        let got = image.pixel(i as u32 % PANEL_SIZE.0, i as u32 / PANEL_SIZE.0);
+        let diff = (0..3).map(|k| (got[k] as i32 - want[k] as i32).abs()).max().unwrap();
+        assert!(diff <= MAX_CODE_DIFF, "pixel {i}: GPU {got:?}, CPU {want:?} (PRT {prt:?} + texel {reflected:?})");
+        max_diff = max_diff.max(diff);
+        reflected_share += f64::from(reflected[1] / (prt[1] + reflected[1])) / inner.len() as f64;
+    }
+    eprintln!(
+        "panel: {} pixels compared, max difference {max_diff} codes; the reflection is {:.0}% of their radiance",
+        inner.len(),
+        100.0 * reflected_share
+    );
+    assert!(inner.len() > 2000, "only {} panel pixels", inner.len());
+    // The texture matters: the reflection is a large part of what the panel shows.
+    assert!(reflected_share > 0.3, "{reflected_share}");
+}
+
+#[test]
+fn panel_noise_falls_with_more_passes() {
+    let Some(gpu) = gpu_or_skip("panel_noise_falls_with_more_passes") else { return };
+    let (bundle, mapping, camera, settings) = panel_fixture();
+    let pixels = panel_pixels(&bundle, &mapping, &camera, &settings.lighting);
+    let inner = inner_panel_pixels(&pixels, (16, 8));
+    // Reference: 1024 samples per texel (pass 36).
+    let reference_passes = (1..100).find(|&p| prtbake::view::panel::samples_after(p) >= 1024).unwrap();
+    let reference = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(reference_passes));
+    let rms: Vec<f64> = [1u32, 3, 5]
+        .iter()
+        .map(|&passes| {
+            let image = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(passes));
+            let sum: f64 = inner
+                .iter()
+                .map(|&i| {
+                    let (a, b) = (
+                        image.pixel(i as u32 % PANEL_SIZE.0, i as u32 / PANEL_SIZE.0),
+                        reference.pixel(i as u32 % PANEL_SIZE.0, i as u32 / PANEL_SIZE.0),
+                    );
+                    (0..3).map(|k| f64::from(a[k] as i32 - b[k] as i32).powi(2)).sum::<f64>() / 3.0
+                })
+                .sum();
+            (sum / inner.len() as f64).sqrt()
+        })
+        .collect();
+    eprintln!("panel noise vs 1024 spp: RMS {:.2} / {:.2} / {:.2} codes at 2 / 8 / 32 samples per texel", rms[0], rms[1], rms[2]);
+    assert!(rms[0] > 1.0, "the rough pass should be visibly noisy: {rms:?}");
+    assert!(rms[1] < rms[0] && rms[2] < rms[1], "{rms:?}");
+    assert!(rms[2] < 0.5 * rms[0], "{rms:?}");
+}
+
+#[test]
+fn panel_texture_leaves_every_other_pixel_unchanged() {
+    let Some(gpu) = gpu_or_skip("panel_texture_leaves_every_other_pixel_unchanged") else { return };
+    // Linear tone mapping (the fixture's): the adaptive operators' exposure follows the whole frame, panel included.
+    let (bundle, mapping, camera, settings) = panel_fixture();
+    let plain_scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    let plain = render_image(&gpu, &plain_scene, None, &camera, &settings, PANEL_SIZE.0, PANEL_SIZE.1).unwrap();
+    let untextured = render_panel(&gpu, &bundle, &mapping, &camera, &settings, None);
+    let textured = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(3));
+    assert!(plain.rgba == untextured.rgba, "the panel without its texture is drawn as before");
+    let pixels = panel_pixels(&bundle, &mapping, &camera, &settings.lighting);
+    let (w, h) = (PANEL_SIZE.0 as i64, PANEL_SIZE.1 as i64);
+    let near_panel = |x: i64, y: i64| {
+        (-1..=1).any(|dy| {
+            (-1..=1)
+                .any(|dx| (0..w).contains(&(x + dx)) && (0..h).contains(&(y + dy)) && pixels[((y + dy) * w + x + dx) as usize].is_some())
+        })
+    };
+    let (mut changed, mut other) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let (a, b) = (plain.pixel(x as u32, y as u32), textured.pixel(x as u32, y as u32));
+            if near_panel(x, y) {
+                changed += (a != b) as usize;
+            } else {
+                assert_eq!(a, b, "pixel ({x}, {y}) away from the panel changed");
+                other += 1;
+            }
+        }
+    }
+    eprintln!("panel texture: {changed} panel pixels changed, {other} others identical");
+    assert!(changed > 2000 && other > 5000, "{changed} {other}");
+}
+
+/// The window's worker (no GPU needed): it refines to 256 samples per texel and
+/// hands back the very texture a screenshot computes after as many passes; a
+/// new eye restarts it, and its textures carry the new request's generation.
+#[test]
+fn panel_worker_refines_to_the_screenshot_texture_and_restarts_on_a_new_eye() {
+    use prtbake::view::panel::{passes_for, PanelRequest, PanelSource, INTERACTIVE_SAMPLES};
+    use prtbake::view::panel_worker::PanelWorker;
+    let (bundle, mapping, camera, settings) = panel_fixture();
+    let worker = PanelWorker::start(PanelSource::new(&bundle, &mapping, None).unwrap(), 2).unwrap();
+    let wait_for = |generation: u64| {
+        let started = std::time::Instant::now();
+        let mut seen = Vec::new();
+        loop {
+            if let Some(texture) = worker.latest(generation) {
+                seen.push(texture.samples);
+                if texture.samples == INTERACTIVE_SAMPLES {
+                    return (texture, seen);
+                }
+            }
+            assert!(started.elapsed().as_secs() < 120, "the worker stalled at {seen:?}");
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+    };
+    let eyes = [camera.eye, camera.eye + Vec3::new(-0.4, 0.1, 0.0)];
+    for (k, eye) in eyes.into_iter().enumerate() {
+        let request = PanelRequest::new(eye, &settings, &LayerSelection::Total, k as u64 + 1);
+        worker.request(request.clone());
+        let (texture, seen) = wait_for(k as u64 + 1);
+        assert!(seen.windows(2).all(|w| w[0] < w[1]), "samples must only grow within a request: {seen:?}");
+        assert_eq!(texture.generation, k as u64 + 1);
+        let mut headless = PanelSource::new(&bundle, &mapping, None).unwrap().texture(&request, passes_for(INTERACTIVE_SAMPLES));
+        headless.generation = texture.generation;
+        assert!(texture == headless, "eye {k}: the window's texture differs from the screenshot's");
+        eprintln!("worker, eye {k}: textures seen at {seen:?} samples per texel");
+    }
 }

@@ -36,6 +36,12 @@ pub struct ViewConfig {
     pub fov_deg: f32,
     /// Frames to time in headless mode (0 = one frame, no timing).
     pub frames: u32,
+    /// Glob on material or group names for the LCD panel; `None` = panel-role materials (if any).
+    pub panel: Option<String>,
+    /// Texels of the panel texture; `None` = 128 along the long side, square texels.
+    pub panel_texels: Option<(u32, u32)>,
+    /// Gather passes before the screenshot (0 = no panel texture); `None` = to 256 samples per texel.
+    pub panel_passes: Option<u32>,
     pub json: bool,
 }
 
@@ -70,8 +76,19 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     let transfer = bundle.transfer.as_ref().with_context(|| format!("{}: the bundle has no transfer to shade", path.display()))?;
     let order = transfer.order as usize;
     let layers = LayerSelection::parse(&config.layers, &transfer.stored_bounces()).map_err(anyhow::Error::msg)?;
+    // The LCD panel (role panel, or --panel), drawn with its final-gathered texture.
+    let panel = match view::panel::PanelMapping::find(&bundle.mesh, config.panel.as_deref(), config.panel_texels, path) {
+        Ok(panel) => panel,
+        Err(e) if config.panel.is_none() => {
+            // A panel-role material the gather cannot lay texels over (no area, facing both ways) does not stop the viewer.
+            eprintln!("warning: {e}; the panel is drawn without its gathered reflection");
+            None
+        }
+        Err(e) => anyhow::bail!(e),
+    };
     // Glass (window role, or `bake --window PATTERN[=TAU]` kept in META) is drawn as glass.
-    let mut scene = view::scene::prepare_scene(&bundle, &layers, &config.hide).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let mut scene = view::scene::prepare_scene_with_panel(&bundle, &layers, &config.hide, panel.as_ref())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let size = parse_size(&config.size)?;
 
     // The time-lapse step, if any.
@@ -153,12 +170,49 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     camera.fov_y_deg = config.fov_deg;
 
     let Some(screenshot) = &config.screenshot else {
-        return view::window::run_window(bundle, scene, state, camera, tz_minutes).map_err(Into::into);
+        let panel_source = match &panel {
+            Some(mapping) => {
+                eprintln!("panel: building the ray-tracing scene for the gather");
+                Some(view::panel::PanelSource::new(&bundle, mapping, scene.environment.clone()).map_err(anyhow::Error::msg)?)
+            }
+            None => None,
+        };
+        return view::window::run_window(bundle, scene, state, camera, tz_minutes, panel_source).map_err(Into::into);
     };
     quiet_headless_vulkan();
     let gpu = view::Gpu::headless()?;
     let settings = state.frame_settings(bundle.sun.as_ref(), order);
     let (width, height) = size;
+    let passes = config.panel_passes.unwrap_or_else(|| view::panel::passes_for(view::panel::INTERACTIVE_SAMPLES));
+    if panel.is_none() && config.panel_passes.is_some_and(|p| p > 0) && !config.json {
+        eprintln!("--panel-passes: the bundle has no panel (no material has the panel role; name it with --panel GLOB)");
+    }
+    let panel_report = match (&panel, &mut scene.panel) {
+        (Some(mapping), Some(draws)) if passes > 0 => {
+            let started = std::time::Instant::now();
+            let mut source = view::panel::PanelSource::new(&bundle, mapping, scene.environment.clone()).map_err(anyhow::Error::msg)?;
+            let request = view::panel::PanelRequest::new(camera.eye, &settings, &state.layers, 0);
+            let texture = source.texture(&request, passes);
+            let report = json!({
+                "texels": [texture.width, texture.height], "texels_on_panel": mapping.layout.covered(), "mapping": mapping.layout.mapping.name(),
+                "centre": mapping.layout.centre.to_array(), "front": mapping.layout.front.to_array(),
+                "passes": passes, "samples_per_texel": texture.samples, "eye": camera.eye.to_array(), "seconds": started.elapsed().as_secs_f64(),
+            });
+            if !config.json {
+                eprintln!(
+                    "panel: {}x{} texels, {passes} passes ({} samples per texel) from the eye {:?} in {:.2} s",
+                    texture.width,
+                    texture.height,
+                    texture.samples,
+                    camera.eye.to_array(),
+                    started.elapsed().as_secs_f64()
+                );
+            }
+            draws.texture = Some(texture);
+            Some(report)
+        }
+        _ => None,
+    };
     let (image, timing) = if config.frames > 0 {
         let (image, timing) = view::time_frames(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height, config.frames)?;
         (image, Some(timing))
@@ -173,7 +227,7 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     if config.json {
         return super::print_json(&json!({
             "screenshot": super::json_path(screenshot), "width": width, "height": height, "adapter": gpu.adapter_name(),
-            "step": step, "step_local_time": step_time, "camera": camera.to_arg(), "timing": timing,
+            "step": step, "step_local_time": step_time, "camera": camera.to_arg(), "timing": timing, "panel": panel_report,
         }));
     }
     println!("wrote {} ({width}x{height}, {})", screenshot.display(), gpu.adapter_name());

@@ -53,6 +53,31 @@ pub struct PanelLayout {
     pub area: f32,
     /// Edge lengths of the planar box (metres along the long and the short axis); UV maps give the bounding box too.
     pub size: [f32; 2],
+    /// The planar box (used for the texel coordinates when `mapping` is [`Mapping::Planar`]).
+    pub frame: PlanarFrame,
+}
+
+/// The panel's best-fit plane and the oriented box of its projected corners.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarFrame {
+    pub centre: Vec3,
+    /// Long axis and `front × x_axis`, unit.
+    pub x_axis: Vec3,
+    pub y_axis: Vec3,
+    /// Box corner and extent along the axes, metres (f64: the unit coordinates are computed in it).
+    pub lo: DVec2,
+    pub span: DVec2,
+}
+
+impl PlanarFrame {
+    /// Point `p` in box coordinates: [0,1]² over the box (x along the long axis).
+    pub fn unit(&self, p: Vec3) -> Vec2 {
+        let q = DVec2::new((p - self.centre).dot(self.x_axis) as f64, (p - self.centre).dot(self.y_axis) as f64);
+        ((q - self.lo) / self.span).as_vec2()
+    }
+    pub fn size(&self) -> [f32; 2] {
+        [self.span.x as f32, self.span.y as f32]
+    }
 }
 
 impl PanelLayout {
@@ -87,17 +112,8 @@ impl PanelLayout {
         }
         let front = weighted_normal.normalize().as_vec3();
         let centre = (centroid / area).as_vec3();
-        let uv_corners = uv_corners(mesh, triangles);
-        let (mapping, corners, size) = match uv_corners {
-            Some(c) => {
-                let size = planar_corners(mesh, triangles, centre, front).1;
-                (Mapping::Uv, c.iter().map(|p| [p.x * width as f32, (1.0 - p.y) * height as f32].into()).collect::<Vec<Vec2>>(), size)
-            }
-            None => {
-                let (plane, size) = planar_corners(mesh, triangles, centre, front);
-                (Mapping::Planar, plane.iter().map(|p| Vec2::new(p.x * width as f32, (1.0 - p.y) * height as f32)).collect(), size)
-            }
-        };
+        let frame = planar_frame(mesh, triangles, centre, front);
+        let mapping = if uv_spans_area(mesh, triangles) { Mapping::Uv } else { Mapping::Planar };
         let count = width as usize * height as usize;
         let mut layout = PanelLayout {
             width,
@@ -109,15 +125,28 @@ impl PanelLayout {
             centre,
             front,
             area: area as f32,
-            size,
+            size: frame.size(),
+            frame,
         };
-        for (k, &t) in triangles.iter().enumerate() {
-            layout.rasterize(mesh, t, [corners[3 * k], corners[3 * k + 1], corners[3 * k + 2]]);
+        for &t in triangles {
+            let corners = mesh.triangle(t as usize).map(|v| layout.texel_coord(mesh, v));
+            layout.rasterize(mesh, t, corners);
         }
         if layout.covered() == 0 {
             return Err(PanelError::NoTexels { path: pattern_path(), width, height, mapping: mapping.name() });
         }
         Ok(layout)
+    }
+
+    /// Where mesh vertex `v` of the panel lies on the texel grid, in texel units:
+    /// `(x, y)` with texel (col, row) covering `[col, col+1) × [row, row+1)`
+    /// (row 0 at the top). The renderer's texture coordinates are this over (W, H).
+    pub fn texel_coord(&self, mesh: &Mesh, v: u32) -> Vec2 {
+        let unit = match self.mapping {
+            Mapping::Uv => mesh.uvs[v as usize],
+            Mapping::Planar => self.frame.unit(mesh.positions[v as usize]),
+        };
+        Vec2::new(unit.x * self.width as f32, (1.0 - unit.y) * self.height as f32)
     }
 
     /// Gives the texels whose centres fall inside triangle `t` (corners in texel units) their point and normal.
@@ -171,23 +200,26 @@ pub fn default_texels(mesh: &Mesh, triangles: &[u32], long_side: u32) -> (u32, u
         area += cross.length();
     }
     let (Some(front), true) = (weighted_normal.try_normalize(), area > 0.0) else { return (long_side, long_side) };
-    let [long, short] = planar_corners(mesh, triangles, centroid / area, front).1;
+    let [long, short] = planar_frame(mesh, triangles, centroid / area, front).size();
     (long_side, ((long_side as f32 * short / long.max(1e-12)).round() as u32).clamp(1, long_side))
 }
 
-/// The panel's triangle corners in UV space, when the mesh has UVs and they span an area.
-fn uv_corners(mesh: &Mesh, triangles: &[u32]) -> Option<Vec<Vec2>> {
+/// Whether the mesh has UVs and the panel's span an area.
+fn uv_spans_area(mesh: &Mesh, triangles: &[u32]) -> bool {
     if mesh.uvs.is_empty() {
-        return None;
+        return false;
     }
-    let corners: Vec<Vec2> = triangles.iter().flat_map(|&t| mesh.triangle(t as usize).map(|v| mesh.uvs[v as usize])).collect();
-    let uv_area: f32 = corners.chunks_exact(3).map(|c| (c[1] - c[0]).perp_dot(c[2] - c[0]).abs()).sum();
-    (uv_area > 1e-9).then_some(corners)
+    let uv_area: f32 = triangles
+        .iter()
+        .map(|&t| mesh.triangle(t as usize).map(|v| mesh.uvs[v as usize]))
+        .map(|c| (c[1] - c[0]).perp_dot(c[2] - c[0]).abs())
+        .sum();
+    uv_area > 1e-9
 }
 
-/// The corners projected onto the panel plane, in box coordinates [0,1]² (x
-/// along the long axis, y = front × x), and the box's edge lengths.
-fn planar_corners(mesh: &Mesh, triangles: &[u32], centre: Vec3, front: Vec3) -> (Vec<Vec2>, [f32; 2]) {
+/// The panel's plane and the oriented box of its corners projected there (x
+/// along the long axis, y = front × x).
+fn planar_frame(mesh: &Mesh, triangles: &[u32], centre: Vec3, front: Vec3) -> PlanarFrame {
     let (t0, t1) = crate::bake::sampling::tangent_frame(front);
     let in_plane = |p: Vec3| DVec2::new((p - centre).dot(t0) as f64, (p - centre).dot(t1) as f64);
     // Principal axis of the panel's area (second moments of its triangles,
@@ -228,8 +260,7 @@ fn planar_corners(mesh: &Mesh, triangles: &[u32], centre: Vec3, front: Vec3) -> 
     let lo = coords.iter().fold(DVec2::splat(f64::INFINITY), |m, p| m.min(*p));
     let hi = coords.iter().fold(DVec2::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
     let span = (hi - lo).max(DVec2::splat(1e-12));
-    let unit = coords.iter().map(|p| ((*p - lo) / span).as_vec2()).collect();
-    (unit, [span.x as f32, span.y as f32])
+    PlanarFrame { centre, x_axis, y_axis, lo, span }
 }
 
 /// The triangles of the panel: those whose material or group name matches

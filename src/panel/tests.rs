@@ -404,3 +404,63 @@ fn planar_layout_fills_the_panel_box() {
     let none = select_panel(&setup.mesh, Some("nav*"), "cabin.prtb".as_ref()).unwrap_err().to_string();
     assert!(none.contains("cabin.prtb") && none.contains("nav*") && none.contains("lcd"), "{none}");
 }
+
+/// The barycentric coordinates of `p` (on the triangle's plane) in triangle `t`.
+fn barycentrics(mesh: &Mesh, t: u32, p: Vec3) -> [f32; 3] {
+    let [a, b, c] = mesh.triangle_positions(t as usize);
+    let n = (b - a).cross(c - a);
+    let area = |x: Vec3, y: Vec3, z: Vec3| (y - x).cross(z - x).dot(n) / n.length_squared();
+    let (w1, w2) = (area(a, p, c), area(a, b, p));
+    [1.0 - w1 - w2, w1, w2]
+}
+
+/// Texel coordinates (what the viewer's texture coordinates are made of) put
+/// every texel centre's panel point back on that centre: a round trip through
+/// the vertices' coordinates and the point's barycentrics, for a tilted panel
+/// without UVs (planar box: the box's corners at 0 and (W, H)) and for UVs.
+#[test]
+fn texel_coordinates_round_trip_through_texel_centres() {
+    let mut b = MeshBuilder::new(vec![material("lcd", 0.1, MaterialRole::Panel)]);
+    let m = b.material("lcd");
+    let tilt = 35f32.to_radians();
+    let long = Vec3::new(0.1, tilt.sin(), -tilt.cos()).normalize() * 0.3;
+    let short = long.cross(Vec3::Y).normalize() * 0.12;
+    b.grid("screen", Vec3::new(-0.3, 0.9, 0.4), short, long, 4, 7, |_, _| m);
+    let planar = Setup::new(b.mesh);
+    let uv = open_panel();
+    for (setup, (w, h)) in [(&planar, (30u32, 12u32)), (&uv, (9, 5))] {
+        let triangles = select_panel(&setup.mesh, None, "t".as_ref()).unwrap();
+        let layout = PanelLayout::new(&setup.mesh, &triangles, w, h, "t".as_ref()).unwrap();
+        let mut checked = 0;
+        for i in 0..layout.texel_count() {
+            let t = layout.triangle[i];
+            if t == layout::NO_TRIANGLE {
+                continue;
+            }
+            let weights = barycentrics(&setup.mesh, t, layout.point[i]);
+            let corners = setup.mesh.triangle(t as usize).map(|v| layout.texel_coord(&setup.mesh, v));
+            let at = corners[0] * weights[0] + corners[1] * weights[1] + corners[2] * weights[2];
+            let centre = Vec2::new((i as u32 % w) as f32 + 0.5, (i as u32 / w) as f32 + 0.5);
+            assert!((at - centre).length() < 1e-3, "{:?} texel {i}: {at} vs {centre}", layout.mapping);
+            checked += 1;
+        }
+        assert_eq!(checked, layout.covered());
+        assert_eq!(checked as u32, w * h, "{:?}: a rectangle covers its whole grid", layout.mapping);
+        let coords: Vec<Vec2> =
+            triangles.iter().flat_map(|&t| setup.mesh.triangle(t as usize)).map(|v| layout.texel_coord(&setup.mesh, v)).collect();
+        let lo = coords.iter().fold(Vec2::splat(f32::INFINITY), |m, c| m.min(*c));
+        let hi = coords.iter().fold(Vec2::splat(f32::NEG_INFINITY), |m, c| m.max(*c));
+        match layout.mapping {
+            // The box's corners: exactly the grid's.
+            Mapping::Planar => assert!(lo.length() < 1e-4 && (hi - Vec2::new(w as f32, h as f32)).length() < 1e-3, "{lo} {hi}"),
+            // open_panel's UVs put the corner vertices on the corner texels' centres.
+            Mapping::Uv => {
+                assert!((lo - Vec2::splat(0.5)).length() < 1e-4 && (hi - Vec2::new(w as f32 - 0.5, h as f32 - 0.5)).length() < 1e-4)
+            }
+        }
+    }
+    assert_eq!(
+        PanelLayout::new(&planar.mesh, &select_panel(&planar.mesh, None, "t".as_ref()).unwrap(), 30, 12, "t".as_ref()).unwrap().mapping,
+        Mapping::Planar
+    );
+}

@@ -18,6 +18,7 @@ use wgpu::util::DeviceExt;
 
 use super::backdrop;
 use super::camera::Camera;
+use super::panel::PanelTexture;
 use super::scene::{DrawKind, MaterialDraw, PreparedScene, GPU_VERTEX_BYTES};
 use super::tonemap::{ADAPT_TAU_BRIGHTEN_S, ADAPT_TAU_DARKEN_S};
 use super::{FrameSettings, ViewError};
@@ -78,7 +79,7 @@ impl Gpu {
 /// GPU memory the renderer allocated, in bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct GpuMemory {
-    /// Vertex, index, transfer, mask and uniform buffers.
+    /// Vertex, index, transfer, mask and uniform buffers (and the panel's texture coordinates).
     pub buffers: u64,
     /// The environment map texture drawn as the backdrop (16 B per texel).
     pub environment: u64,
@@ -98,8 +99,18 @@ struct Targets {
     tonemap_bind: wgpu::BindGroup,
 }
 
+/// The panel's pipeline, texture coordinates and texture (scenes with a panel).
+struct PanelGpu {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    texcoords: wgpu::Buffer,
+    /// The texture and its bind group; `None` draws the panel PRT-shaded only.
+    texture: Option<(wgpu::Texture, wgpu::BindGroup)>,
+}
+
 /// Draws a prepared scene: pipelines, buffers and targets.
 pub struct Renderer {
+    panel: Option<PanelGpu>,
     scene_pipeline: wgpu::RenderPipeline,
     glass_pipeline: wgpu::RenderPipeline,
     backdrop_pipeline: wgpu::RenderPipeline,
@@ -290,6 +301,39 @@ impl Renderer {
         let opaque = (true, wgpu::CompareFunction::Less);
         let scene_pipeline =
             hdr_pipeline("scene", &scene_pipeline_layout, &shading, ("vs_main", "fs_main"), &vertex_layout, opaque, HDR_FORMAT.into());
+        // The panel: the scene's shading (same bindings) plus its texture in group 1 and texture coordinates in buffer 1.
+        let panel = scene.panel.as_ref().map(|draws| {
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("panel"),
+                entries: &[hdr_texture_entry(0, wgpu::ShaderStages::FRAGMENT)],
+            });
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("panel.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(concat!(include_str!("shading.wgsl"), include_str!("panel.wgsl")).into()),
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("panel"),
+                bind_group_layouts: &[Some(&scene_layout), Some(&layout)],
+                immediate_size: 0,
+            });
+            let texcoord_attributes = wgpu::vertex_attr_array![4 => Float32x2];
+            let buffers = [
+                vertex_layout[0].clone(),
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: 8,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &texcoord_attributes,
+                }),
+            ];
+            let pipeline = hdr_pipeline("panel", &pipeline_layout, &module, ("vs_panel", "fs_panel"), &buffers, opaque, HDR_FORMAT.into());
+            let texcoord_words: Vec<u32> = draws.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
+            let texcoords = init("panel texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
+            let mut panel = PanelGpu { pipeline, layout, texcoords, texture: None };
+            if let Some(texture) = &draws.texture {
+                panel.set_texture(gpu, texture);
+            }
+            panel
+        });
         // Glass: alpha ← min(alpha, τ); colour untouched.
         let min = wgpu::BlendComponent {
             src_factor: wgpu::BlendFactor::One,
@@ -436,6 +480,7 @@ impl Renderer {
         let targets =
             Self::create_targets(device, &luminance_layout, &tonemap_layout, &adapt_state, &adapt_params, &tone_buffer, width, height);
         Ok(Renderer {
+            panel,
             scene_pipeline,
             luminance_pipeline,
             tonemap_pipeline,
@@ -536,6 +581,17 @@ impl Renderer {
         Ok(())
     }
 
+    /// Draws the panel with `texture` (same size: written in place), or PRT-shaded only with `None`.
+    /// Does nothing for a scene without a panel.
+    pub fn set_panel_texture(&mut self, gpu: &Gpu, texture: Option<&PanelTexture>) {
+        if let Some(panel) = &mut self.panel {
+            match texture {
+                Some(texture) => panel.set_texture(gpu, texture),
+                None => panel.texture = None,
+            }
+        }
+    }
+
     /// Memory held by the renderer's buffers and targets.
     pub fn memory(&self) -> GpuMemory {
         let buffers = [
@@ -551,7 +607,8 @@ impl Renderer {
         ]
         .iter()
         .map(|b| b.size())
-        .sum();
+        .sum::<u64>()
+            + self.panel.as_ref().map_or(0, |p| p.texcoords.size());
         let pixels = self.targets.width as u64 * self.targets.height as u64;
         let environment = self.env_size.0 as u64 * self.env_size.1 as u64 * 16;
         GpuMemory { buffers, environment, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
@@ -638,12 +695,24 @@ impl Renderer {
             for draw in self.draws.iter().filter(|d| d.kind == DrawKind::Opaque) {
                 pass.draw_indexed(draw.indices.clone(), 0, 0..1);
             }
+            let panel_draws = self.draws.iter().filter(|d| d.kind == DrawKind::Panel);
+            match &self.panel {
+                Some(PanelGpu { pipeline, texcoords, texture: Some((_, bind)), .. }) => {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(1, bind, &[]);
+                    pass.set_vertex_buffer(1, texcoords.slice(..));
+                    for draw in panel_draws {
+                        pass.draw_indexed(draw.indices.clone(), 0, 0..1);
+                    }
+                }
+                _ => panel_draws.for_each(|draw| pass.draw_indexed(draw.indices.clone(), 0, 0..1)),
+            }
             pass.set_pipeline(&self.backdrop_pipeline);
             pass.set_bind_group(0, &self.backdrop_bind, &[]);
             pass.draw(0..3, 0..1);
             pass.set_pipeline(&self.glass_pipeline);
             pass.set_bind_group(0, &self.scene_bind, &[]);
-            for draw in self.draws.iter().filter(|d| d.kind != DrawKind::Opaque) {
+            for draw in self.draws.iter().filter(|d| matches!(d.kind, DrawKind::Glass { .. })) {
                 pass.draw_indexed(draw.indices.clone(), 0, 0..1);
             }
         }
@@ -672,5 +741,39 @@ impl Renderer {
             pass.draw(0..3, 0..1);
         }
         queue.submit([encoder.finish()])
+    }
+}
+
+impl PanelGpu {
+    /// Writes `texture` into the GPU texture, recreating it (and its bind group) when the size changed.
+    fn set_texture(&mut self, gpu: &Gpu, texture: &PanelTexture) {
+        let size = wgpu::Extent3d { width: texture.width.max(1), height: texture.height.max(1), depth_or_array_layers: 1 };
+        if self.texture.as_ref().is_none_or(|(t, _)| t.size() != size) {
+            let gpu_texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("panel"),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            });
+            let view = gpu_texture.create_view(&Default::default());
+            let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("panel"),
+                layout: &self.layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }],
+            });
+            self.texture = Some((gpu_texture, bind));
+        }
+        let Some((gpu_texture, _)) = &self.texture else { return };
+        let texels: Vec<u32> = texture.rgb.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]).map(f32::to_bits).collect();
+        gpu.queue.write_texture(
+            gpu_texture.as_image_copy(),
+            &words_to_bytes(&texels),
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size.width), rows_per_image: Some(size.height) },
+            size,
+        );
     }
 }

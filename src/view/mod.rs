@@ -31,7 +31,9 @@
 //! - [`camera`]: look-at camera, orbit and fly controls.
 //! - [`tonemap`]: tone-mapping parameters and their CPU reference.
 //! - [`reference`]: the shading formula on the CPU (tests compare the GPU with it).
-//! - `gpu`: device, buffers, pipelines, one frame's passes (shading.wgsl, backdrop.wgsl, luminance.wgsl, tonemap.wgsl).
+//! - `gpu`: device, buffers, pipelines, one frame's passes (shading.wgsl, panel.wgsl, backdrop.wgsl, luminance.wgsl, tonemap.wgsl).
+//! - [`panel`]: the LCD panel's final-gathered texture (texel coordinates, texture, the gather's passes).
+//! - [`panel_worker`]: that gather on a worker thread for the window (restarts when the eye or the light changes).
 //! - [`headless`]: offscreen frame → RGBA8 → PNG, frame timing.
 //! - [`window`]: the interactive winit app.
 
@@ -40,6 +42,8 @@ pub mod camera;
 mod gpu;
 pub mod headless;
 pub mod lighting;
+pub mod panel;
+pub mod panel_worker;
 pub mod reference;
 pub mod scene;
 pub mod tonemap;

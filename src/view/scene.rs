@@ -91,12 +91,24 @@ pub enum DrawKind {
     /// Window glass: transmits τ of what is behind it (the env, or the car
     /// body seen through it), adds nothing.
     Glass { transmittance: f32 },
+    /// The LCD panel ([`super::panel`]): PRT-shaded, plus its final-gathered
+    /// texture when one is set ([`PanelDraws::texture`]), else as `Opaque`.
+    Panel,
+}
+
+/// The panel's part of a prepared scene.
+#[derive(Clone, Debug)]
+pub struct PanelDraws {
+    /// Texture coordinate of every GPU vertex ([0,1]² over the panel's texel
+    /// grid; zero for vertices of other draws, which do not read it).
+    pub texcoords: Vec<[f32; 2]>,
+    /// The gathered radiance drawn on the panel; `None` draws it PRT-shaded only.
+    pub texture: Option<super::panel::PanelTexture>,
 }
 
 /// A contiguous range of [`PreparedScene::indices`] with one material and one
-/// way of drawing. This is the seam for per-material drawing: a later pass
-/// (the LCD panel's final-gathered texture) finds its material's range here
-/// and draws it with its own pipeline instead of the PRT one.
+/// way of drawing: the renderer picks each draw's pipeline by its kind (the
+/// LCD panel's final-gathered texture is drawn by its own).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialDraw {
     /// Index into the bundle mesh's materials.
@@ -131,6 +143,8 @@ pub struct PreparedScene {
     /// The equirect map drawn behind the geometry ([`super::backdrop::Backdrop::EnvMap`]),
     /// uploaded once at full resolution; `None` for a sky or no backdrop.
     pub environment: Option<crate::sh::EquirectImage>,
+    /// The panel's texture coordinates and texture, when the scene has a panel.
+    pub panel: Option<PanelDraws>,
 }
 
 /// Whether the bundle was baked in window mode (its META `params.mode`).
@@ -152,6 +166,18 @@ pub fn window_patterns(bundle: &Bundle) -> Vec<String> {
 /// drawn. Errors when the bundle has no transfer, a pattern is malformed, or
 /// the selected layers are absent.
 pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) -> Result<PreparedScene, String> {
+    prepare_scene_with_panel(bundle, layers, hide, None)
+}
+
+/// [`prepare_scene`], with the triangles of `panel` (those not drawn as glass)
+/// in draws of kind [`DrawKind::Panel`] whose vertices carry their texture
+/// coordinates; no texture yet ([`PanelDraws::texture`] is `None`).
+pub fn prepare_scene_with_panel(
+    bundle: &Bundle,
+    layers: &LayerSelection,
+    hide: &[String],
+    panel: Option<&super::panel::PanelMapping>,
+) -> Result<PreparedScene, String> {
     let transfer = bundle.transfer.as_ref().ok_or("the bundle has no transfer to shade (bake it first)")?;
     if transfer.channels != 1 && transfer.channels != 3 {
         return Err(format!("{} transfer channels: the viewer shades 1 (grey) or 3 (RGB)", transfer.channels));
@@ -173,6 +199,10 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
     let surfaces = crate::bake::Surfaces::resolve(mesh, &window_patterns(bundle)).map_err(|e| format!("META window_patterns: {e}"))?;
     let hidden_material: Vec<bool> = mesh.materials.iter().map(|m| patterns.iter().any(|p| p.matches(&m.name))).collect();
     let hidden_group: Vec<bool> = mesh.groups.iter().map(|g| patterns.iter().any(|p| p.matches(g))).collect();
+    let mut is_panel = vec![false; mesh.triangle_count()];
+    for &t in panel.map_or(&[][..], |p| &p.triangles) {
+        is_panel[t as usize] = true;
+    }
 
     // Each drawn triangle's draw: (material, kind), numbered in first-use order.
     let mut draw_keys: Vec<(u32, DrawKind)> = Vec::new();
@@ -182,7 +212,11 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
         if hidden_material[material as usize] || hidden_group[mesh.tri_group[t] as usize] {
             continue;
         }
-        let kind = surfaces.window_transmittance[t].map_or(DrawKind::Opaque, |transmittance| DrawKind::Glass { transmittance });
+        let kind = match surfaces.window_transmittance[t] {
+            Some(transmittance) => DrawKind::Glass { transmittance },
+            None if is_panel[t] => DrawKind::Panel,
+            None => DrawKind::Opaque,
+        };
         let draw = match draw_keys.iter().position(|&key| key == (material, kind)) {
             Some(d) => d,
             None => {
@@ -200,6 +234,7 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
     // One GPU vertex per (bundle vertex, draw) pair in first-use order.
     let mut copies: HashMap<(u32, usize), u32> = HashMap::new();
     let mut vertices = Vec::new();
+    let mut texcoords = Vec::new();
     let mut indices = Vec::with_capacity(mesh.indices.len());
     let mut draws = Vec::with_capacity(order.len());
     let (mut lo, mut hi) = (glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY));
@@ -207,7 +242,7 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
         let (material, kind) = draw_keys[d];
         // Glass copies carry (τ, τ, τ) where opaque ones carry the albedo.
         let colour = match kind {
-            DrawKind::Opaque => mesh.materials[material as usize].albedo.map(|a| a.clamp(0.0, 1.0)),
+            DrawKind::Opaque | DrawKind::Panel => mesh.materials[material as usize].albedo.map(|a| a.clamp(0.0, 1.0)),
             DrawKind::Glass { transmittance } => [transmittance; 3],
         };
         let first = indices.len() as u32;
@@ -223,6 +258,10 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
                         albedo: colour,
                         source: v,
                     });
+                    if let (Some(mapping), DrawKind::Panel) = (panel, kind) {
+                        texcoords.resize(vertices.len() - 1, [0.0; 2]);
+                        texcoords.push(mapping.texcoord(mesh, v));
+                    }
                     vertices.len() as u32 - 1
                 });
                 indices.push(index);
@@ -233,6 +272,10 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
     if indices.is_empty() {
         (lo, hi) = mesh.bounds();
     }
+    let panel = panel.map(|_| {
+        texcoords.resize(vertices.len(), [0.0; 2]);
+        PanelDraws { texcoords, texture: None }
+    });
     let (masks, words_per_vertex) = match &bundle.sun {
         Some(SunSeries { masks, words_per_vertex, .. }) => (masks.clone(), *words_per_vertex),
         None => (Vec::new(), 0),
@@ -249,5 +292,6 @@ pub fn prepare_scene(bundle: &Bundle, layers: &LayerSelection, hide: &[String]) 
         two_sided_sun: is_window_mode(bundle),
         bounds: (lo, hi),
         environment: None,
+        panel,
     })
 }

@@ -41,6 +41,11 @@ struct VertexOut {
 
 @vertex
 fn vs_main(v: VertexIn) -> VertexOut {
+    return shade_vertex(v);
+}
+
+// The PRT shading of a vertex (also the panel's, panel.wgsl).
+fn shade_vertex(v: VertexIn) -> VertexOut {
     let n2 = frame.counts.x;
     let channels = frame.counts.y;
     let base = v.source * channels * n2;

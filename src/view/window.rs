@@ -4,7 +4,7 @@
 //! orbit, right drag look around, wheel dolly; `W A S D` fly, `Q E` down/up;
 //! `Space` play/pause the time lapse; `← →` (or `, .`) step; `+ −` exposure ±½
 //! stop; `[ ]` turn the car ∓15° under the sky, `R` auto-turn; `T` all light, `B`
-//! (or `0`) direct, `I` indirect, `0–9` bounce N; `U` sun term; `M` tone
+//! (or `0`) direct, `I` indirect, `0–9` bounce N; `U` sun term; `P` the panel's gathered texture; `M` tone
 //! operator; `C` print the camera as `--camera`; `H` help; `Esc` quit.
 
 use std::collections::HashSet;
@@ -19,6 +19,8 @@ use winit::window::{Window, WindowId};
 
 use super::camera::{Camera, CameraControl};
 use super::gpu::{Gpu, Renderer};
+use super::panel::{PanelRequest, PanelSource};
+use super::panel_worker::PanelWorker;
 use super::scene::{LayerSelection, PreparedScene};
 use super::{lighting, LightingSource, ViewError, ViewState};
 use crate::bundle::Bundle;
@@ -33,7 +35,7 @@ pub const HELP: &str = "\
 mouse: left drag orbit, right drag look, wheel dolly | W A S D fly, Q E down/up
 Space play/pause time lapse | <- -> (or , .) step | + - exposure 1/2 stop
 [ ] turn the car under the sky, R auto-turn | T all light, B (or 0) direct, I indirect, 0-9 bounce N
-U sun term | M tone operator (photographic/Drago/linear) | C print camera | H help | Esc quit";
+U sun term | P panel texture | M tone operator (photographic/Drago/linear) | C print camera | H help | Esc quit";
 
 struct Surface {
     window: Arc<Window>,
@@ -60,15 +62,47 @@ struct App {
     cursor: Option<(f64, f64)>,
     frame_times: Vec<f32>,
     first_frame: bool,
+    panel: Option<PanelState>,
+}
+
+/// The panel's progressive gather as the window sees it.
+struct PanelState {
+    worker: PanelWorker,
+    /// The texture is drawn (`P` toggles).
+    on: bool,
+    /// The last request sent (`None` after a toggle: send one), the samples per
+    /// texel of the texture shown, and the requests sent so far (never reused, so a
+    /// late texture of an older request is never shown).
+    sent: Option<PanelRequest>,
+    samples: u32,
+    generation: u64,
 }
 
 /// Opens a window on `bundle` and runs until it is closed.
-pub fn run_window(bundle: Bundle, scene: PreparedScene, state: ViewState, camera: Camera, tz_minutes: i32) -> Result<(), ViewError> {
+/// With `panel`, the LCD panel shows its final gather, refined on worker threads.
+pub fn run_window(
+    bundle: Bundle,
+    scene: PreparedScene,
+    state: ViewState,
+    camera: Camera,
+    tz_minutes: i32,
+    panel: Option<PanelSource>,
+) -> Result<(), ViewError> {
     let event_loop = EventLoop::new().map_err(|e| {
         ViewError::Window(format!("cannot open the window system: {e} (without a display, render headlessly with --screenshot OUT.png)"))
     })?;
     let bounds = scene.bounds;
     let playing = state.step.is_some() && bundle.sun.is_some();
+    let panel = match panel {
+        Some(source) => Some(PanelState {
+            worker: PanelWorker::start(source, 0).map_err(ViewError::Invalid)?,
+            on: true,
+            sent: None,
+            samples: 0,
+            generation: 0,
+        }),
+        None => None,
+    };
     let mut app = App {
         bundle,
         scene,
@@ -86,6 +120,7 @@ pub fn run_window(bundle: Bundle, scene: PreparedScene, state: ViewState, camera
         cursor: None,
         frame_times: Vec::new(),
         first_frame: true,
+        panel,
     };
     eprintln!("{HELP}");
     event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
@@ -229,6 +264,7 @@ impl App {
                     self.toggle_bounces(&indirect);
                 }
                 "u" => self.state.sun_on = !self.state.sun_on,
+                "p" => self.toggle_panel(),
                 "m" => {
                     self.state.tonemap.operator = self.state.tonemap.operator.next();
                     eprintln!("tone operator: {:?}", self.state.tonemap.operator);
@@ -245,6 +281,37 @@ impl App {
         }
     }
 
+    fn toggle_panel(&mut self) {
+        let Some(panel) = &mut self.panel else {
+            eprintln!("no panel (no material has the panel role; name it with --panel PATTERN)");
+            return;
+        };
+        panel.on = !panel.on;
+        panel.sent = None;
+        if let (false, Some(s)) = (panel.on, &mut self.surface) {
+            s.renderer.set_panel_texture(&s.gpu, None);
+        }
+        eprintln!("panel texture: {}", if panel.on { "on" } else { "off" });
+    }
+
+    /// Restarts the gather when the eye or the light changed; shows the newest texture.
+    fn update_panel(&mut self, settings: &super::FrameSettings) {
+        let (Some(panel), Some(s)) = (&mut self.panel, &mut self.surface) else { return };
+        if !panel.on {
+            return;
+        }
+        let request = PanelRequest::new(self.control.camera.eye, settings, &self.state.layers, panel.generation + 1);
+        if panel.sent.as_ref().is_none_or(|sent| !sent.same_gather(&request)) {
+            panel.generation = request.generation;
+            panel.worker.request(request.clone());
+            panel.sent = Some(request);
+        }
+        if let Some(texture) = panel.worker.latest(panel.generation) {
+            panel.samples = texture.samples;
+            s.renderer.set_panel_texture(&s.gpu, Some(&texture));
+        }
+    }
+
     fn status(&self) -> String {
         let step = match (&self.bundle.sun, self.state.step) {
             (Some(sun), Some(k)) => format!(
@@ -257,8 +324,12 @@ impl App {
             _ => String::new(),
         };
         let ms = if self.frame_times.is_empty() { 0.0 } else { self.frame_times.iter().sum::<f32>() / self.frame_times.len() as f32 * 1e3 };
+        let panel = match &self.panel {
+            Some(p) if p.on => format!(" | panel {} spp", p.samples),
+            _ => String::new(),
+        };
         format!(
-            "prtbake view | {:?} {:+.1} EV | {} | car yaw {:.0}°{step} | {ms:.1} ms",
+            "prtbake view | {:?} {:+.1} EV | {} | car yaw {:.0}°{step}{panel} | {ms:.1} ms",
             self.state.tonemap.operator,
             self.state.tonemap.exposure_stops,
             self.state.layers.describe(),
@@ -293,6 +364,7 @@ impl App {
         }
         let order = self.scene.order as usize;
         let settings = self.state.frame_settings(self.bundle.sun.as_ref(), order);
+        self.update_panel(&settings);
         let title = self.status();
         let reset = std::mem::replace(&mut self.first_frame, false);
         let Some(s) = &mut self.surface else { return };
