@@ -5,7 +5,9 @@
 //!
 //! Over the vertices the reference lights (total DC > 0): the relative RMS
 //! error of DC, sqrt(Σ (b − r)² / Σ r²) (as `budget::relative_rms`), the mean
-//! ratio Σ b / Σ r, and how many of them the bundle leaves black (DC = 0).
+//! ratio Σ b / Σ r, how many of them the bundle leaves black (DC = 0), and
+//! how concentrated the error is: the share of Σ (b − r)² carried by the 1%
+//! of lit vertices with the largest squared error.
 
 use prtbake::bundle::read_bundle;
 
@@ -25,8 +27,8 @@ fn main() {
     let reference = dc_of(reference_path);
     let lit: Vec<usize> = (0..reference.len()).filter(|&v| reference[v] > 0.0).collect();
     println!("reference {reference_path}: {} vertices, {} lit", reference.len(), lit.len());
-    println!("| bundle | relative RMS DC | mean ratio | black of lit |");
-    println!("|---|---:|---:|---:|");
+    println!("| bundle | relative RMS DC | mean ratio | black of lit | error share of the worst 1% |");
+    println!("|---|---:|---:|---:|---:|");
     for path in others {
         let dc = dc_of(path);
         assert_eq!(dc.len(), reference.len(), "{path}: vertex count differs from the reference's");
@@ -39,6 +41,14 @@ fn main() {
             black += usize::from(dc[v] == 0.0);
         }
         let share = 100.0 * black as f64 / lit.len() as f64;
-        println!("| {path} | {:.3} | {:.3} | {black} ({share:.1}%) |", (error / norm).sqrt(), sum / reference_sum);
+        let mut squared: Vec<f64> = lit.iter().map(|&v| (dc[v] - reference[v]).powi(2)).collect();
+        squared.sort_by(|a, b| b.total_cmp(a));
+        let worst: f64 = squared[..lit.len().div_ceil(100)].iter().sum();
+        let concentration = 100.0 * worst / error.max(f64::MIN_POSITIVE);
+        println!(
+            "| {path} | {:.3} | {:.3} | {black} ({share:.1}%) | {concentration:.0}% |",
+            (error / norm).sqrt(),
+            sum / reference_sum
+        );
     }
 }
