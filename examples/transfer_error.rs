@@ -45,10 +45,6 @@ fn main() {
         squared.sort_by(|a, b| b.total_cmp(a));
         let worst: f64 = squared[..lit.len().div_ceil(100)].iter().sum();
         let concentration = 100.0 * worst / error.max(f64::MIN_POSITIVE);
-        println!(
-            "| {path} | {:.3} | {:.3} | {black} ({share:.1}%) | {concentration:.0}% |",
-            (error / norm).sqrt(),
-            sum / reference_sum
-        );
+        println!("| {path} | {:.3} | {:.3} | {black} ({share:.1}%) | {concentration:.0}% |", (error / norm).sqrt(), sum / reference_sum);
     }
 }
