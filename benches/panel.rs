@@ -12,7 +12,7 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
 use prtbake::bake::{BuildQuality, Scene, Surfaces};
 use prtbake::brdf::PanelBrdf;
-use prtbake::fixtures::cabin::generate_cabin;
+use prtbake::fixtures::cabin::{generate_cabin, DRIVER_EYE};
 use prtbake::panel::{select_panel, Environment, GatherOptions, Interior, PanelGather, PanelLayout};
 
 fn panel_gather(c: &mut Criterion) {
@@ -24,8 +24,9 @@ fn panel_gather(c: &mut Criterion) {
         Interior { scene: &scene, mesh: &mesh, surfaces: &surfaces, vertex_light: vec![[100.0; 3]; mesh.vertex_count()], two_sided: true };
     let triangles = select_panel(&mesh, Some("lcd_panel"), "cabin".as_ref()).unwrap();
     let layout = PanelLayout::new(&mesh, &triangles, 400, 300, "cabin".as_ref()).unwrap();
-    let eye = Vec3::new(-0.42, 1.15, -0.4);
-    // The demo's sunny case: a sun 18° high, turned to glare (docs/panel.md).
+    let eye = DRIVER_EYE;
+    // The glare case: the sun in the eye's mirror direction at the panel centre
+    // (6° up, straight back through the rear window; docs/panel.md).
     let wo = (eye - layout.centre).normalize();
     let mirror = 2.0 * wo.dot(layout.front) * layout.front - wo;
     let env = Environment::clear_sky(mirror, 3.0, 0.0).unwrap();
