@@ -6,10 +6,10 @@
 //! elements/s are the gather's rays/s (BRDF and disk rays). The interior's
 //! PRT light is a constant here: it changes the values, not the rays.
 //!
-//! Run: `cargo bench --bench panel` (one case: `cargo bench --bench panel -- spp40`).
+//! Run: `cargo bench --bench panel` (one case: `cargo bench --bench panel -- spp40`);
+//! ten images per case, 16 min in all on two shared cores (docs/panel.md "Speed").
 
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use glam::Vec3;
+use criterion::{criterion_group, criterion_main, Criterion, SamplingMode, Throughput};
 use prtbake::bake::{BuildQuality, Scene, Surfaces};
 use prtbake::brdf::PanelBrdf;
 use prtbake::fixtures::cabin::{generate_cabin, DRIVER_EYE};
@@ -28,11 +28,14 @@ fn panel_gather(c: &mut Criterion) {
     // The glare case: the sun in the eye's mirror direction at the panel centre
     // (6° up, straight back through the rear window; docs/panel.md).
     let wo = (eye - layout.centre).normalize();
-    let mirror = 2.0 * wo.dot(layout.front) * layout.front - wo;
+    let mirror = prtbake::brdf::frame::reflect(wo, layout.front);
     let env = Environment::clear_sky(mirror, 3.0, 0.0).unwrap();
     let brdf = PanelBrdf::default();
     let mut group = c.benchmark_group("panel_400x300");
-    group.sample_size(10);
+    // Ten timed images each, one per sample (flat sampling): criterion's
+    // default linear sampling would time 1 + 2 + … + 10 = 55 images, which at
+    // 256 samples per texel is most of an hour on two cores.
+    group.sample_size(10).sampling_mode(SamplingMode::Flat);
     for samples in [40u32, 256] {
         let rays = {
             let mut g = PanelGather::new(&interior, &env, &brdf, &layout, eye, GatherOptions::default());

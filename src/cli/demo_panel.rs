@@ -172,7 +172,7 @@ pub fn run(
             // How far the chosen sun is from the eye's mirror direction at the panel centre.
             let sun_car = sunny.sun.map_or(Vec3::Y, |sun| sun.direction);
             let wo = (DRIVER_EYE - probes.centre).normalize();
-            let mirror = 2.0 * wo.dot(probes.front) * probes.front - wo;
+            let mirror = crate::brdf::frame::reflect(wo, probes.front);
             entry["sun_direction_car"] = json!(sun_car.to_array());
             entry["sun_from_mirror_deg"] = json!(sun_car.dot(mirror).clamp(-1.0, 1.0).acos().to_degrees());
             entry["command"] = json!(format!(
