@@ -46,6 +46,8 @@ struct Glare {
     elevation_deg: f64,
     /// Car yaw, whole degrees.
     yaw: u32,
+    /// `Σ_p f cos θ τ` over the probe points, 1/sr.
+    score: f32,
 }
 
 /// The sun at each local time of the demo date (5-minute steps, 06:00–12:00)
@@ -105,9 +107,9 @@ fn glare_heading(interior: &Interior, probes: &PanelLayout, brdf: &PanelBrdf) ->
             best = Some((k, s));
         }
     }
-    best.map(|(k, _)| {
+    best.map(|(k, score)| {
         let (minutes, sun_world, elevation_deg) = suns[k / 360];
-        Glare { minutes, sun_world, elevation_deg, yaw: (k % 360) as u32 }
+        Glare { minutes, sun_world, elevation_deg, yaw: (k % 360) as u32, score }
     })
 }
 
@@ -140,7 +142,7 @@ pub fn run(
     let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: Vec::new(), two_sided: true };
     let glare = glare_heading(&interior, &probes, &brdf)
         .ok_or_else(|| anyhow::anyhow!("demo: no morning sun reaches the panel through a window at any heading"))?;
-    let Glare { minutes, sun_world, elevation_deg: elevation, yaw } = glare;
+    let Glare { minutes, sun_world, elevation_deg: elevation, yaw, .. } = glare;
     let sunny = Environment::clear_sky(sun_world, crate::sky::DEFAULT_TURBIDITY, yaw as f32)
         .ok_or_else(|| anyhow::anyhow!("demo: the chosen sun is below the horizon"))?;
     let overcast = Environment::overcast(TYPICAL_OVERCAST_LUX);
@@ -205,4 +207,41 @@ pub fn run(
 /// `DRIVER_EYE` as `--eye` takes it.
 fn eye_arg() -> String {
     format!("{},{},{}", DRIVER_EYE.x, DRIVER_EYE.y, DRIVER_EYE.z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::MaterialRole;
+
+    fn search(mesh: &Mesh) -> Option<(Glare, PanelLayout)> {
+        let triangles = crate::panel::select_panel(mesh, Some("lcd_panel"), "cabin".as_ref()).unwrap();
+        let probes = PanelLayout::new(mesh, &triangles, PROBES.0, PROBES.1, "cabin".as_ref()).unwrap();
+        let surfaces = Surfaces::resolve(mesh, &[]).unwrap();
+        let scene = Scene::build(mesh, BuildQuality::Sah).unwrap();
+        let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: Vec::new(), two_sided: true };
+        glare_heading(&interior, &probes, &PanelBrdf::default()).map(|glare| (glare, probes))
+    }
+
+    /// In the cabin the eye's mirror direction at the panel centre leaves
+    /// through the rear window, so the search lands the sun on it (within the
+    /// 5-minute and 1° steps); with the glass made opaque next to no sun reaches the panel.
+    #[test]
+    fn glare_search_finds_the_sun_in_the_mirror_direction_and_next_to_none_without_windows() {
+        // Cleaned as the demo does: the raw cabin's roof crack lets sunlight through.
+        let (raw, _) = crate::fixtures::cabin::generate_cabin(24.0);
+        let (mut mesh, _) = crate::clean::clean_mesh(&raw, &crate::clean::CleanParams::cad()).unwrap();
+        let (glare, probes) = search(&mesh).expect("a glare heading");
+        let sun_car = crate::panel::environment::yaw_rotation(glare.yaw as f32).transpose() * glare.sun_world;
+        let mirror = crate::brdf::frame::reflect((DRIVER_EYE - probes.centre).normalize(), probes.front);
+        let degrees = sun_car.dot(mirror).clamp(-1.0, 1.0).acos().to_degrees();
+        assert!(degrees < 1.5, "sun {degrees:.2}° from the mirror direction (yaw {}, {} min)", glare.yaw, glare.minutes);
+        assert!(glare.elevation_deg >= MIN_SUN_ELEVATION_DEG);
+        mesh.materials.iter_mut().filter(|m| m.role == MaterialRole::Window).for_each(|m| m.role = MaterialRole::Opaque);
+        // Not exactly zero: at its best heading some shadow ray still leaves
+        // the glassless cabin (0.23 % of the glazed score, 2026-11-24; where
+        // it escapes is not traced down), so this is a bound.
+        let leak = search(&mesh).map_or(0.0, |(g, _)| g.score);
+        assert!(leak < 1e-2 * glare.score, "without windows {leak} against {}", glare.score);
+    }
 }
