@@ -6,13 +6,13 @@
 //! elements/s are the gather's rays/s (BRDF and disk rays). The interior's
 //! PRT light is a constant here: it changes the values, not the rays.
 //!
-//! Run: `cargo bench --bench panel` (one case: `cargo bench --bench panel -- spp40`).
+//! Run: `cargo bench --bench panel` (one case: `cargo bench --bench panel -- spp40`);
+//! ten images per case, 16 min in all on two shared cores (docs/panel.md "Speed").
 
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use glam::Vec3;
+use criterion::{criterion_group, criterion_main, Criterion, SamplingMode, Throughput};
 use prtbake::bake::{BuildQuality, Scene, Surfaces};
 use prtbake::brdf::PanelBrdf;
-use prtbake::fixtures::cabin::generate_cabin;
+use prtbake::fixtures::cabin::{generate_cabin, DRIVER_EYE};
 use prtbake::panel::{select_panel, Environment, GatherOptions, Interior, PanelGather, PanelLayout};
 
 fn panel_gather(c: &mut Criterion) {
@@ -24,14 +24,18 @@ fn panel_gather(c: &mut Criterion) {
         Interior { scene: &scene, mesh: &mesh, surfaces: &surfaces, vertex_light: vec![[100.0; 3]; mesh.vertex_count()], two_sided: true };
     let triangles = select_panel(&mesh, Some("lcd_panel"), "cabin".as_ref()).unwrap();
     let layout = PanelLayout::new(&mesh, &triangles, 400, 300, "cabin".as_ref()).unwrap();
-    let eye = Vec3::new(-0.42, 1.15, -0.4);
-    // The demo's sunny case: a sun 18° high, turned to glare (docs/panel.md).
+    let eye = DRIVER_EYE;
+    // The glare case: the sun in the eye's mirror direction at the panel centre
+    // (6° up, straight back through the rear window; docs/panel.md).
     let wo = (eye - layout.centre).normalize();
-    let mirror = 2.0 * wo.dot(layout.front) * layout.front - wo;
+    let mirror = prtbake::brdf::frame::reflect(wo, layout.front);
     let env = Environment::clear_sky(mirror, 3.0, 0.0).unwrap();
     let brdf = PanelBrdf::default();
     let mut group = c.benchmark_group("panel_400x300");
-    group.sample_size(10);
+    // Ten timed images each, one per sample (flat sampling): criterion's
+    // default linear sampling would time 1 + 2 + … + 10 = 55 images, which at
+    // 256 samples per texel is most of an hour on two cores.
+    group.sample_size(10).sampling_mode(SamplingMode::Flat);
     for samples in [40u32, 256] {
         let rays = {
             let mut g = PanelGather::new(&interior, &env, &brdf, &layout, eye, GatherOptions::default());
