@@ -142,7 +142,7 @@ pub fn run(
     let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: Vec::new(), two_sided: true };
     let glare = glare_heading(&interior, &probes, &brdf)
         .ok_or_else(|| anyhow::anyhow!("demo: no morning sun reaches the panel through a window at any heading"))?;
-    let Glare { minutes, sun_world, elevation_deg: elevation, yaw, .. } = glare;
+    let Glare { minutes, sun_world, elevation_deg: elevation, yaw, score } = glare;
     let sunny = Environment::clear_sky(sun_world, crate::sky::DEFAULT_TURBIDITY, yaw as f32)
         .ok_or_else(|| anyhow::anyhow!("demo: the chosen sun is below the horizon"))?;
     let overcast = Environment::overcast(TYPICAL_OVERCAST_LUX);
@@ -171,6 +171,8 @@ pub fn run(
             entry["date"] = json!("2026-03-20");
             entry["sun_elevation_deg"] = json!(elevation);
             entry["yaw_deg"] = json!(yaw);
+            // What the glare search maximised: Σ_p f cos θ τ over its probe points (1/sr).
+            entry["glare_score"] = json!(score);
             // How far the chosen sun is from the eye's mirror direction at the panel centre.
             let sun_car = sunny.sun.map_or(Vec3::Y, |sun| sun.direction);
             let wo = (DRIVER_EYE - probes.centre).normalize();
