@@ -311,7 +311,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32]) -> Round {
     if let Some(max_edge) = params.max_edge {
         r.edges_split = refine::split_long_edges(&mut work, max_edge);
     }
-    r.sliver_flips = refine::flip_slivers(&mut work, sliver_rad, plane_tol, params.max_edge);
+    r.sliver_flips = refine::flip_slivers(&mut work, sliver_rad, plane_tol, weld_tol, params.max_edge);
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
 
     // 8. Weld again and write out.
