@@ -45,18 +45,17 @@ fn sample_bundle() -> Bundle {
     }
 }
 
-/// The bundle vertices each written primitive holds, in order: per non-empty
-/// group, its vertices ascending (the GLB writer's documented layout).
-fn group_vertices(mesh: &Mesh) -> Vec<Vec<u32>> {
+/// The non-empty groups' triangles, each sorted (the GLB writer's documented
+/// layout: one glTF mesh per non-empty group, in group order).
+fn group_triangles(mesh: &Mesh) -> Vec<Vec<[u32; 3]>> {
     (0..mesh.groups.len() as u32)
         .map(|g| {
-            let mut used: Vec<u32> =
-                (0..mesh.triangle_count()).filter(|&t| mesh.tri_group[t] == g).flat_map(|t| mesh.triangle(t)).collect();
-            used.sort_unstable();
-            used.dedup();
-            used
+            let mut triangles: Vec<[u32; 3]> =
+                (0..mesh.triangle_count()).filter(|&t| mesh.tri_group[t] == g).map(|t| mesh.triangle(t)).collect();
+            triangles.sort_unstable();
+            triangles
         })
-        .filter(|u| !u.is_empty())
+        .filter(|t| !t.is_empty())
         .collect()
 }
 
@@ -76,20 +75,25 @@ fn check_glb(path: &std::path::Path, b: &Bundle, expected_transfer: &[f32]) {
     let t = b.transfer.as_ref().unwrap();
     let sun = b.sun.as_ref().unwrap();
     let per_vertex = t.values_per_vertex() as usize;
-    let groups = group_vertices(&b.mesh);
+    let groups = group_triangles(&b.mesh);
     assert_eq!(gltf.meshes().count(), groups.len());
-    let mut vertices_seen = 0;
-    for (mesh, vertices) in gltf.meshes().zip(&groups) {
+    // Every primitive indexes one pool of all bundle vertices, in bundle order.
+    let vertices: Vec<u32> = (0..b.mesh.vertex_count() as u32).collect();
+    for (mesh, triangles) in gltf.meshes().zip(&groups) {
+        let mut written: Vec<[u32; 3]> = Vec::new();
         for primitive in mesh.primitives() {
             let reader = primitive.reader(|_| Some(blob));
+            let indices: Vec<u32> = reader.read_indices().expect("indexed primitives").into_u32().collect();
+            written.extend(indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
             let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
             assert_eq!(positions.len(), vertices.len());
-            for (p, &v) in positions.iter().zip(vertices) {
+            for (p, &v) in positions.iter().zip(&vertices) {
                 assert_eq!(*p, b.mesh.positions[v as usize].to_array());
             }
             for k in 0..per_vertex.div_ceil(4) {
                 let values: Vec<[f32; 4]> = read_attribute(&primitive, &format!("_PRT_TRANSFER_{k}"), blob);
-                for (value, &v) in values.iter().zip(vertices) {
+                assert_eq!(values.len(), vertices.len());
+                for (value, &v) in values.iter().zip(&vertices) {
                     for j in 0..4 {
                         let index = 4 * k + j;
                         let want = if index < per_vertex { expected_transfer[v as usize * per_vertex + index] } else { 0.0 };
@@ -99,7 +103,8 @@ fn check_glb(path: &std::path::Path, b: &Bundle, expected_transfer: &[f32]) {
             }
             for w in 0..sun.words_per_vertex as usize {
                 let words: Vec<[u8; 4]> = read_attribute(&primitive, &format!("_PRT_SUN_{w}"), blob);
-                for (bytes, &v) in words.iter().zip(vertices) {
+                assert_eq!(words.len(), vertices.len());
+                for (bytes, &v) in words.iter().zip(&vertices) {
                     // Step 32w + 8j + b is bit b of byte j.
                     for step in 32 * w..(32 * w + 32).min(sun.step_count()) {
                         let (j, bit) = ((step % 32) / 8, step % 8);
@@ -108,9 +113,9 @@ fn check_glb(path: &std::path::Path, b: &Bundle, expected_transfer: &[f32]) {
                 }
             }
         }
-        vertices_seen += vertices.len();
+        written.sort_unstable();
+        assert_eq!(&written, triangles, "mesh {:?}: its group's triangles", mesh.name());
     }
-    assert_eq!(vertices_seen, b.mesh.vertex_count());
     let extras: serde_json::Value = serde_json::from_str(gltf.document.as_json().extras.as_ref().expect("document extras").get()).unwrap();
     let prt = &extras["prtbake"];
     assert_eq!(prt["format"], bundle::GLTF_EXPORT_FORMAT);

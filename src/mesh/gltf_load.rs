@@ -79,6 +79,7 @@ pub(crate) fn load_gltf(
         builder: MeshBuilder::new(materials),
         default_material: None,
         skipped_modes: BTreeMap::new(),
+        placed_vertices: HashMap::new(),
     };
     for instance in &instances {
         loader.emit_instance(instance, warnings)?;
@@ -201,9 +202,13 @@ fn convert_materials(document: &gltf::Document, base_color_given: &[bool]) -> Ve
         .collect()
 }
 
-/// Attribute accessors that make up a vertex: primitives of one node sharing them
-/// share their vertices.
+/// Attribute accessors that make up a vertex: primitives sharing them under the
+/// same world transform share their vertices, across glTF meshes too (prtbake's
+/// own GLB gives every group's primitives one vertex pool).
 type VertexKey = [Option<usize>; 4];
+
+/// A [`VertexKey`] placed by a world transform (its bits).
+type PlacedVertexKey = (VertexKey, [u32; 16]);
 
 /// Decoded attributes of one primitive, in its local frame.
 struct LocalVertices {
@@ -220,6 +225,8 @@ struct PrimitiveLoader<'a> {
     builder: MeshBuilder,
     default_material: Option<u16>,
     skipped_modes: BTreeMap<String, usize>,
+    /// First vertex and count of each placed vertex set already pushed.
+    placed_vertices: HashMap<PlacedVertexKey, (u32, u32)>,
 }
 
 impl PrimitiveLoader<'_> {
@@ -236,7 +243,7 @@ impl PrimitiveLoader<'_> {
         let group_name = mesh.name.clone().unwrap_or_else(|| format!("mesh{}", instance.mesh));
         let flip_winding = instance.world.determinant() < 0.0;
         let normal_matrix = Mat3::from_mat4(instance.world).inverse().transpose();
-        let mut shared_vertices: HashMap<VertexKey, u32> = HashMap::new();
+        let world_bits = instance.world.to_cols_array().map(f32::to_bits);
 
         for (p, primitive) in mesh.primitives.iter().enumerate() {
             let mode = match primitive.mode {
@@ -256,8 +263,17 @@ impl PrimitiveLoader<'_> {
             };
             let key: VertexKey =
                 [Some(position_accessor), attribute(Semantic::Normals), attribute(Semantic::TexCoords(0)), attribute(Semantic::Colors(0))];
-            let local = self.read_vertices(&key, &mesh_label, p, warnings)?;
-            let vertex_count = local.positions.len();
+            // Vertices placed before (a shared pool) are neither decoded nor pushed again.
+            let placed = (key, world_bits);
+            let earlier = self.placed_vertices.get(&placed).copied();
+            let local = match earlier {
+                Some(_) => None,
+                None => Some(self.read_vertices(&key, &mesh_label, p, warnings)?),
+            };
+            let vertex_count = match (earlier, &local) {
+                (Some((_, count)), _) => count as usize,
+                (None, local) => local.as_ref().map_or(0, |l| l.positions.len()),
+            };
 
             // Indices: explicit or implicit 0..n, then range-checked before use.
             let local_indices = match primitive.indices {
@@ -284,13 +300,14 @@ impl PrimitiveLoader<'_> {
                 continue;
             }
 
-            let base = match shared_vertices.get(&key) {
-                Some(&base) => base,
-                None => {
+            let base = match (earlier, local) {
+                (Some((base, _)), _) => base,
+                (None, Some(local)) => {
                     let base = self.push_vertices(&local, &instance.world, &normal_matrix)?;
-                    shared_vertices.insert(key, base);
+                    self.placed_vertices.insert(placed, (base, vertex_count as u32));
                     base
                 }
+                (None, None) => continue, // not reached: `local` is decoded whenever `earlier` is None
             };
             let material = self.material_index(primitive.material.map(|m| m.value()))?;
             let group = self.builder.group_index(&group_name);

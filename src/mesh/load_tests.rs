@@ -226,8 +226,9 @@ fn gltf_materials_default_to_grey_and_primitives_without_one_share_a_default() {
     let mesh = load(&write_file(dir.path(), "grey.gltf", doc.to_string())).unwrap().mesh;
     assert_eq!(mesh.materials, vec![Material::opaque("Plain", DEFAULT_ALBEDO), Material::opaque("default", DEFAULT_ALBEDO)]);
     assert_eq!(mesh.tri_material, vec![0, 1, 0]);
-    // Both primitives of mesh 0 share accessors, so their vertices are shared too.
-    assert_eq!(mesh.vertex_count(), 6);
+    // All three primitives (two glTF meshes, one node transform) share accessors,
+    // so they share their 3 vertices.
+    assert_eq!(mesh.vertex_count(), 3);
     assert_eq!(mesh.groups, vec!["tri", "mesh1"]);
     assert_eq!(mesh.tri_group, vec![0, 0, 1]);
 }
@@ -456,19 +457,24 @@ fn obj_byte_substitutions_never_panic() {
     }
 }
 
-/// A mesh whose groups and materials share vertices survives OBJ → load with
-/// the same vertices: the writer's one vertex pool and the loader agree (the
-/// loader no longer splits a shared vertex per `o`/`usemtl` block).
+/// A mesh whose groups and materials share vertices survives OBJ → load and
+/// GLB → load with the same vertices: each writer's one vertex pool and its
+/// loader agree (the OBJ loader no longer splits a shared vertex per
+/// `o`/`usemtl` block; the GLB's glTF meshes, one per group, share one set of
+/// accessors, which the glTF loader places once).
 #[test]
-fn obj_round_trip_keeps_shared_vertices() {
+fn round_trips_keep_shared_vertices() {
     let (cabin, _) = crate::fixtures::cabin::generate_cabin(8.0);
     let (cleaned, _) = crate::clean::clean_mesh(&cabin, &crate::clean::CleanParams::cad()).unwrap();
     assert!(cleaned.groups.len() > 3, "the cabin has several groups");
     let dir = tempfile::tempdir().unwrap();
-    {
-        let name = "c.obj";
+    for name in ["c.obj", "c.glb"] {
         let path = dir.path().join(name);
-        write_obj(&path, &cleaned).unwrap();
+        if name.ends_with(".obj") {
+            write_obj(&path, &cleaned).unwrap();
+        } else {
+            write_glb(&path, &cleaned).unwrap();
+        }
         let back = load(&path).unwrap().mesh;
         assert_eq!(back.triangle_count(), cleaned.triangle_count(), "{name}");
         assert_eq!(back.vertex_count(), cleaned.vertex_count(), "{name}: vertices split or merged");

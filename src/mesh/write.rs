@@ -275,9 +275,8 @@ impl CustomAttribute {
 /// [`write_glb`] plus application-specific vertex attributes and document-level
 /// `extras` (e.g. what the attributes mean).
 ///
-/// Each attribute is split by group exactly like POSITION, so element `k` of a
-/// primitive's attribute belongs to the same vertex as element `k` of its
-/// POSITION. Refuses (with [`MeshError::InvalidForWrite`]) semantics that do
+/// Each attribute holds one element per mesh vertex, in mesh order, like the
+/// POSITION accessor that every primitive shares. Refuses (with [`MeshError::InvalidForWrite`]) semantics that do
 /// not start with `_` or repeat, lengths that do not match the vertex count,
 /// and non-finite floats.
 pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute], extras: Option<Value>) -> Result<(), MeshError> {
@@ -311,38 +310,32 @@ pub fn stage_glb_with(
     for t in 0..mesh.triangle_count() {
         by_group[mesh.tri_group[t] as usize].entry(mesh.tri_material[t]).or_default().push(t);
     }
-    const UNUSED: u32 = u32::MAX;
-    let mut local_index = vec![UNUSED; mesh.vertex_count()];
+    // One vertex pool, in mesh order, that every group's primitives index: a
+    // vertex shared by two groups stays one vertex through a round trip (the
+    // loader keys vertices by accessor and transform, not by glTF mesh).
+    let pool: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
+    let position = bin.push_vec3s(mesh.positions.iter().map(|p| p.to_array()), true);
+    let normal = bin.push_vec3s(mesh.normals.iter().map(|n| n.to_array()), false);
+    let mut attributes = json!({"POSITION": position, "NORMAL": normal});
+    if !mesh.uvs.is_empty() {
+        let data: Vec<u8> = mesh.uvs.iter().flat_map(|uv| uv.to_array()).flat_map(f32::to_le_bytes).collect();
+        attributes["TEXCOORD_0"] =
+            json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": pool.len(), "type": "VEC2"})));
+    }
+    if !mesh.colors.is_empty() {
+        attributes["COLOR_0"] = json!(bin.push_vec3s(mesh.colors.iter().copied(), false));
+    }
+    for custom in attributes_in {
+        attributes[custom.semantic.as_str()] = json!(custom.push(&mut bin, &pool));
+    }
     for (group, runs) in by_group.iter().enumerate() {
         if runs.is_empty() {
             continue;
         }
-        // The group's vertices in ascending original order.
-        let mut used: Vec<u32> = runs.values().flatten().flat_map(|&t| mesh.triangle(t)).collect();
-        used.sort_unstable();
-        used.dedup();
-        for (local, &v) in used.iter().enumerate() {
-            local_index[v as usize] = local as u32;
-        }
-        let position = bin.push_vec3s(used.iter().map(|&v| mesh.positions[v as usize].to_array()), true);
-        let normal = bin.push_vec3s(used.iter().map(|&v| mesh.normals[v as usize].to_array()), false);
-        let mut attributes = json!({"POSITION": position, "NORMAL": normal});
-        if !mesh.uvs.is_empty() {
-            let data: Vec<u8> = used.iter().flat_map(|&v| mesh.uvs[v as usize].to_array()).flat_map(f32::to_le_bytes).collect();
-            attributes["TEXCOORD_0"] =
-                json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": used.len(), "type": "VEC2"})));
-        }
-        if !mesh.colors.is_empty() {
-            attributes["COLOR_0"] = json!(bin.push_vec3s(used.iter().map(|&v| mesh.colors[v as usize]), false));
-        }
-        for custom in attributes_in {
-            attributes[custom.semantic.as_str()] = json!(custom.push(&mut bin, &used));
-        }
         let primitives: Vec<Value> = runs
             .iter()
             .map(|(&material, triangles)| {
-                let data: Vec<u8> =
-                    triangles.iter().flat_map(|&t| mesh.triangle(t)).flat_map(|v| local_index[v as usize].to_le_bytes()).collect();
+                let data: Vec<u8> = triangles.iter().flat_map(|&t| mesh.triangle(t)).flat_map(u32::to_le_bytes).collect();
                 let indices = bin.push(
                     &data,
                     ELEMENT_ARRAY_BUFFER,
@@ -352,9 +345,6 @@ pub fn stage_glb_with(
             })
             .collect();
         meshes.push(json!({"name": mesh.groups[group], "primitives": primitives}));
-        for &v in &used {
-            local_index[v as usize] = UNUSED;
-        }
     }
 
     let nodes: Vec<Value> = meshes.iter().enumerate().map(|(i, m)| json!({"mesh": i, "name": m["name"]})).collect();
