@@ -128,6 +128,9 @@ struct BakeArgs {
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
+    /// With --clean: split edges longer than this (world units), as `clean --max-edge` does.
+    #[arg(long, requires = "clean")]
+    max_edge: Option<f32>,
     /// Bake only shard K of N (K in 0..N): its share of the items, into a part (-o PART.prtp)
     /// that `prtbake merge` joins with the others, round by round (docs/scale.md).
     #[arg(long, value_name = "K/N")]
@@ -570,6 +573,14 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         }),
         None => None,
     };
+    let clean = match a.clean {
+        true => {
+            let params = CleanParams { max_edge: a.max_edge, ..CleanParams::cad() };
+            params.validate()?;
+            Some(params)
+        }
+        false => None,
+    };
     Ok(cli::bake_cmd::BakeConfig {
         shard,
         input: a.mesh,
@@ -579,7 +590,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         window_patterns: a.windows,
         threads: a.threads,
         json: a.json,
-        clean: a.clean.then(CleanParams::cad),
+        clean,
         storage: cli::bake_cmd::StorageRequest { quantize, max_error: a.max_error },
         force: a.force,
         view_box: match &a.view_box {

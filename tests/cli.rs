@@ -200,3 +200,53 @@ fn panel_gathers_the_ground_and_refuses_bad_input() {
     assert!(message.contains("scene.prtb") && message.contains("nav*") && message.contains("grey"), "{message}");
     assert!(!out.exists() && !dir.path("behind.exr").exists(), "no output on error");
 }
+
+/// Issue 20 item 4: `bake --clean --max-edge` and `clean --max-edge` → OBJ or
+/// GLB → `bake` give the same vertices (positions, order) and the same
+/// transfer, bit for bit.
+#[test]
+fn bake_clean_max_edge_equals_clean_then_bake() {
+    let dir = Scratch::new("clean-then-bake");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let common = ["--rays", "16", "--bounces", "1", "--seed", "3", "--quiet"];
+    let bake = |input: &std::path::Path, out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend(common);
+        args.extend(extra);
+        let o = prtbake(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        prtbake::bundle::read_bundle(&out).unwrap()
+    };
+    let direct = bake(&obj, "direct.prtb", &["--clean", "--max-edge", "0.3"]);
+    // The ground's 4 m edges and the box's 0.5 m edges were split.
+    assert!(direct.mesh.triangle_count() > 300, "{} triangles", direct.mesh.triangle_count());
+    let direct_transfer = direct.transfer.as_ref().unwrap();
+    for cleaned in ["cleaned.obj", "cleaned.glb"] {
+        let path = dir.path(cleaned);
+        let o = prtbake(&["clean", obj.to_str().unwrap(), "-o", path.to_str().unwrap(), "--max-edge", "0.3", "--quiet"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let via_file = bake(&path, &format!("{cleaned}.prtb"), &[]);
+        assert_eq!(via_file.mesh.vertex_count(), direct.mesh.vertex_count(), "{cleaned}");
+        assert_eq!(via_file.mesh.positions, direct.mesh.positions, "{cleaned}");
+        assert_eq!(via_file.mesh.indices, direct.mesh.indices, "{cleaned}");
+        let differ: Vec<_> = (0..via_file.mesh.vertex_count())
+            .filter(|&v| via_file.mesh.normals[v] != direct.mesh.normals[v])
+            .map(|v| (v, via_file.mesh.positions[v], via_file.mesh.normals[v], direct.mesh.normals[v]))
+            .take(8)
+            .collect();
+        assert!(differ.is_empty(), "{cleaned}: {differ:?}");
+        assert_eq!(via_file.mesh.tri_material, direct.mesh.tri_material, "{cleaned}");
+        assert_eq!(via_file.mesh.tri_group, direct.mesh.tri_group, "{cleaned}");
+        assert_eq!(via_file.mesh.materials, direct.mesh.materials, "{cleaned}");
+        let layers = &via_file.transfer.as_ref().unwrap().layers;
+        assert_eq!(layers.len(), direct_transfer.layers.len());
+        for (a, b) in layers.iter().zip(&direct_transfer.layers) {
+            assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()), "{cleaned}: transfer differs");
+        }
+    }
+    // --max-edge means nothing without --clean.
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("x.prtb").to_str().unwrap(), "--max-edge", "0.3"]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -229,7 +229,8 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
     }
     report.converged = round.report.repairs() == 0;
     report.retriggered = round.report.repair_counts().iter().filter(|&&(_, n)| n > 0).map(|&(name, n)| (name.to_string(), n)).collect();
-    Ok((round.mesh, report))
+    // Canonical order: what `bake --clean` bakes is what a cleaned file loads as.
+    Ok((round.mesh.into_canonical_order(), report))
 }
 
 /// Upper bound on clean-up rounds. Measured: the Ferrari (359k triangles) converges

@@ -362,8 +362,9 @@ impl PrimitiveLoader<'_> {
         };
         self.builder.reserve(local.positions.len(), 0);
         for (i, &position) in local.positions.iter().enumerate() {
-            // A singular transform gives a NaN normal here: repaired later.
-            let normal = local.normals.as_ref().and_then(|n| n.get(i)).map(|&n| (*normal_matrix * n).normalize_or_zero());
+            // Made unit (or, from a singular transform, recomputed) by the
+            // builder's normal repair, which keeps an already unit normal bit for bit.
+            let normal = local.normals.as_ref().and_then(|n| n.get(i)).map(|&n| *normal_matrix * n);
             let uv = local.uvs.as_ref().and_then(|u| u.get(i)).copied();
             let color = local.colors.as_ref().and_then(|c| c.get(i)).copied();
             self.builder.push_vertex(world.transform_point3(position), normal, uv, color);

@@ -47,6 +47,11 @@ pub fn compute_vertex_normals(positions: &[Vec3], indices: &[u32]) -> Vec<Vec3> 
     sums.into_iter().map(|sum| sum.try_normalize().unwrap_or(FALLBACK_NORMAL)).collect()
 }
 
+/// |n|² of a normal already unit to f32 rounding (a few ulps of 1): such a
+/// normal is kept bit for bit, since normalising it again can move it by an
+/// ulp and a written-then-loaded mesh would no longer bake the same.
+const UNIT_LENGTH_SQUARED_TOLERANCE: f32 = 4.0 * f32::EPSILON;
+
 /// Makes `normals` unit length, replacing every zero or non-finite one by the
 /// computed area-and-angle-weighted normal of that vertex.
 ///
@@ -61,7 +66,7 @@ pub fn repair_normals(normals: &mut [Vec3], positions: &[Vec3], indices: &[u32])
     for (i, normal) in normals.iter_mut().enumerate() {
         if is_bad(normal) {
             *normal = computed.get(i).copied().unwrap_or(FALLBACK_NORMAL);
-        } else {
+        } else if (normal.length_squared() - 1.0).abs() > UNIT_LENGTH_SQUARED_TOLERANCE {
             *normal = normal.normalize_or(FALLBACK_NORMAL);
         }
     }

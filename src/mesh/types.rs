@@ -89,6 +89,39 @@ impl Mesh {
         let (lo, hi) = self.bounds();
         (hi - lo).length()
     }
+    /// The same mesh in the writers' canonical order: triangles stably sorted
+    /// by (group, material), vertices renumbered in order of first use (unused
+    /// ones dropped). OBJ and GLB files of a mesh in this order load back in
+    /// the same order, so `clean` → file → `bake` bakes the mesh `bake --clean` does.
+    pub fn into_canonical_order(self) -> Mesh {
+        let mut order: Vec<u32> = (0..self.triangle_count() as u32).collect();
+        order.sort_by_key(|&t| (self.tri_group[t as usize], self.tri_material[t as usize]));
+        const UNUSED: u32 = u32::MAX;
+        let mut new_index = vec![UNUSED; self.vertex_count()];
+        let mut old_of_new: Vec<u32> = Vec::with_capacity(self.vertex_count());
+        let mut indices = Vec::with_capacity(self.indices.len());
+        for &t in &order {
+            for v in self.triangle(t as usize) {
+                if new_index[v as usize] == UNUSED {
+                    new_index[v as usize] = old_of_new.len() as u32;
+                    old_of_new.push(v);
+                }
+                indices.push(new_index[v as usize]);
+            }
+        }
+        let gather = |values: &[Vec3]| old_of_new.iter().map(|&v| values[v as usize]).collect::<Vec<_>>();
+        Mesh {
+            positions: gather(&self.positions),
+            normals: gather(&self.normals),
+            uvs: if self.uvs.is_empty() { Vec::new() } else { old_of_new.iter().map(|&v| self.uvs[v as usize]).collect() },
+            colors: if self.colors.is_empty() { Vec::new() } else { old_of_new.iter().map(|&v| self.colors[v as usize]).collect() },
+            indices,
+            tri_material: order.iter().map(|&t| self.tri_material[t as usize]).collect(),
+            tri_group: order.iter().map(|&t| self.tri_group[t as usize]).collect(),
+            materials: self.materials,
+            groups: self.groups,
+        }
+    }
     /// Checks the invariants above; returns a description of the first one broken.
     pub fn validate(&self) -> Result<(), String> {
         let n = self.positions.len();
