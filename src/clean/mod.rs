@@ -218,12 +218,13 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
     params.validate()?;
     check_input(mesh)?;
     let identity: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
-    let mut round = clean_once(mesh, params, &identity);
+    let mut flipped = refine::FlippedEdges::default();
+    let mut round = clean_once(mesh, params, &identity, &mut flipped);
     let mut report = round.report.clone();
     report.rounds = 1;
     // Repeat until a round repairs nothing, so that cleaning a cleaned mesh is a no-op.
     while round.report.repairs() > 0 && report.rounds < MAX_ROUNDS {
-        round = clean_once(&round.mesh, params, &round.origin);
+        round = clean_once(&round.mesh, params, &round.origin, &mut flipped);
         report.absorb(&round.report, round.removed_area);
         report.rounds += 1;
     }
@@ -248,8 +249,9 @@ struct Round {
 }
 
 /// One pass of the pipeline over a validated mesh. `origin` maps `mesh`'s triangles
-/// to the original input's, for the ids in the report.
-fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32]) -> Round {
+/// to the original input's, for the ids in the report; `flipped` holds the edges
+/// earlier rounds flipped, which are not flipped again.
+fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut refine::FlippedEdges) -> Round {
     let diagonal = referenced_diagonal(mesh);
     let weld_tol = params.weld_tolerance.resolve(diagonal);
     let plane_tol = params.coplanar_tolerance.resolve(diagonal);
@@ -312,7 +314,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32]) -> Round {
     if let Some(max_edge) = params.max_edge {
         r.edges_split = refine::split_long_edges(&mut work, max_edge);
     }
-    r.sliver_flips = refine::flip_slivers(&mut work, sliver_rad, plane_tol, weld_tol, params.max_edge);
+    r.sliver_flips = refine::flip_slivers(&mut work, sliver_rad, plane_tol, weld_tol, params.max_edge, flipped);
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
 
     // 8. Weld again and write out.

@@ -115,9 +115,32 @@ pub(crate) fn count_slivers(work: &Work, min_angle_rad: f64) -> usize {
 type EdgeTris = (u32, u32);
 const NONE: u32 = u32::MAX;
 
-/// Flips edges of slivers while that raises their smallest angles (see module doc).
-/// Returns the number of flips.
-pub(crate) fn flip_slivers(work: &mut Work, min_angle_rad: f64, plane_tol: f32, height_tol: f32, max_edge: Option<f32>) -> usize {
+/// Edges flipped so far, as their two end positions (bits, sorted), across the
+/// rounds of one clean. An edge is flipped at most once: on the grey-white room
+/// at `--max-edge 0.3` a flip made a triangle that another covered, the next
+/// round removed it and zipped the hole shut with the old edge, and the flip
+/// came back every round (not converged after 8).
+#[derive(Default)]
+pub(crate) struct FlippedEdges(std::collections::HashSet<([u32; 3], [u32; 3])>);
+
+impl FlippedEdges {
+    /// Records the edge between `a` and `b`; false when it was recorded before.
+    fn insert(&mut self, a: glam::Vec3, b: glam::Vec3) -> bool {
+        let (a, b) = (a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
+        self.0.insert((a.min(b), a.max(b)))
+    }
+}
+
+/// Flips edges of slivers while that raises their smallest angles (see module
+/// doc), each edge at most once per clean (`flipped`). Returns the number of flips.
+pub(crate) fn flip_slivers(
+    work: &mut Work,
+    min_angle_rad: f64,
+    plane_tol: f32,
+    height_tol: f32,
+    max_edge: Option<f32>,
+    flipped: &mut FlippedEdges,
+) -> usize {
     if min_angle_rad <= 0.0 {
         return 0;
     }
@@ -154,6 +177,9 @@ pub(crate) fn flip_slivers(work: &mut Work, min_angle_rad: f64, plane_tol: f32, 
             continue;
         };
         let Flip { a, b, c, d, va, vb, vc, vd } = flip;
+        if !flipped.insert(work.points[a as usize], work.points[b as usize]) {
+            continue;
+        }
         work.tris[t1 as usize] = [va, vd, vc];
         work.tris[t2 as usize] = [vd, vb, vc];
         map.remove(&edge);
