@@ -99,6 +99,13 @@ struct BakeArgs {
     /// importance sampling: far less noise where windows are small or far.
     #[arg(long)]
     window_sampling: bool,
+    /// Window mode: keep the light through glass on sides of sample points that see
+    /// the open sky (more than a quarter of their rays escape without meeting glass).
+    /// By default such a side is outside the enclosure and gets none (no glow on a
+    /// wall's outer face from a pane in front of it); keep it for window scenes
+    /// with no enclosure.
+    #[arg(long)]
+    keep_outside_sides: bool,
     /// Memory for bounce 0's hit cache (8 bytes a ray), in MiB. Bounces ≥ 1
     /// gather from it; over it they re-trace the same rays instead (3–4×
     /// slower, same bytes).
@@ -546,6 +553,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         },
         quiet: a.quiet || a.json,
         window_sampling: a.window_sampling,
+        keep_outside_sides: a.keep_outside_sides,
         hit_cache_bytes: a.hit_cache_mib.map_or_else(prtbake::bake::transfer::available_hit_cache_bytes, |mib| mib.saturating_mul(1 << 20)),
         ..BakeParams::default()
     };

@@ -340,6 +340,8 @@ fn window_errors(window: Rect, rays: u32) -> (f64, f64, f64) {
             seed,
             mode: Mode::Window,
             window_sampling,
+            // A pane over an open plane: no enclosure, every side sees the sky.
+            keep_outside_sides: true,
             sampling: Sampling::Interior { samples_per_vertex: 16.0, max_per_triangle: 256 },
             ..BakeParams::default()
         };

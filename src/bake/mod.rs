@@ -94,6 +94,15 @@ pub struct BakeParams {
     /// alone at the same traced rays on the closed-form window scenes
     /// (tests/estimator.rs); far better where the glass is small or far.
     pub window_sampling: bool,
+    /// Window mode: keep the light through glass that reaches a sample point
+    /// from a side outside the enclosure. Off (the default), a side of a
+    /// point from which more than a quarter of bounce 0's cosine rays escape
+    /// to the sky without meeting glass is outside, and its light through
+    /// glass is dropped: the outer face of a wall no longer glows from a pane
+    /// in front of it and carries the glow into the room through shared
+    /// vertices. On, for window scenes with no enclosure (a pane over an
+    /// open plane), where every side sees the open sky.
+    pub keep_outside_sides: bool,
     /// A sample is inside geometry when most of its probe rays hit back faces
     /// closer than this fraction of the scene diagonal.
     pub inside_distance: f32,
@@ -123,6 +132,7 @@ impl Default for BakeParams {
             store_bounces: false,
             pattern: DirectionPattern::Sobol,
             window_sampling: false,
+            keep_outside_sides: false,
             inside_distance: 0.05,
             quiet: true,
             hit_cache_bytes: transfer::HIT_CACHE_BUDGET_BYTES,

@@ -4,8 +4,9 @@
 //! Bounce b:  t_i⁽ᵇ⁾(x) = 1/π ∫ ρ(h) t_i⁽ᵇ⁻¹⁾(h) [h opaque] c(n,ω) dω
 //!
 //! Open mode: c = max(n·ω,0), V = 1 when the ray escapes. Window mode: c = |n·ω|,
-//! V = τ when the first hit is a window. Directions are drawn with pdf ∝ c, so
-//! each ray's weight is a constant: 1/N (hemisphere) or 2/N (sphere).
+//! V = τ when the first hit is a window, except on a side of the point outside
+//! the enclosure ([`Sides`], docs/conventions.md). Directions are drawn with
+//! pdf ∝ c, so each ray's weight is a constant: 1/N (hemisphere) or 2/N (sphere).
 //!
 //! Points: stratified samples inside each triangle (seed 000 §4.1.1) whose
 //! results go to the triangle's vertices by barycentric weight times the area
@@ -83,6 +84,36 @@ struct Scratch {
     occluded: Vec<bool>,
     /// Per window-light query: the window triangle aimed at and the light pdf of its direction.
     targets: Vec<(u32, f64)>,
+    /// Window mode, bounce 0: the light through glass of each side of the
+    /// point (front, back of its face), kept apart until [`Sides`] decides.
+    side_light: [Vec<f32>; 2],
+}
+
+/// Window mode, bounce 0: per side of a point (0 front, 1 back of its face),
+/// how many of its cosine rays escaped to the sky without meeting glass and
+/// how many met an opaque surface first.
+#[derive(Default)]
+struct Sides {
+    escaped: [u32; 2],
+    opaque: [u32; 2],
+}
+
+impl Sides {
+    /// Side 0 or 1 of a direction leaving a face.
+    #[inline]
+    fn of(face_normal: Vec3, direction: Vec3) -> usize {
+        (face_normal.dot(direction) < 0.0) as usize
+    }
+
+    /// A side is outside the enclosure when more of its cosine rays escaped
+    /// to the sky without meeting glass than met opaque surfaces. Inside a
+    /// cabin or room the sky is seen through windows and, where the model
+    /// leaks or a window is open, through gaps that are a small part of
+    /// what a side sees; the outer face of a wall, or a car's body, sees
+    /// open sky and glass and little else.
+    fn outside(&self, side: usize) -> bool {
+        self.escaped[side] > self.opaque[side]
+    }
 }
 
 /// One point rays leave from.
@@ -887,6 +918,16 @@ impl Pass<'_> {
         // estimated by the cosine rays and as many rays aimed at the glass,
         // combined by MIS (`window_light`).
         let sample_windows = if bounce == 0 { self.windows } else { None };
+        // Window mode keeps bounce 0's light of the point's two sides apart,
+        // to drop that of a side outside the enclosure (`Sides::outside`).
+        let split_sides = window_mode && bounce == 0 && !params.keep_outside_sides;
+        let mut sides = Sides::default();
+        if split_sides {
+            for light in &mut scratch.side_light {
+                light.clear();
+                light.resize(result.len(), 0.0);
+            }
+        }
         let cosine_rays = ray_count;
         let mut traced = 0u64;
         // The rays go to the scene a batch at a time (so it can walk several
@@ -939,6 +980,14 @@ impl Pass<'_> {
                             _ => NO_HIT,
                         });
                     }
+                    if split_sides {
+                        let side = Sides::of(point.face_normal, query.direction);
+                        match hit {
+                            None => sides.escaped[side] += 1,
+                            Some(h) if self.surfaces.window_transmittance[h.triangle as usize].is_none() => sides.opaque[side] += 1,
+                            Some(_) => {}
+                        }
+                    }
                     match hit {
                         Some(h) if window_mode => self.surfaces.window_transmittance[h.triangle as usize].unwrap_or(0.0),
                         Some(_) => 0.0,
@@ -959,7 +1008,9 @@ impl Pass<'_> {
                         _ => visibility * ray_weight,
                     };
                     sh::eval_basis(params.order, query.direction, &mut scratch.basis);
-                    result.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
+                    let target =
+                        if split_sides { &mut scratch.side_light[Sides::of(point.face_normal, query.direction)][..] } else { &mut *result };
+                    target.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
                 }
             }
             if check_inside && batch.start < probe && self.reject_inside(inside_hits, probe, hits) {
@@ -967,7 +1018,15 @@ impl Pass<'_> {
             }
         }
         if let Some(windows) = sample_windows {
-            traced += self.add_window_light(point, windows, result, scratch);
+            traced += self.add_window_light(point, windows, if split_sides { None } else { Some(&mut *result) }, scratch);
+        }
+        if split_sides {
+            // Only the sides inside the enclosure keep their light through glass.
+            for side in 0..2 {
+                if !sides.outside(side) {
+                    result.iter_mut().zip(&scratch.side_light[side]).for_each(|(r, l)| *r += l);
+                }
+            }
         }
         (traced, false)
     }
@@ -992,8 +1051,9 @@ impl Pass<'_> {
     /// Bounce 0 in window mode, the light strategy: N directions toward the
     /// glass (`WindowLights::draw`: a pane by area, a direction uniform
     /// over its solid angle); a draw counts when the first hit along it is
-    /// the pane drawn, weighted by [`Pass::window_mis_weight`]. Returns rays traced.
-    fn add_window_light(&self, point: &Point, windows: &WindowLights, result: &mut [f32], scratch: &mut Scratch) -> u64 {
+    /// the pane drawn, weighted by [`Pass::window_mis_weight`], into `result`,
+    /// or when that is `None` into the side's `scratch.side_light`. Returns rays traced.
+    fn add_window_light(&self, point: &Point, windows: &WindowLights, mut result: Option<&mut [f32]>, scratch: &mut Scratch) -> u64 {
         scratch.queries.clear();
         scratch.targets.clear();
         for k in 0..self.params.rays {
@@ -1018,7 +1078,11 @@ impl Pass<'_> {
             let tau = self.surfaces.window_transmittance[triangle as usize].unwrap_or(0.0);
             let w = tau * self.window_mis_weight(point, query.direction, pdf);
             sh::eval_basis(self.params.order, query.direction, &mut scratch.basis);
-            result.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
+            let target = match result.as_deref_mut() {
+                Some(result) => result,
+                None => &mut scratch.side_light[Sides::of(point.face_normal, query.direction)][..],
+            };
+            target.iter_mut().zip(scratch.basis.iter()).for_each(|(r, y)| *r += w * y);
         }
         scratch.queries.len() as u64
     }

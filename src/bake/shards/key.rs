@@ -127,7 +127,7 @@ impl TransferKey {
         u32(&mut out, p.bounces);
         out.extend_from_slice(&[
             p.store_bounces as u8,
-            p.window_sampling as u8,
+            p.window_sampling as u8 | (p.keep_outside_sides as u8) << 1,
             quantize_code(self.quantize),
             self.max_error.is_some() as u8,
         ]);
@@ -167,7 +167,11 @@ impl TransferKey {
             };
             let bounces = r.u32("bounces")?;
             let store_bounces = flag(r.u8("store bounces")?, "store bounces")?;
-            let window_sampling = flag(r.u8("window sampling")?, "window sampling")?;
+            let window_options = r.u8("window options")?;
+            if window_options > 3 {
+                return Err(format!("window options {window_options} has bits other than 0 and 1"));
+            }
+            let (window_sampling, keep_outside_sides) = (window_options & 1 == 1, window_options & 2 == 2);
             let quantize = quantize_of(r.u8("quantize")?)?;
             let has_max_error = flag(r.u8("max error flag")?, "max error")?;
             let inside_distance = r.f32("inside distance")?;
@@ -185,6 +189,7 @@ impl TransferKey {
                 store_bounces,
                 pattern,
                 window_sampling,
+                keep_outside_sides,
                 inside_distance,
                 ..BakeParams::default()
             };
@@ -208,6 +213,7 @@ impl TransferKey {
             ("bounces", p.bounces.to_string()),
             ("store bounces", p.store_bounces.to_string()),
             ("window sampling", p.window_sampling.to_string()),
+            ("keep outside sides", p.keep_outside_sides.to_string()),
             ("inside distance", p.inside_distance.to_string()),
             ("window patterns", format!("{:?}", self.window_patterns)),
             ("quantize", format!("{:?}", self.quantize)),
