@@ -264,6 +264,10 @@ struct SunArgs {
     /// Window mode even without --window (materials with the window role only).
     #[arg(long)]
     window_mode: bool,
+    /// Window mode: let the sun reach a sample through glass also from a side that sees
+    /// more open sky than surfaces (outside the enclosure; dark by default, as in `bake`).
+    #[arg(long)]
+    keep_outside_sides: bool,
     /// Preetham sky turbidity, 2..=10.
     #[arg(long, default_value_t = 3.0)]
     turbidity: f64,
@@ -706,6 +710,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         samples_per_vertex: a.samples_per_vertex,
         max_per_triangle: 256,
         seed: a.seed,
+        keep_outside_sides: a.keep_outside_sides,
         loop_order: match a.loop_order {
             LoopOrderArg::StepOuter => prtbake::bake::LoopOrder::StepOuter,
             LoopOrderArg::PointOuter => prtbake::bake::LoopOrder::PointOuter,

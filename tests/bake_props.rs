@@ -256,58 +256,14 @@ fn window_mode_is_side_blind() {
 /// only the order of the float sums differs).
 #[test]
 fn no_window_halo_on_the_outer_face_of_a_wall() {
-    use prtbake::mesh::Material;
-    let mut mesh = Mesh::default();
-    let quad = |mesh: &mut Mesh, corners: [Vec3; 4], material: u16| {
-        let base = mesh.positions.len() as u32;
-        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
-        mesh.positions.extend(corners);
-        mesh.normals.extend([normal; 4]);
-        mesh.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        mesh.tri_material.extend([material; 2]);
-        mesh.tri_group.extend([material as u32; 2]);
-    };
-    let v = Vec3::new;
-    // Floor, ceiling, back and side walls, one quad each.
-    quad(&mut mesh, [v(0., 0., 0.), v(0., 0., 4.), v(4., 0., 4.), v(4., 0., 0.)], 0);
-    quad(&mut mesh, [v(0., 3., 0.), v(4., 3., 0.), v(4., 3., 4.), v(0., 3., 4.)], 0);
-    quad(&mut mesh, [v(0., 0., 4.), v(0., 3., 4.), v(4., 3., 4.), v(4., 0., 4.)], 0);
-    quad(&mut mesh, [v(0., 0., 0.), v(0., 3., 0.), v(0., 3., 4.), v(0., 0., 4.)], 0);
-    quad(&mut mesh, [v(4., 0., 0.), v(4., 0., 4.), v(4., 3., 4.), v(4., 3., 0.)], 0);
-    // The front wall: a 16 × 12 grid of shared vertices without the opening's 4 × 4 cells.
-    let wall_first = mesh.positions.len() as u32;
-    for j in 0..=12 {
-        for i in 0..=16 {
-            mesh.positions.push(v(0.25 * i as f32, 0.25 * j as f32, 0.0));
-            mesh.normals.push(Vec3::Z);
-        }
-    }
-    let wall_end = mesh.positions.len() as u32;
-    let at = |i: u32, j: u32| wall_first + j * 17 + i;
-    for j in 0..12 {
-        for i in 0..16 {
-            if (6..10).contains(&i) && (4..8).contains(&j) {
-                continue;
-            }
-            mesh.indices.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            mesh.tri_material.extend([0; 2]);
-            mesh.tri_group.extend([0; 2]);
-        }
-    }
-    quad(&mut mesh, [v(1.45, 0.95, -0.19), v(1.45, 2.05, -0.19), v(2.55, 2.05, -0.19), v(2.55, 0.95, -0.19)], 1);
-    let mut glass = Material::opaque("glass", 0.0);
-    glass.role = MaterialRole::Window;
-    mesh.materials = vec![Material::opaque("wall", 0.5), glass];
-    mesh.groups = vec!["room".into(), "pane".into()];
-    mesh.validate().unwrap();
-
+    let (mesh, wall) = shapes::room_with_pane_outside_opening();
     let bake = |keep_outside_sides: bool| {
         let params = BakeParams { order: 2, rays: 256, mode: Mode::Window, keep_outside_sides, ..BakeParams::default() };
         let (result, _, _) = bake_mesh(&mesh, &params, &[]).unwrap();
         (0..mesh.vertex_count()).map(|v| result.coefficients(v, 0)[0]).collect::<Vec<f32>>()
     };
     let (kept, inside_only) = (bake(true), bake(false));
-    let on_wall = |v: usize| (wall_first as usize..wall_end as usize).contains(&v);
+    let on_wall = |v: usize| wall.contains(&v);
     let halo = (0..mesh.vertex_count()).filter(|&v| on_wall(v)).map(|v| kept[v]).fold(0.0f32, f32::max);
     let room_max = (0..mesh.vertex_count()).filter(|&v| !on_wall(v)).map(|v| kept[v]).fold(0.0f32, f32::max);
     eprintln!("front wall: brightest vertex {halo:.4} with outside sides kept (room's brightest {room_max:.4})");

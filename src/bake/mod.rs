@@ -4,6 +4,7 @@
 
 pub mod bvh8;
 pub mod cull;
+mod enclosure;
 mod gather;
 pub mod hugepages;
 pub mod leaf_blocks;

@@ -33,6 +33,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::enclosure::{side_is_outside, Sides, SIDE_PROBE_RAYS};
 use super::progress::Progress;
 use super::scene::Scene;
 use super::surfaces::Surfaces;
@@ -70,6 +71,11 @@ pub struct SunParams {
     pub max_per_triangle: u32,
     /// Seed of the sample placement (the transfer bake's `seed` gives the same points).
     pub seed: u32,
+    /// Window mode: a sample also sees the sun through glass from a side of
+    /// its face outside the enclosure (`enclosure`; off by default: such a
+    /// side, probed with 32 rays the first time the sun reaches it through
+    /// glass, stays dark, as the transfer bake's does).
+    pub keep_outside_sides: bool,
     /// Loop nesting while tracing (the masks are the same either way; not stored).
     #[serde(skip)]
     pub loop_order: LoopOrder,
@@ -89,6 +95,7 @@ impl Default for SunParams {
             samples_per_vertex: 2.0,
             max_per_triangle: 256,
             seed: 1,
+            keep_outside_sides: false,
             loop_order: LoopOrder::StepOuter,
             shadow_cache: true,
             quiet: true,
@@ -444,6 +451,8 @@ impl Tracer<'_> {
         }
         let words = self.words;
         let mut rays = 0u64;
+        // Window mode: each point's verdict per side (0 not yet probed, 1 inside, 2 outside).
+        let mut sides = vec![[0u8; 2]; points.len()];
         // One shadow-cache entry per task: the leaf that blocked the previous ray.
         let mut hint = u32::MAX;
         match self.params.loop_order {
@@ -451,7 +460,7 @@ impl Tracer<'_> {
                 for (k, sun) in self.suns.iter().enumerate() {
                     let Some(s) = *sun else { continue };
                     for (p, point) in points.iter().enumerate() {
-                        let (lit, traced) = self.sees_sun(point, s, &mut hint);
+                        let (lit, traced) = self.sees_sun(point, s, &mut hint, &mut sides[p]);
                         rays += traced as u64;
                         if lit {
                             out[p * words + k / 32] |= 1 << (k % 32);
@@ -463,7 +472,7 @@ impl Tracer<'_> {
                 for (p, point) in points.iter().enumerate() {
                     for (k, sun) in self.suns.iter().enumerate() {
                         let Some(s) = *sun else { continue };
-                        let (lit, traced) = self.sees_sun(point, s, &mut hint);
+                        let (lit, traced) = self.sees_sun(point, s, &mut hint, &mut sides[p]);
                         rays += traced as u64;
                         if lit {
                             out[p * words + k / 32] |= 1 << (k % 32);
@@ -475,13 +484,14 @@ impl Tracer<'_> {
         rays
     }
 
-    /// Whether `point` sees the sun toward unit `s`, and whether a ray was traced.
+    /// Whether `point` sees the sun toward unit `s`, and the rays traced.
+    /// `sides` holds the point's verdicts on its sides (window mode).
     #[inline]
-    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32) -> (bool, bool) {
+    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32, sides: &mut [u8; 2]) -> (bool, u32) {
         match self.params.mode {
             Mode::Open => {
                 if point.normal.dot(s) <= 0.0 {
-                    return (false, false);
+                    return (false, 0);
                 }
                 let origin = self.scene.offset_origin(point.position, point.face_normal, s);
                 let blocked = if self.params.shadow_cache {
@@ -489,7 +499,7 @@ impl Tracer<'_> {
                 } else {
                     self.scene.occluded(origin, s, f32::INFINITY)
                 };
-                (!blocked, true)
+                (!blocked, 1)
             }
             Mode::Window => {
                 let origin = self.scene.offset_origin(point.position, point.face_normal, s);
@@ -497,7 +507,17 @@ impl Tracer<'_> {
                     .scene
                     .closest_hit(origin, s, f32::INFINITY)
                     .is_some_and(|hit| self.surfaces.window_transmittance[hit.triangle as usize].is_some_and(|tau| tau > 0.0));
-                (lit, true)
+                if !lit || self.params.keep_outside_sides {
+                    return (lit, 1);
+                }
+                let side = Sides::of(point.face_normal, s);
+                let mut traced = 1;
+                if sides[side] == 0 {
+                    let outside = side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side);
+                    sides[side] = 1 + outside as u8;
+                    traced += SIDE_PROBE_RAYS;
+                }
+                (sides[side] == 1, traced)
             }
         }
     }
@@ -518,9 +538,13 @@ mod tests {
     }
 
     fn bake(mesh: &Mesh, suns: &[Option<Vec3>], mode: Mode) -> SunMasks {
+        bake_with(mesh, suns, &SunParams { mode, ..SunParams::default() })
+    }
+
+    fn bake_with(mesh: &Mesh, suns: &[Option<Vec3>], params: &SunParams) -> SunMasks {
         let surfaces = Surfaces::resolve(mesh, &[]).unwrap();
         let scene = Scene::build(mesh, BuildQuality::Sah).unwrap();
-        bake_sun_masks(mesh, &scene, &surfaces, suns, &SunParams { mode, ..SunParams::default() }).unwrap()
+        bake_sun_masks(mesh, &scene, &surfaces, suns, params).unwrap()
     }
 
     /// An open floor under a high sun: every vertex lit; sun below the horizon
@@ -567,7 +591,9 @@ mod tests {
             pane.grid("pane", Vec3::new(-0.25, 0.5, -0.25), Vec3::Z * 0.5, Vec3::X * 0.5, 2, 2, |_, _| 0);
             crate::verify::shapes::append(&mut mesh, &pane.mesh);
             let floor_vertices = 121;
-            let m = bake(&mesh, &[Some(Vec3::Y)], Mode::Window);
+            // A pane over an open floor: no enclosure, so outside sides are kept.
+            let params = SunParams { mode: Mode::Window, keep_outside_sides: true, ..SunParams::default() };
+            let m = bake_with(&mesh, &[Some(Vec3::Y)], &params);
             for v in 0..floor_vertices {
                 let p = mesh.positions[v];
                 let inside = p.x.abs() < 0.2 && p.z.abs() < 0.2;
@@ -579,6 +605,33 @@ mod tests {
                     assert!(!m.bit(v, 0), "vertex {v} at {p} outside the pane (floor up {up})");
                 }
             }
+        }
+    }
+
+    /// The window halo in sun masks: in the closed room of
+    /// `room_with_pane_outside_opening`, a low sun in front of the pane
+    /// reaches the floor through the opening and, through the pane from
+    /// behind, the front wall's outer face. With the enclosure rule no
+    /// front-wall vertex is lit (its outer side sees open sky and glass, its
+    /// inner side cannot see the sun through the pane); every other vertex
+    /// keeps its bit, and the floor has a lit patch.
+    #[test]
+    fn sun_through_a_pane_does_not_light_the_outer_face_of_its_wall() {
+        let (mesh, wall) = crate::verify::shapes::room_with_pane_outside_opening();
+        let suns = [Some(Vec3::new(0.1, 0.6, -1.0).normalize()), Some(Vec3::new(-0.2, 0.3, -1.0).normalize())];
+        let window = SunParams { mode: Mode::Window, ..SunParams::default() };
+        let rule = bake_with(&mesh, &suns, &window);
+        let kept = bake_with(&mesh, &suns, &SunParams { keep_outside_sides: true, ..window });
+        for k in 0..suns.len() {
+            let lit_wall = |m: &SunMasks| wall.clone().filter(|&v| m.bit(v, k)).count();
+            assert!(lit_wall(&kept) > 0, "step {k}: the fixture no longer shows the halo");
+            assert_eq!(lit_wall(&rule), 0, "step {k}");
+            let floor_lit = (0..mesh.vertex_count()).filter(|&v| !wall.contains(&v) && rule.bit(v, k)).count();
+            assert!(floor_lit > 0, "step {k}: the sun no longer enters the room");
+            for v in (0..mesh.vertex_count()).filter(|v| !wall.contains(v)) {
+                assert_eq!(rule.bit(v, k), kept.bit(v, k), "step {k}, vertex {v} at {}", mesh.positions[v]);
+            }
+            eprintln!("step {k}: front wall lit {} -> 0 vertices, room lit {floor_lit}", lit_wall(&kept));
         }
     }
 

@@ -22,6 +22,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::enclosure::Sides;
 use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
 use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
@@ -87,33 +88,6 @@ struct Scratch {
     /// Window mode, bounce 0: the light through glass of each side of the
     /// point (front, back of its face), kept apart until [`Sides`] decides.
     side_light: [Vec<f32>; 2],
-}
-
-/// Window mode, bounce 0: per side of a point (0 front, 1 back of its face),
-/// how many of its cosine rays escaped to the sky without meeting glass and
-/// how many met an opaque surface first.
-#[derive(Default)]
-struct Sides {
-    escaped: [u32; 2],
-    opaque: [u32; 2],
-}
-
-impl Sides {
-    /// Side 0 or 1 of a direction leaving a face.
-    #[inline]
-    fn of(face_normal: Vec3, direction: Vec3) -> usize {
-        (face_normal.dot(direction) < 0.0) as usize
-    }
-
-    /// A side is outside the enclosure when more of its cosine rays escaped
-    /// to the sky without meeting glass than met opaque surfaces. Inside a
-    /// cabin or room the sky is seen through windows and, where the model
-    /// leaks or a window is open, through gaps that are a small part of
-    /// what a side sees; the outer face of a wall, or a car's body, sees
-    /// open sky and glass and little else.
-    fn outside(&self, side: usize) -> bool {
-        self.escaped[side] > self.opaque[side]
-    }
 }
 
 /// One point rays leave from.
@@ -982,11 +956,7 @@ impl Pass<'_> {
                     }
                     if split_sides {
                         let side = Sides::of(point.face_normal, query.direction);
-                        match hit {
-                            None => sides.escaped[side] += 1,
-                            Some(h) if self.surfaces.window_transmittance[h.triangle as usize].is_none() => sides.opaque[side] += 1,
-                            Some(_) => {}
-                        }
+                        sides.count(side, self.surfaces, hit.map(|h| h.triangle));
                     }
                     match hit {
                         Some(h) if window_mode => self.surfaces.window_transmittance[h.triangle as usize].unwrap_or(0.0),

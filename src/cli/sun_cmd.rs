@@ -278,7 +278,7 @@ pub fn sun_meta(config: &SunConfig, frame: &SkyFrame, stats: &SunStats, input_wa
         "params": config.params,
         "window_patterns": config.window_patterns,
         "added_to_bundle": input_was_bundle,
-        "bit_rule": "lit iff day step, n.s > 0 (open mode only), and a strict majority of the interior samples of the adjacent triangles, each weighted by its barycentric coordinate times the area it stands for, see the sun",
+        "bit_rule": "lit iff day step, n.s > 0 (open mode only), and a strict majority of the interior samples of the adjacent triangles, each weighted by its barycentric coordinate times the area it stands for, see the sun (window mode: the first hit toward the sun is glass, seen from a side of the sample that is not outside the enclosure, unless keep_outside_sides)",
         "stats": sun_stats_meta(stats),
     })
 }

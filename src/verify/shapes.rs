@@ -198,6 +198,67 @@ pub fn covered_floor(overhang: f32) -> (Mesh, Vec<usize>) {
     (mesh, covered)
 }
 
+/// A closed 4 × 3 × 4 m room (x, y, z from 0; a floor of 0.25 m cells, the
+/// ceiling and the other walls one quad each) whose
+/// front wall (z = 0) is one sheet of 0.25 m cells with shared vertices and a
+/// 1 × 1 m opening (x 1.5–2.5, y 1–2), and a window pane (material 1, the
+/// window role) 0.19 m outside it, 5 cm larger than the opening on each side:
+/// the window-halo fixture (docs/conventions.md "Window mode, outside
+/// sides"). Returns the mesh and the front wall's vertex range.
+pub fn room_with_pane_outside_opening() -> (Mesh, std::ops::Range<usize>) {
+    let mut mesh = Mesh::default();
+    let quad = |mesh: &mut Mesh, corners: [Vec3; 4], material: u16| {
+        let base = mesh.positions.len() as u32;
+        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
+        mesh.positions.extend(corners);
+        mesh.normals.extend([normal; 4]);
+        mesh.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        mesh.tri_material.extend([material; 2]);
+        mesh.tri_group.extend([material as u32; 2]);
+    };
+    let v = Vec3::new;
+    // The floor: 16 × 16 cells of 0.25 m (so a sun patch shows in vertex bits).
+    let floor = plane_grid(16, 4.0);
+    let floor_first = mesh.positions.len() as u32;
+    mesh.positions.extend(floor.positions.iter().map(|p| *p + v(2., 0., 2.)));
+    mesh.normals.extend(&floor.normals);
+    mesh.indices.extend(floor.indices.iter().map(|i| i + floor_first));
+    mesh.tri_material.extend(vec![0; floor.triangle_count()]);
+    mesh.tri_group.extend(vec![0; floor.triangle_count()]);
+    // Ceiling, back and side walls, one quad each.
+    quad(&mut mesh, [v(0., 3., 0.), v(4., 3., 0.), v(4., 3., 4.), v(0., 3., 4.)], 0);
+    quad(&mut mesh, [v(0., 0., 4.), v(0., 3., 4.), v(4., 3., 4.), v(4., 0., 4.)], 0);
+    quad(&mut mesh, [v(0., 0., 0.), v(0., 3., 0.), v(0., 3., 4.), v(0., 0., 4.)], 0);
+    quad(&mut mesh, [v(4., 0., 0.), v(4., 0., 4.), v(4., 3., 4.), v(4., 3., 0.)], 0);
+    // The front wall: a 16 × 12 grid of shared vertices without the opening's 4 × 4 cells.
+    let wall_first = mesh.positions.len() as u32;
+    for j in 0..=12 {
+        for i in 0..=16 {
+            mesh.positions.push(v(0.25 * i as f32, 0.25 * j as f32, 0.0));
+            mesh.normals.push(Vec3::Z);
+        }
+    }
+    let wall_end = mesh.positions.len() as u32;
+    let at = |i: u32, j: u32| wall_first + j * 17 + i;
+    for j in 0..12 {
+        for i in 0..16 {
+            if (6..10).contains(&i) && (4..8).contains(&j) {
+                continue;
+            }
+            mesh.indices.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            mesh.tri_material.extend([0; 2]);
+            mesh.tri_group.extend([0; 2]);
+        }
+    }
+    quad(&mut mesh, [v(1.45, 0.95, -0.19), v(1.45, 2.05, -0.19), v(2.55, 2.05, -0.19), v(2.55, 0.95, -0.19)], 1);
+    let mut glass = Material::opaque("glass", 0.0);
+    glass.role = MaterialRole::Window;
+    mesh.materials = vec![Material::opaque("wall", 0.5), glass];
+    mesh.groups = vec!["room".into(), "pane".into()];
+    mesh.validate().expect("a valid room");
+    (mesh, wall_first as usize..wall_end as usize)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

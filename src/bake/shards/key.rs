@@ -226,7 +226,7 @@ impl SunKey {
     /// The canonical block (docs/scale.md "Sun parameter block").
     pub fn encode(&self) -> Vec<u8> {
         let p = &self.params;
-        let mut out = vec![mode_code(p.mode), 0, 0, 0];
+        let mut out = vec![mode_code(p.mode), p.keep_outside_sides as u8, 0, 0];
         out.extend_from_slice(&p.samples_per_vertex.to_le_bytes());
         out.extend_from_slice(&p.max_per_triangle.to_le_bytes());
         out.extend_from_slice(&p.seed.to_le_bytes());
@@ -239,11 +239,13 @@ impl SunKey {
     pub fn decode(block: &[u8]) -> Result<SunKey, String> {
         read_block(block, |r| {
             let mode = mode_of(r.u8("mode")?)?;
-            if r.take(3, "reserved")? != [0, 0, 0] {
+            let keep_outside_sides = flag(r.u8("keep outside sides")?, "keep outside sides")?;
+            if r.take(2, "reserved")? != [0, 0] {
                 return Err("reserved bytes are not zero".into());
             }
             let params = SunParams {
                 mode,
+                keep_outside_sides,
                 samples_per_vertex: r.f32("samples per vertex")?,
                 max_per_triangle: r.u32("max per triangle")?,
                 seed: r.u32("seed")?,
@@ -263,6 +265,7 @@ impl SunKey {
         let p = &self.params;
         vec![
             ("mode", format!("{:?}", p.mode)),
+            ("keep outside sides", p.keep_outside_sides.to_string()),
             ("samples per vertex", p.samples_per_vertex.to_string()),
             ("max per triangle", p.max_per_triangle.to_string()),
             ("seed", p.seed.to_string()),
