@@ -217,6 +217,9 @@ pub enum CleanError {
 pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanReport), CleanError> {
     params.validate()?;
     check_input(mesh)?;
+    if let Some(max_edge) = params.max_edge {
+        refine::check_split_size(mesh, max_edge)?;
+    }
     let identity: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
     let mut flipped = refine::FlippedEdges::default();
     let mut round = clean_once(mesh, params, &identity, &mut flipped);

@@ -27,6 +27,36 @@ const MAX_SPLIT_PASSES: usize = 40;
 const FLIP_MARGIN: f64 = 1e-7;
 
 /// Splits every point edge longer than `max_edge`; returns the number of edges split.
+/// Most triangles `--max-edge` may make: tens of bytes each through the
+/// clean's passes, a few GiB at this count.
+pub(crate) const MAX_SPLIT_TRIANGLES: f64 = 50e6;
+
+/// Refuses a `max_edge` that would split `mesh` into more than
+/// [`MAX_SPLIT_TRIANGLES`] (`--max-edge 1e-9` on a 4 m floor ran until
+/// killed): per triangle about ⌈longest / max_edge⌉ × ⌈height / max_edge⌉
+/// pieces, which counts a sliver by its length, not its area.
+pub(crate) fn check_split_size(mesh: &crate::mesh::Mesh, max_edge: f32) -> Result<(), super::CleanError> {
+    let asked = max_edge;
+    let max_edge = max_edge as f64;
+    let estimate: f64 = (0..mesh.triangle_count())
+        .map(|t| {
+            let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
+            let longest = a.distance(b).max(b.distance(c)).max(c.distance(a));
+            let height = if longest > 0.0 { (b - a).cross(c - a).length() / longest } else { 0.0 };
+            (longest / max_edge).ceil().max(1.0) * (height / max_edge).ceil().max(1.0)
+        })
+        .sum();
+    if estimate > MAX_SPLIT_TRIANGLES {
+        return Err(super::CleanError::InvalidParams {
+            name: "max_edge",
+            problem: format!(
+                "{asked} would split the mesh into about {estimate:.3e} triangles, more than {MAX_SPLIT_TRIANGLES:.0e}: choose a longer edge"
+            ),
+        });
+    }
+    Ok(())
+}
+
 pub(crate) fn split_long_edges(work: &mut Work, max_edge: f32) -> usize {
     let max_edge = max_edge as f64;
     let mut split = 0;

@@ -454,3 +454,15 @@ fn long_edge_splits_on_the_grey_white_room_do_not_damage_it() {
     let (a, b) = (mesh_area(&plain), mesh_area(&split));
     assert!(((b - a) / a).abs() <= 1e-5, "area {a} -> {b}");
 }
+
+/// `--max-edge` far below the mesh's scale is refused before any work, with
+/// the estimate (a 4 m floor at 1e-9 m ran until killed); the room's real
+/// `--max-edge 0.3` stays far below the cap.
+#[test]
+fn a_max_edge_that_would_explode_the_mesh_is_refused() {
+    let mesh = crate::verify::shapes::plane_grid(2, 4.0);
+    let refused = clean_mesh(&mesh, &CleanParams { max_edge: Some(1e-9), ..CleanParams::default() }).unwrap_err().to_string();
+    assert!(refused.contains("max_edge") && refused.contains("triangles"), "{refused}");
+    let (split, _) = clean_mesh(&mesh, &CleanParams { max_edge: Some(0.05), ..CleanParams::default() }).unwrap();
+    assert!(split.triangle_count() > 6_000, "{}", split.triangle_count());
+}
