@@ -2,7 +2,7 @@
 """Converts a Mitsuba 0.5/2 scene (scene.xml with `obj` and `rectangle`
 shapes) into one OBJ + MTL that prtbake loads.
 
-    python3 scripts/convert_mitsuba.py SCENE_DIR OUT.obj
+    python3 scripts/convert_mitsuba.py SCENE_DIR OUT.obj [--force]
 
 Used for the CC-BY dining room ("The Breakfast Room" by Wig42, Mitsuba
 version from jgarciapueyo/mitsuba2-transient-scenes, folder dining-room/):
@@ -22,10 +22,14 @@ What it keeps, and how:
 - one shared vertex pool (`v`/`vt`/`vn` indices are global), so the loader
   sees the mesh as Mitsuba does. Emitters, the camera and the integrator
   are ignored; the camera's eye and target are printed for `view --camera`.
-Only the Python standard library is used.
+OUT.obj and OUT.mtl are written to temporaries and renamed together; an
+existing OUT.obj or OUT.mtl is replaced only with --force, and never when it
+is one of the scene's own files. Only the Python standard library is used.
 """
 
+import os
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -38,9 +42,12 @@ def matrix_of(shape):
     m = transform.find("matrix")
     if m is None:
         raise SystemExit(f"shape {shape.attrib}: only <matrix> transforms are supported")
-    values = [float(x) for x in m.attrib["value"].replace(",", " ").split()]
-    if len(values) != 16:
-        raise SystemExit(f"shape {shape.attrib}: matrix has {len(values)} values, not 16")
+    try:
+        values = [float(x) for x in m.attrib["value"].replace(",", " ").split()]
+    except ValueError as e:
+        raise SystemExit(f"shape {shape.attrib}: bad matrix: {e}")
+    if len(values) != 16 or not all(abs(v) < float("inf") for v in values):
+        raise SystemExit(f"shape {shape.attrib}: matrix needs 16 finite values, got {values}")
     return [values[4 * r:4 * r + 4] for r in range(4)]
 
 
@@ -113,14 +120,30 @@ def read_obj(path):
 
 
 def main():
-    if len(sys.argv) != 3:
+    args = [a for a in sys.argv[1:] if a != "--force"]
+    force = len(args) < len(sys.argv) - 1
+    if len(args) != 2:
         print(__doc__.split("\n\n")[1], file=sys.stderr)
         sys.exit(2)
-    scene_dir, out = Path(sys.argv[1]), Path(sys.argv[2])
+    scene_dir, out = Path(args[0]), Path(args[1])
     scene_file = scene_dir / "scene.xml"
     if not scene_file.is_file():
         sys.exit(f"{scene_file}: not found")
-    root = ET.parse(scene_file).getroot()
+    if out.suffix.lower() != ".obj":
+        sys.exit(f"{out}: the output must end in .obj")
+    mtl = out.with_suffix(".mtl")
+    scene_root = scene_dir.resolve()
+    for target in (out, mtl):
+        if target.resolve().is_relative_to(scene_root):
+            sys.exit(f"{target}: inside the scene folder {scene_dir}; write the conversion elsewhere")
+        if target.exists() and not force:
+            sys.exit(f"{target}: exists; pass --force to replace it")
+        if target.exists() and not target.is_file():
+            sys.exit(f"{target}: exists and is not a regular file")
+    try:
+        root = ET.parse(scene_file).getroot()
+    except ET.ParseError as e:
+        sys.exit(f"{scene_file}: not valid XML: {e}")
     bsdfs = {b.attrib["id"]: b for b in root.findall("bsdf") if "id" in b.attrib}
 
     lines_v, lines_vt, lines_vn, body = [], [], [], []
@@ -138,7 +161,10 @@ def main():
         if kind == "obj":
             filename = shape.find("string[@name='filename']").attrib["value"]
             name = Path(filename).stem
-            positions, uvs, normals, faces = read_obj(scene_dir / filename)
+            try:
+                positions, uvs, normals, faces = read_obj(scene_dir / filename)
+            except (OSError, ValueError, IndexError) as e:
+                sys.exit(f"{scene_dir / filename}: cannot read it as OBJ: {e}")
         elif kind == "rectangle":
             name = f"rectangle{number}"
             positions = [(-1.0, -1.0, 0.0), (1.0, -1.0, 0.0), (1.0, 1.0, 0.0), (-1.0, 1.0, 0.0)]
@@ -171,12 +197,24 @@ def main():
             body.append("f " + " ".join(tokens))
         counts["triangles"] += len(faces)
 
-    mtl = out.with_suffix(".mtl")
-    mtl.write_text("".join(f"newmtl {name}\nKd {r:.6g} {g:.6g} {b:.6g}\n\n" for name, (r, g, b) in used_materials.items()))
-    with out.open("w") as f:
-        f.write(f"# converted from {scene_file} by scripts/convert_mitsuba.py\nmtllib {mtl.name}\n")
-        for block in (lines_v, lines_vt, lines_vn, body):
-            f.write("\n".join(block) + "\n")
+    # Both files to temporaries beside their targets, then renamed together.
+    staged = []
+    try:
+        for target, write in (
+            (mtl, lambda f: f.write("".join(f"newmtl {name}\nKd {r:.6g} {g:.6g} {b:.6g}\n\n" for name, (r, g, b) in used_materials.items()))),
+            (out, lambda f: [f.write(f"# converted from {scene_file} by scripts/convert_mitsuba.py\nmtllib {mtl.name}\n")]
+             + [f.write("\n".join(block) + "\n") for block in (lines_v, lines_vt, lines_vn, body)]),
+        ):
+            fd, temporary = tempfile.mkstemp(prefix=".convert-", suffix=".tmp", dir=target.parent or ".")
+            staged.append((temporary, target))
+            with os.fdopen(fd, "w") as f:
+                write(f)
+        for temporary, target in staged:
+            os.replace(temporary, target)
+    finally:
+        for temporary, _ in staged:
+            if os.path.exists(temporary):
+                os.remove(temporary)
     sensor = root.find("sensor")
     if sensor is not None:
         cm = matrix_of(sensor)
