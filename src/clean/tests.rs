@@ -273,11 +273,8 @@ fn cleaning_a_large_torus_soup_runs() {
 
 #[test]
 fn stanford_bunny_report() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/scans/stanford-bunny.obj");
-    if !std::path::Path::new(path).exists() {
-        eprintln!("skipping: {path} is absent");
-        return;
-    }
+    let Some(path) = shared_data("scans/stanford-bunny.obj") else { return };
+    let path = path.as_str();
     let options = tobj::LoadOptions { single_index: true, triangulate: true, ..Default::default() };
     let (models, _) = tobj::load_obj(path, &options).expect("bunny loads");
     let mut mesh = Mesh { materials: vec![crate::mesh::Material::opaque("default", 0.8)], ..Mesh::default() };
@@ -431,11 +428,8 @@ fn edge_lengths(mesh: &Mesh) -> (usize, f64, usize, f64) {
 /// when ../shared/data is absent.
 #[test]
 fn long_edge_splits_on_the_grey_white_room_do_not_damage_it() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/room-grey-white/grey_white_room_flat.obj");
-    if !std::path::Path::new(path).exists() {
-        eprintln!("skipping: {path} is absent");
-        return;
-    }
+    let Some(path) = shared_data("room-grey-white/grey_white_room_flat.obj") else { return };
+    let path = path.as_str();
     let mesh = crate::mesh::load_mesh(path.as_ref(), &crate::mesh::LoadOptions { up: crate::mesh::UpAxis::Y }).unwrap().mesh;
     let (plain, plain_report) = clean_mesh(&mesh, &CleanParams::default()).unwrap();
     let (split, split_report) = clean_mesh(&mesh, &CleanParams { max_edge: Some(0.3), ..CleanParams::default() }).unwrap();
@@ -465,4 +459,14 @@ fn a_max_edge_that_would_explode_the_mesh_is_refused() {
     assert!(refused.contains("max_edge") && refused.contains("triangles"), "{refused}");
     let (split, _) = clean_mesh(&mesh, &CleanParams { max_edge: Some(0.05), ..CleanParams::default() }).unwrap();
     assert!(split.triangle_count() > 6_000, "{}", split.triangle_count());
+}
+
+/// `../shared/data/REL` beside the repository, or `None` (with a notice) when absent.
+fn shared_data(rel: &str) -> Option<String> {
+    let path = format!("{}/../shared/data/{rel}", env!("CARGO_MANIFEST_DIR"));
+    let present = std::path::Path::new(&path).exists();
+    if !present {
+        eprintln!("skipping: {path} is absent");
+    }
+    present.then_some(path)
 }
