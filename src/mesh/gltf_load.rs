@@ -210,6 +210,13 @@ type VertexKey = [Option<usize>; 4];
 /// A [`VertexKey`] placed by a world transform (its bits).
 type PlacedVertexKey = (VertexKey, [u32; 16]);
 
+/// A primitive's vertices: already placed (first vertex, count), or decoded
+/// and to be pushed once the primitive turns out to have triangles.
+enum Vertices {
+    Placed { base: u32, count: u32 },
+    New(LocalVertices),
+}
+
 /// Decoded attributes of one primitive, in its local frame.
 struct LocalVertices {
     positions: Vec<Vec3>,
@@ -265,14 +272,13 @@ impl PrimitiveLoader<'_> {
                 [Some(position_accessor), attribute(Semantic::Normals), attribute(Semantic::TexCoords(0)), attribute(Semantic::Colors(0))];
             // Vertices placed before (a shared pool) are neither decoded nor pushed again.
             let placed = (key, world_bits);
-            let earlier = self.placed_vertices.get(&placed).copied();
-            let local = match earlier {
-                Some(_) => None,
-                None => Some(self.read_vertices(&key, &mesh_label, p, warnings)?),
+            let vertices = match self.placed_vertices.get(&placed) {
+                Some(&(base, count)) => Vertices::Placed { base, count },
+                None => Vertices::New(self.read_vertices(&key, &mesh_label, p, warnings)?),
             };
-            let vertex_count = match (earlier, &local) {
-                (Some((_, count)), _) => count as usize,
-                (None, local) => local.as_ref().map_or(0, |l| l.positions.len()),
+            let vertex_count = match &vertices {
+                Vertices::Placed { count, .. } => *count as usize,
+                Vertices::New(local) => local.positions.len(),
             };
 
             // Indices: explicit or implicit 0..n, then range-checked before use.
@@ -300,14 +306,13 @@ impl PrimitiveLoader<'_> {
                 continue;
             }
 
-            let base = match (earlier, local) {
-                (Some((base, _)), _) => base,
-                (None, Some(local)) => {
+            let base = match vertices {
+                Vertices::Placed { base, .. } => base,
+                Vertices::New(local) => {
                     let base = self.push_vertices(&local, &instance.world, &normal_matrix)?;
                     self.placed_vertices.insert(placed, (base, vertex_count as u32));
                     base
                 }
-                (None, None) => continue, // not reached: `local` is decoded whenever `earlier` is None
             };
             let material = self.material_index(primitive.material.map(|m| m.value()))?;
             let group = self.builder.group_index(&group_name);
