@@ -451,8 +451,8 @@ impl Tracer<'_> {
         }
         let words = self.words;
         let mut rays = 0u64;
-        // Window mode: each point's verdict per side (0 not yet probed, 1 inside, 2 outside).
-        let mut sides = vec![[0u8; 2]; points.len()];
+        // Window mode: whether each side of each point is outside, once probed.
+        let mut sides = vec![[None; 2]; points.len()];
         // One shadow-cache entry per task: the leaf that blocked the previous ray.
         let mut hint = u32::MAX;
         match self.params.loop_order {
@@ -487,7 +487,7 @@ impl Tracer<'_> {
     /// Whether `point` sees the sun toward unit `s`, and the rays traced.
     /// `sides` holds the point's verdicts on its sides (window mode).
     #[inline]
-    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32, sides: &mut [u8; 2]) -> (bool, u32) {
+    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32, sides: &mut [Option<bool>; 2]) -> (bool, u32) {
         match self.params.mode {
             Mode::Open => {
                 if point.normal.dot(s) <= 0.0 {
@@ -511,13 +511,10 @@ impl Tracer<'_> {
                     return (lit, 1);
                 }
                 let side = Sides::of(point.face_normal, s);
-                let mut traced = 1;
-                if sides[side] == 0 {
-                    let outside = side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side);
-                    sides[side] = 1 + outside as u8;
-                    traced += SIDE_PROBE_RAYS;
-                }
-                (sides[side] == 1, traced)
+                let probed = sides[side].is_none();
+                let outside =
+                    *sides[side].get_or_insert_with(|| side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side));
+                (!outside, 1 + if probed { SIDE_PROBE_RAYS } else { 0 })
             }
         }
     }
