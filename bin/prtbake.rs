@@ -138,6 +138,8 @@ struct BakeArgs {
     /// With --clean: split edges longer than this (world units), as `clean --max-edge` does.
     #[arg(long, requires = "clean")]
     max_edge: Option<f32>,
+    #[command(flatten)]
+    refine: RefineArgs,
     /// Bake only shard K of N (K in 0..N): its share of the items, into a part (-o PART.prtp)
     /// that `prtbake merge` joins with the others, round by round (docs/scale.md).
     #[arg(long, value_name = "K/N")]
@@ -161,6 +163,49 @@ struct BakeArgs {
     /// No progress on stderr.
     #[arg(long)]
     quiet: bool,
+}
+
+/// Adaptive refinement (docs/refinement.md), shared by `bake` and `sun`.
+#[derive(clap::Args)]
+struct RefineArgs {
+    /// Refine the mesh where its light changes: split edges whose two vertices differ by more
+    /// than ERROR, re-bake the vertices around the splits, repeat. `bake`: shaded luminance under
+    /// twelve clear skies, as a fraction of the scene's mean (e.g. 0.1); `sun`: direct sun
+    /// (bit × cosine) as a fraction of the sun's normal irradiance.
+    #[arg(long, value_name = "ERROR", conflicts_with_all = ["shard"])]
+    refine: Option<f64>,
+    /// Refine (by largest error × edge length first) up to at most N vertices
+    /// [default with --refine: 4× the input's vertices].
+    #[arg(long, value_name = "N", conflicts_with_all = ["shard"])]
+    max_vertices: Option<usize>,
+    /// With --refine or --max-vertices: never split edges shorter than this (world units)
+    /// [default: 2e-4 of the bounding-box diagonal].
+    #[arg(long, value_name = "LENGTH")]
+    min_edge: Option<f32>,
+}
+
+impl RefineArgs {
+    /// The request, when refinement was asked for; ranges checked.
+    fn request(&self) -> anyhow::Result<Option<cli::bake_cmd::RefineRequest>> {
+        if let Some(e) = self.refine {
+            if !(e.is_finite() && e >= 0.0) {
+                anyhow::bail!("--refine {e}: expected a finite error ≥ 0 (e.g. 0.1)");
+            }
+        }
+        if let Some(m) = self.min_edge {
+            if !(m.is_finite() && m >= 0.0) {
+                anyhow::bail!("--min-edge {m}: expected a finite length ≥ 0");
+            }
+        }
+        if self.max_vertices == Some(0) {
+            anyhow::bail!("--max-vertices 0: expected at least one vertex");
+        }
+        Ok(match (self.refine, self.max_vertices) {
+            (None, None) if self.min_edge.is_some() => anyhow::bail!("--min-edge needs --refine or --max-vertices"),
+            (None, None) => None,
+            (error, max_vertices) => Some(cli::bake_cmd::RefineRequest { error, max_vertices, min_edge: self.min_edge }),
+        })
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -289,6 +334,8 @@ struct SunArgs {
     /// Trace without the shadow cache (for measurement; the masks are the same).
     #[arg(long)]
     no_shadow_cache: bool,
+    #[command(flatten)]
+    refine: RefineArgs,
     /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
@@ -593,7 +640,12 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         }
         false => None,
     };
+    let refine = a.refine.request()?;
+    if refine.is_some() && a.view_box.is_some() {
+        anyhow::bail!("--refine/--max-vertices and --view-box cannot be combined: refine first, then cull");
+    }
     Ok(cli::bake_cmd::BakeConfig {
+        refine,
         shard,
         input: a.mesh,
         output: a.output,
@@ -720,6 +772,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     };
     params.check()?;
     Ok(cli::sun_cmd::SunConfig {
+        refine: a.refine.request()?,
         shard: a.shard.as_deref().map(prtbake::bake::shards::Shard::parse).transpose()?,
         input: a.input,
         output: a.output,

@@ -16,6 +16,7 @@ pub mod files;
 pub mod fixtures;
 pub mod mesh;
 pub mod panel;
+pub mod refine;
 pub mod sh;
 pub mod sky;
 pub mod verify;

@@ -250,3 +250,61 @@ fn bake_clean_max_edge_equals_clean_then_bake() {
     let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("x.prtb").to_str().unwrap(), "--max-edge", "0.3"]);
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+#[test]
+fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
+    let dir = Scratch::new("refine");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let run = |args: &[&str]| {
+        let o = prtbake(args);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    let mut bytes = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.path(&format!("refined-{threads}.prtb"));
+        let args = ["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "32", "--bounces", "1", "--quiet"];
+        run(&[&args[..], &["--refine", "0.1", "--max-vertices", "400", "--threads", threads]].concat());
+        bytes.push(std::fs::read(&out).unwrap());
+    }
+    assert!(bytes[0] == bytes[1], "refined bundles differ between 1 and 2 threads");
+    let refined = prtbake::bundle::read_bundle(&dir.path("refined-1.prtb")).unwrap();
+    let meta = &refined.meta["refine"];
+    let input_vertices = meta["input_vertices"].as_u64().unwrap() as usize;
+    assert!(refined.mesh.vertex_count() > input_vertices && refined.mesh.vertex_count() <= 400, "{meta}");
+    assert_eq!(meta["output_vertices"].as_u64(), Some(refined.mesh.vertex_count() as u64));
+
+    // Sun masks refine the mesh too, from a mesh file.
+    let sun = dir.path("sun.prtb");
+    run(&[
+        "sun",
+        obj.to_str().unwrap(),
+        "-o",
+        sun.to_str().unwrap(),
+        "--steps",
+        "6",
+        "--refine",
+        "0.2",
+        "--max-vertices",
+        "600",
+        "--quiet",
+    ]);
+    let sun_bundle = prtbake::bundle::read_bundle(&sun).unwrap();
+    assert!(sun_bundle.mesh.vertex_count() > input_vertices, "{}", sun_bundle.meta);
+    assert_eq!(sun_bundle.sun.as_ref().unwrap().masks.len(), sun_bundle.mesh.vertex_count());
+
+    // A bundle's sections belong to its vertices: refining it is refused, by name.
+    let again = dir.path("again.prtb");
+    let o = prtbake(&["sun", sun.to_str().unwrap(), "-o", again.to_str().unwrap(), "--refine", "0.2"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("sun.prtb") && err.contains("refine"), "{err}");
+    assert!(!again.exists());
+    for bad in [&["--refine", "nan"][..], &["--refine", "-1"], &["--max-vertices", "0"], &["--min-edge", "0.1"]] {
+        let out = dir.path("bad.prtb");
+        let o = prtbake(&[&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+        assert!(!out.exists());
+    }
+}

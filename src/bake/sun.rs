@@ -183,6 +183,75 @@ pub fn bake_sun_masks(
     plan.masks_from_bits(&sample_bits, rays, started)
 }
 
+/// [`bake_sun_masks`], and per vertex the steps whose vote was split
+/// ([`SunPlan::vote_all`]): where adaptive refinement (`crate::refine`)
+/// finds shadow edges that pass between a vertex's samples.
+pub(crate) fn bake_sun_masks_split(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    suns: &[Option<Vec3>],
+    params: &SunParams,
+) -> Result<(SunMasks, Vec<u32>), BakeError> {
+    let started = Instant::now();
+    let plan = SunPlan::new(mesh, surfaces, suns, params)?;
+    let (sample_bits, rays) = plan.trace_items(scene, surfaces, 0..plan.layout.triangles.len());
+    plan.vote_all(&sample_bits, rays, started)
+}
+
+/// What a partial sun re-bake keeps: earlier masks and split votes (one
+/// row per vertex of the new mesh) and the vertices whose rows stay.
+pub(crate) struct SunKept<'a> {
+    pub(crate) vertices: &'a [bool],
+    pub(crate) masks: &'a SunMasks,
+    pub(crate) split_votes: &'a [u32],
+}
+
+/// Re-bakes the sun masks of the vertices not kept (adaptive refinement,
+/// `crate::refine`): traces only the samples of the triangles flagged in
+/// `receivers` (which must hold every triangle around those vertices) and
+/// keeps the others' words.
+pub(crate) fn bake_sun_masks_update(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    suns: &[Option<Vec3>],
+    params: &SunParams,
+    receivers: &[bool],
+    kept: &SunKept,
+) -> Result<(SunMasks, Vec<u32>), BakeError> {
+    let started = Instant::now();
+    let plan = SunPlan::new(mesh, surfaces, suns, params)?;
+    let items = &plan.layout.triangles;
+    let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
+    for item in (0..items.len()).filter(|&i| receivers[items[i] as usize]) {
+        match runs.last_mut() {
+            Some(run) if run.end == item => run.end += 1,
+            _ => runs.push(item..item + 1),
+        }
+    }
+    let (traced, rays) = plan.trace_item_runs(scene, surfaces, &runs);
+    let mut sample_bits = vec![0u32; plan.layout.sample_count() as usize * plan.words];
+    if let Some(first) = runs.first() {
+        let base = plan.layout.first_sample[first.start] as usize * plan.words;
+        sample_bits[base..base + traced.len()].copy_from_slice(&traced);
+    }
+    let (mut masks, mut split) = plan.vote_all(&sample_bits, rays, started)?;
+    let words = plan.words;
+    for v in (0..mesh.vertex_count()).filter(|&v| kept.vertices[v]) {
+        masks.masks[v * words..(v + 1) * words].copy_from_slice(&kept.masks.masks[v * words..(v + 1) * words]);
+        split[v * words..(v + 1) * words].copy_from_slice(&kept.split_votes[v * words..(v + 1) * words]);
+    }
+    let mut sampled = vec![false; mesh.vertex_count()];
+    for &t in items {
+        mesh.triangle(t as usize).iter().for_each(|&v| sampled[v as usize] = true);
+    }
+    masks.stats.vertices_without_samples = sampled.iter().filter(|&&s| !s).count() as u64;
+    masks.stats.lit_vertices =
+        (0..suns.len()).map(|k| masks.masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64).collect();
+    Ok((masks, split))
+}
+
 /// The masks of a sharded sun bake from its shards' sample bits put end to
 /// end (`bake::shards::merge_sun_parts`): the vote a whole bake runs, with
 /// the stats of a bake that traced `rays`.
@@ -246,22 +315,37 @@ impl<'a> SunPlan<'a> {
     /// step: `words` bits per sample, in sample order, each task writing its
     /// own slice. Returns the bits and the rays traced.
     pub(crate) fn trace_items(&self, scene: &Scene, surfaces: &Surfaces, range: std::ops::Range<usize>) -> (Vec<u32>, u64) {
+        self.trace_item_runs(scene, surfaces, std::slice::from_ref(&range))
+    }
+
+    /// [`SunPlan::trace_items`] over ascending, disjoint runs of items: the
+    /// bits of the samples from the first run's first item to the last
+    /// run's end, zero for the items between runs (not traced).
+    pub(crate) fn trace_item_runs(&self, scene: &Scene, surfaces: &Surfaces, runs: &[std::ops::Range<usize>]) -> (Vec<u32>, u64) {
         let layout = &self.layout;
         let words = self.words;
         let day_steps = self.day_steps();
         let first_point = |item: usize| layout.first_sample.get(item).map_or(layout.sample_count() as usize, |&f| f as usize);
-        let mut sample_bits = vec![0u32; (first_point(range.end) - first_point(range.start)) * words];
+        let (base, end) = match (runs.first(), runs.last()) {
+            (Some(first), Some(last)) => (first_point(first.start), first_point(last.end)),
+            _ => (0, 0),
+        };
+        let mut sample_bits = vec![0u32; (end - base) * words];
         let tracer = Tracer { mesh: self.mesh, scene, surfaces, params: self.params, layout, suns: &self.suns, words };
-        let points: u64 = layout.counts[range.clone()].iter().map(|&c| c as u64).sum();
+        let points: u64 = runs.iter().flat_map(|r| &layout.counts[r.clone()]).map(|&c| c as u64).sum();
         let progress = Progress::start("sun".into(), points * day_steps, self.params.quiet);
         let mut tasks = Vec::new();
         let mut rest: &mut [u32] = &mut sample_bits;
-        for start in range.clone().step_by(TRIANGLES_PER_TASK) {
-            let end = (start + TRIANGLES_PER_TASK).min(range.end);
-            let samples = layout.counts[start..end].iter().map(|&c| c as usize).sum::<usize>();
-            let (mine, others) = rest.split_at_mut(samples * words);
-            rest = others;
-            tasks.push((start, end, mine));
+        let mut rest_start = base;
+        for range in runs {
+            for start in range.clone().step_by(TRIANGLES_PER_TASK) {
+                let end = (start + TRIANGLES_PER_TASK).min(range.end);
+                let (_, tail) = rest.split_at_mut((first_point(start) - rest_start) * words);
+                let (mine, others) = tail.split_at_mut((first_point(end) - first_point(start)) * words);
+                rest = others;
+                rest_start = first_point(end);
+                tasks.push((start, end, mine));
+            }
         }
         let rays: u64 = tasks
             .into_par_iter()
@@ -279,6 +363,13 @@ impl<'a> SunPlan<'a> {
     /// order: a whole bake's, or its shards' put end to end), with the
     /// stats of a bake that traced `rays` and started at `started`.
     pub(crate) fn masks_from_bits(&self, sample_bits: &[u32], rays: u64, started: Instant) -> Result<SunMasks, BakeError> {
+        Ok(self.vote_all(sample_bits, rays, started)?.0)
+    }
+
+    /// [`SunPlan::masks_from_bits`], and per vertex (same layout) the steps
+    /// whose vote was split: some samples around the vertex saw the sun and
+    /// some did not (a shadow edge crosses its one-ring), facing vertices only.
+    pub(crate) fn vote_all(&self, sample_bits: &[u32], rays: u64, started: Instant) -> Result<(SunMasks, Vec<u32>), BakeError> {
         let (words, mesh, params) = (self.words, self.mesh, self.params);
         let point_count = self.layout.sample_count() as usize;
         if sample_bits.len() != point_count * words {
@@ -291,14 +382,16 @@ impl<'a> SunPlan<'a> {
         let adjacency = VertexAdjacency::build(mesh, &self.layout);
         let vertex_count = mesh.vertex_count();
         let mut masks = vec![0u32; vertex_count * words];
+        let mut split = vec![0u32; vertex_count * words];
         let without: u64 = masks
             .par_chunks_mut(VERTICES_PER_TASK * words)
+            .zip(split.par_chunks_mut(VERTICES_PER_TASK * words))
             .enumerate()
-            .map(|(chunk, out)| {
+            .map(|(chunk, (out, split_out))| {
                 let first = chunk * VERTICES_PER_TASK;
                 let mut lit_weight = vec![0.0f32; self.suns.len()];
                 let mut without = 0u64;
-                for (local, vertex_words) in out.chunks_exact_mut(words).enumerate() {
+                for (local, (vertex_words, split_words)) in out.chunks_exact_mut(words).zip(split_out.chunks_exact_mut(words)).enumerate() {
                     let v = first + local;
                     let total = self.vote(v, &adjacency, sample_bits, &mut lit_weight);
                     if total <= 0.0 {
@@ -311,6 +404,9 @@ impl<'a> SunPlan<'a> {
                         let facing = params.mode == Mode::Window || normal.dot(*s) > 0.0;
                         if facing && 2.0 * lit_weight[k] > total {
                             vertex_words[k / 32] |= 1 << (k % 32);
+                        }
+                        if facing && lit_weight[k] > 0.0 && lit_weight[k] < total {
+                            split_words[k / 32] |= 1 << (k % 32);
                         }
                     }
                 }
@@ -333,7 +429,7 @@ impl<'a> SunPlan<'a> {
             seconds,
             rays_per_second: rays as f64 / seconds.max(1e-9),
         };
-        Ok(SunMasks { words_per_vertex: words as u32, masks, stats })
+        Ok((SunMasks { words_per_vertex: words as u32, masks, stats }, split))
     }
 
     /// Barycentrics of sample `s` of layout item `item`.

@@ -477,6 +477,23 @@ pub(crate) fn normalise_source_into(source: &mut SourceRows, sums: &[f32], weigh
     normalise_rows(source.rows.as_mut_slice(), sums, weights, stride);
 }
 
+/// The next bounce's gather rows from a widened layer (its first
+/// `pass_channels` channels: bounce 0's are copies of one).
+fn source_from_layer(source: &mut SourceRows, layer: &[f32], pass_channels: usize, channels: usize, coeffs: usize) {
+    let stride = pass_channels * coeffs;
+    let vertices = layer.len() / (channels * coeffs).max(1);
+    if source.rows.len() != vertices * stride {
+        source.rows = RowBuffer::zeroed(vertices * stride);
+    }
+    source.channels = pass_channels;
+    source
+        .rows
+        .as_mut_slice()
+        .par_chunks_mut(stride)
+        .zip(layer.par_chunks(channels * coeffs))
+        .for_each(|(dst, src)| dst.copy_from_slice(&src[..stride]));
+}
+
 /// `dst` = each vertex's row of `sums` over its weight, zero where it has none.
 pub(crate) fn normalise_rows(dst: &mut [f32], sums: &[f32], weights: &[f32], stride: usize) {
     dst.par_chunks_mut(stride).zip(sums.par_chunks(stride).zip(weights.par_iter())).for_each(|(dst, (src, &w))| {
@@ -514,6 +531,44 @@ pub fn bake_transfer_receivers(
     surfaces: &Surfaces,
     params: &BakeParams,
     receivers: Option<&[bool]>,
+) -> Result<TransferResult, BakeError> {
+    bake_layers(mesh, scene, surfaces, params, receivers, None)
+}
+
+/// What a partial re-bake keeps (adaptive refinement, `crate::refine`):
+/// every bounce's full layer from an earlier bake of the same surface, and
+/// the vertices whose values stay.
+pub(crate) struct Kept<'a> {
+    /// One widened layer per bounce 0..=B, `[vertex][channel][coeff]`.
+    pub(crate) layers: &'a [Vec<f32>],
+    pub(crate) vertices: &'a [bool],
+}
+
+/// Re-bakes the vertices not in `kept.vertices` from the triangles flagged
+/// in `receivers` (which must hold every triangle around those vertices),
+/// and keeps the others' values. Bounces ≥ 1 gather from the merged
+/// previous bounce, so a re-baked vertex sees its neighbours' light whether
+/// they were re-baked or kept. Returns every bounce's layer (as with
+/// `store_bounces`) and the total.
+pub(crate) fn bake_transfer_update(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    params: &BakeParams,
+    receivers: &[bool],
+    kept: &Kept,
+) -> Result<TransferResult, BakeError> {
+    let params = BakeParams { store_bounces: true, ..*params };
+    bake_layers(mesh, scene, surfaces, &params, Some(receivers), Some(kept))
+}
+
+fn bake_layers(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    params: &BakeParams,
+    receivers: Option<&[bool]>,
+    kept: Option<&Kept>,
 ) -> Result<TransferResult, BakeError> {
     let started = Instant::now();
     let plan = Plan::new(mesh, scene, surfaces, params, receivers)?;
@@ -558,9 +613,20 @@ pub fn bake_transfer_receivers(
             rejected[index as usize] = true;
         }
         let pass_channels = plan.pass_channels(bounce);
-        let layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
-        if bounce < params.bounces {
-            normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs);
+        let mut layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
+        match kept {
+            Some(kept) => {
+                let stride = channels * coeffs;
+                let previous = &kept.layers[bounce as usize];
+                for v in (0..mesh.vertex_count()).filter(|&v| kept.vertices[v]) {
+                    layer[v * stride..(v + 1) * stride].copy_from_slice(&previous[v * stride..(v + 1) * stride]);
+                }
+                if bounce < params.bounces {
+                    source_from_layer(&mut source, &layer, pass_channels, channels, coeffs);
+                }
+            }
+            None if bounce < params.bounces => normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs),
+            None => {}
         }
         add_layer(&mut total, &layer);
         stats.rays_per_bounce.push(sums.rays);
@@ -572,7 +638,8 @@ pub fn bake_transfer_receivers(
     }
 
     stats.points_rejected = rejected.iter().filter(|&&r| r).count() as u64;
-    stats.vertices_without_samples = vertex_weight.iter().filter(|&&w| w <= 0.0).count() as u64;
+    let re_baked = |v: usize| kept.is_none_or(|k| !k.vertices[v]);
+    stats.vertices_without_samples = vertex_weight.iter().enumerate().filter(|&(v, &w)| w <= 0.0 && re_baked(v)).count() as u64;
     stats.rays = stats.rays_per_bounce.iter().sum();
     stats.seconds = started.elapsed().as_secs_f64();
     stats.rays_gathered = if use_cache { stats.rays_per_bounce.iter().skip(1).sum() } else { 0 };

@@ -60,11 +60,13 @@ mod orient;
 mod refine;
 mod report;
 mod spatial;
+mod split;
 mod weld;
 mod work;
 mod zip;
 
 pub use report::{CleanReport, DefectKind, DefectReport, OverlapReport, UnorientableComponent};
+pub use split::{split_edges, EdgeSplit};
 
 use crate::mesh::Mesh;
 use work::{count_boundary_and_non_manifold, Work};
@@ -407,12 +409,18 @@ fn referenced_diagonal(mesh: &Mesh) -> f32 {
     }
 }
 
-/// Writes the live triangles and their vertices (in id order) to a new mesh.
+/// Writes the live triangles and their vertices (in id order) to a new mesh,
+/// without the vertices no triangle uses.
 fn write_mesh(work: &Work, input: &Mesh) -> Mesh {
     let mut used = vec![false; work.vertex_point.len()];
     for tri in &work.tris {
         tri.iter().for_each(|&v| used[v as usize] = true);
     }
+    write_vertices(work, input, &used)
+}
+
+/// Writes the triangles and the vertices flagged in `used` (in id order).
+fn write_vertices(work: &Work, input: &Mesh, used: &[bool]) -> Mesh {
     let mut remap = vec![u32::MAX; used.len()];
     let mut out = Mesh {
         materials: input.materials.clone(),

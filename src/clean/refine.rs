@@ -26,7 +26,6 @@ const MAX_SPLIT_PASSES: usize = 40;
 /// A flip must raise the smallest angle by more than this (radians): no flip-flopping on ties.
 const FLIP_MARGIN: f64 = 1e-7;
 
-/// Splits every point edge longer than `max_edge`; returns the number of edges split.
 /// Most triangles `--max-edge` may make: tens of bytes each through the
 /// clean's passes, a few GiB at this count.
 pub(crate) const MAX_SPLIT_TRIANGLES: f64 = 50e6;
@@ -57,46 +56,60 @@ pub(crate) fn check_split_size(mesh: &crate::mesh::Mesh, max_edge: f32) -> Resul
     Ok(())
 }
 
+/// Splits every point edge longer than `max_edge` (recursively); returns the number of edges split.
 pub(crate) fn split_long_edges(work: &mut Work, max_edge: f32) -> usize {
     let max_edge = max_edge as f64;
     let mut split = 0;
     for _ in 0..MAX_SPLIT_PASSES {
-        // Midpoints of the long edges, numbered in sorted edge order (deterministic).
-        let edges = sorted_edges(work);
-        let mut mid_point: HashMap<(u32, u32), u32> = HashMap::new();
-        for run in edge_runs(&edges) {
-            let (lo, hi) = (run[0].lo, run[0].hi);
-            let (a, b) = (work.points[lo as usize].as_dvec3(), work.points[hi as usize].as_dvec3());
-            if a.distance(b) > max_edge {
-                let m = work.push_point(((a + b) * 0.5).as_vec3());
-                mid_point.insert((lo, hi), m);
-            }
-        }
-        if mid_point.is_empty() {
+        let long =
+            |work: &Work, lo: u32, hi: u32| work.points[lo as usize].as_dvec3().distance(work.points[hi as usize].as_dvec3()) > max_edge;
+        let n = split_marked_edges(work, long);
+        if n == 0 {
             break;
         }
-        split += mid_point.len();
-        let mut mid_vertex: HashMap<(u32, u32), u32> = HashMap::new();
-        for t in 0..work.tris.len() {
-            if !work.tri_alive[t] {
-                continue;
-            }
-            let p = work.tri_points(t);
-            let v = work.tris[t];
-            let mut mids: [Option<u32>; 3] = [None; 3];
-            for c in 0..3 {
-                let key = (p[c].min(p[(c + 1) % 3]), p[c].max(p[(c + 1) % 3]));
-                if let Some(&point) = mid_point.get(&key) {
-                    let (va, vb) = (v[c], v[(c + 1) % 3]);
-                    let vkey = (va.min(vb), va.max(vb));
-                    let mid = *mid_vertex.entry(vkey).or_insert_with(|| work.push_vertex_lerp(va, vb, 0.5, point));
-                    mids[c] = Some(mid);
-                }
-            }
-            subdivide(work, t, mids);
-        }
+        split += n;
     }
     split
+}
+
+/// Splits once, at its midpoint, every point edge `(lo, hi)` (`lo < hi`)
+/// for which `marked` holds, in all triangles that use it (red-green
+/// patterns); returns the number of edges split. Midpoints are numbered in
+/// sorted edge order, so the result is deterministic.
+pub(crate) fn split_marked_edges(work: &mut Work, marked: impl Fn(&Work, u32, u32) -> bool) -> usize {
+    let edges = sorted_edges(work);
+    let mut mid_point: HashMap<(u32, u32), u32> = HashMap::new();
+    for run in edge_runs(&edges) {
+        let (lo, hi) = (run[0].lo, run[0].hi);
+        if marked(work, lo, hi) {
+            let (a, b) = (work.points[lo as usize].as_dvec3(), work.points[hi as usize].as_dvec3());
+            let m = work.push_point(((a + b) * 0.5).as_vec3());
+            mid_point.insert((lo, hi), m);
+        }
+    }
+    if mid_point.is_empty() {
+        return 0;
+    }
+    let mut mid_vertex: HashMap<(u32, u32), u32> = HashMap::new();
+    for t in 0..work.tris.len() {
+        if !work.tri_alive[t] {
+            continue;
+        }
+        let p = work.tri_points(t);
+        let v = work.tris[t];
+        let mut mids: [Option<u32>; 3] = [None; 3];
+        for c in 0..3 {
+            let key = (p[c].min(p[(c + 1) % 3]), p[c].max(p[(c + 1) % 3]));
+            if let Some(&point) = mid_point.get(&key) {
+                let (va, vb) = (v[c], v[(c + 1) % 3]);
+                let vkey = (va.min(vb), va.max(vb));
+                let mid = *mid_vertex.entry(vkey).or_insert_with(|| work.push_vertex_lerp(va, vb, 0.5, point));
+                mids[c] = Some(mid);
+            }
+        }
+        subdivide(work, t, mids);
+    }
+    mid_point.len()
 }
 
 /// Replaces triangle `t` by the red-green pattern for its split sides

@@ -33,6 +33,24 @@ pub struct BakeConfig {
     pub force: bool,
     /// Bake one shard's part of one round instead of the bundle (`--shard`).
     pub shard: Option<super::shard_cmd::ShardRun>,
+    /// Refine the mesh where its light changes (`--refine`, `--max-vertices`).
+    pub refine: Option<RefineRequest>,
+}
+
+/// What the user asked of adaptive refinement ([`crate::refine`]); the
+/// defaults depend on the mesh, so they are resolved once it is loaded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefineRequest {
+    pub error: Option<f64>,
+    pub max_vertices: Option<usize>,
+    pub min_edge: Option<f32>,
+}
+
+impl RefineRequest {
+    /// The refinement's parameters for `mesh`.
+    pub fn params(&self, mesh: &Mesh) -> crate::refine::RefineParams {
+        crate::refine::RefineParams::for_mesh(mesh, self.error, self.max_vertices, self.min_edge)
+    }
 }
 
 /// What the user asked about storage.
@@ -185,6 +203,8 @@ pub struct BakeReport {
     pub storage: Option<budget::Choice>,
     /// What view-box culling removed.
     pub cull: Option<bake::cull::CullReport>,
+    /// What adaptive refinement did.
+    pub refine: Option<crate::refine::RefineReport>,
 }
 
 /// Extensions of a bundle output.
@@ -194,11 +214,19 @@ pub const BUNDLE_FORMAT: &[&str] = &["prtb"];
 /// outputs (it lands when the caller commits them); `extra_meta` is merged
 /// into the metadata.
 pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value, staged: &mut Staged) -> anyhow::Result<BakeReport> {
-    let (result, surfaces, build_seconds, cull) =
-        super::with_threads(config.threads, || bake_maybe_culled(mesh, config))?.with_context(|| config.input.display().to_string())?;
+    let (result, surfaces, build_seconds, cull, refined) =
+        super::with_threads(config.threads, || bake_maybe_refined(mesh, config))?.with_context(|| config.input.display().to_string())?;
     check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
     let mut extra_meta = bundle_meta(extra_meta, &config.window_patterns, &surfaces);
+    let (mesh, refine) = match refined {
+        Some((refined_mesh, report)) => {
+            extra_meta["refine"] = report.meta();
+            (std::borrow::Cow::Owned(refined_mesh), Some(report))
+        }
+        None => (std::borrow::Cow::Borrowed(mesh), None),
+    };
+    let mesh: &Mesh = &mesh;
     let (stored_mesh, result) = match &cull {
         Some((visible, report)) => {
             if !config.params.quiet {
@@ -240,10 +268,26 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         write_seconds: write_start.elapsed().as_secs_f64(),
         storage: choice,
         cull: cull.map(|c| c.1),
+        refine,
     })
 }
 
 type CulledBake = (TransferResult, bake::Surfaces, f64, Option<(Vec<bool>, bake::cull::CullReport)>);
+type RefinedBake =
+    (TransferResult, bake::Surfaces, f64, Option<(Vec<bool>, bake::cull::CullReport)>, Option<(Mesh, crate::refine::RefineReport)>);
+
+/// Bakes `mesh`, refined first with `--refine`/`--max-vertices` (the
+/// result then belongs to the refined mesh, returned with the report).
+fn bake_maybe_refined(mesh: &Mesh, config: &BakeConfig) -> Result<RefinedBake, bake::BakeError> {
+    let Some(request) = &config.refine else {
+        let (r, s, b, c) = bake_maybe_culled(mesh, config)?;
+        return Ok((r, s, b, c, None));
+    };
+    let (refined, result, surfaces, report) =
+        crate::refine::refine_transfer(mesh.clone(), &config.params, &config.window_patterns, &request.params(mesh))?;
+    // The rounds' BVH builds are inside the refinement's time.
+    Ok((result, surfaces, 0.0, None, Some((refined, report))))
+}
 
 /// Bakes `mesh`; with a view box, finds the visible triangles first and
 /// (without bounces) shoots rays only from them, every triangle still occluding.
@@ -285,6 +329,7 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             "storage": report.storage.as_ref().map(|c| storage_meta(c, &report.result)),
             "storage_candidates": report.storage.as_ref().map(|c| &c.measured),
             "cull": report.cull,
+            "refine": report.refine,
         }));
     }
     println!(
@@ -303,6 +348,9 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
         report.result.channels,
         report.bundle_bytes
     );
+    if let Some(r) = &report.refine {
+        println!("{}", r.summary());
+    }
     if let Some(c) = &report.storage {
         let s = &c.chosen;
         println!(

@@ -54,6 +54,7 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         eprintln!("clean: {}", clean_report.summary());
     }
     let config = BakeConfig {
+        refine: None,
         input: "demo-cabin (generated)".into(),
         output: bundle_path,
         up: UpAxis::Y,

@@ -61,6 +61,8 @@ pub struct SunConfig {
     pub force: bool,
     /// Trace one shard's samples into a part instead of the bundle (`--shard`).
     pub shard: Option<crate::bake::shards::Shard>,
+    /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`; a mesh input only).
+    pub refine: Option<super::bake_cmd::RefineRequest>,
 }
 
 /// What `sun` reports.
@@ -72,6 +74,8 @@ pub struct SunReport {
     pub sky_seconds: f64,
     pub build_seconds: f64,
     pub bundle_bytes: u64,
+    /// What adaptive refinement did (`--refine`).
+    pub refine: Option<crate::refine::RefineReport>,
 }
 
 /// Runs `sun` end to end and prints its report; with `--shard`, one
@@ -221,18 +225,35 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
 
 /// Loads the input, computes the day, bakes the masks and writes the bundle.
 pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
-    let input = load_sun_input(config, BUNDLE_FORMAT, true)?;
-    let (steps, build_seconds, sky_seconds, masks) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+    let mut input = load_sun_input(config, BUNDLE_FORMAT, true)?;
+    if config.refine.is_some() && input.was_bundle() {
+        anyhow::bail!(
+            "{}: --refine/--max-vertices add vertices, and a bundle's sections belong to its vertices: refine from the mesh file (`sun MESH --refine`), or refine the transfer with `bake --refine` (docs/refinement.md)",
+            config.input.display()
+        );
+    }
+    let (steps, build_seconds, sky_seconds, masks, refined) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let sky_start = Instant::now();
         let steps = day_steps(config, &input)?;
         let sky_seconds = sky_start.elapsed().as_secs_f64();
         let surfaces = sun_surfaces(config, &input.mesh)?;
         let in_input = || config.input.display().to_string();
+        let suns = sky::day_directions(&steps);
+        if let Some(request) = &config.refine {
+            let params = request.params(&input.mesh);
+            let (mesh, masks, report) =
+                crate::refine::refine_sun(input.mesh.clone(), &config.window_patterns, &suns, &config.params, &params)
+                    .with_context(in_input)?;
+            return Ok((steps, 0.0, sky_seconds, masks, Some((mesh, report))));
+        }
         let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
-        let masks =
-            bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &sky::day_directions(&steps), &config.params).with_context(in_input)?;
-        Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks))
+        let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
+        Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None))
     })??;
+    let refine = refined.map(|(mesh, report)| {
+        input.mesh = mesh;
+        report
+    });
 
     let series = SunSeries {
         sky_order: config.sky_order as u32,
@@ -240,12 +261,24 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         words_per_vertex: masks.words_per_vertex,
         masks: masks.masks.clone(),
     };
-    let sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
+    let mut sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
+    if let Some(r) = &refine {
+        sun_meta["refine"] = r.meta();
+    }
     let output = &config.output;
     let encoded = encode_sun_output(&input, sun_meta, &series, output)?;
     crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
     let bundle_bytes = encoded.len() as u64;
-    Ok(SunReport { output: output.clone(), masks, steps, input_was_bundle: input.was_bundle(), sky_seconds, build_seconds, bundle_bytes })
+    Ok(SunReport {
+        output: output.clone(),
+        masks,
+        steps,
+        input_was_bundle: input.was_bundle(),
+        sky_seconds,
+        build_seconds,
+        bundle_bytes,
+        refine,
+    })
 }
 
 /// The sun parameters and deterministic stats recorded in META (no timings).
@@ -303,7 +336,11 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
             "bvh_build_seconds": report.build_seconds,
             "bundle_bytes": report.bundle_bytes,
             "peak_memory_bytes": bake::peak_memory_bytes(),
+            "refine": report.refine,
         }));
+    }
+    if let Some(r) = &report.refine {
+        println!("{}", r.summary());
     }
     println!(
         "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
