@@ -34,6 +34,10 @@
 //! (a big polygon face, a cone's apex) costs what a grid does
 //! ([`hub_pairs`]; `benches/clean.rs`, docs/performance.md).
 //!
+//! Outside the pipeline, [`split_edges`] splits chosen edges of a finished
+//! mesh (the same red-green splits, closed over longest edges): adaptive
+//! refinement (`crate::refine`) calls it where the bake finds the light changing.
+//!
 //! Keep-rules are deterministic: the smallest index survives (vertex, point or
 //! triangle). Same input and parameters give the same bytes.
 //!
