@@ -91,15 +91,6 @@ mod tests {
         super::super::work::count_boundary_and_non_manifold(&work)
     }
 
-    fn area(mesh: &Mesh) -> f64 {
-        (0..mesh.triangle_count())
-            .map(|t| {
-                let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
-                0.5 * (b - a).cross(c - a).length()
-            })
-            .sum()
-    }
-
     #[test]
     fn a_split_keeps_the_surface_and_its_old_vertices() {
         let mesh = grid(4, 4.0);
@@ -112,7 +103,7 @@ mod tests {
         assert_eq!(&s.mesh.normals[..mesh.vertex_count()], &mesh.normals[..]);
         assert!(s.mesh.vertex_count() > mesh.vertex_count());
         // Exact split: same area, no new boundary (no T-junction), still manifold.
-        assert!((area(&s.mesh) - area(&mesh)).abs() < 1e-9 * area(&mesh));
+        assert!((s.mesh.area() - mesh.area()).abs() < 1e-9 * mesh.area());
         let after = boundary_and_non_manifold(&s.mesh);
         assert_eq!(after.1, 0);
         assert!(after.0 >= before.0 && after.0 <= before.0 + 2, "boundary edges {before:?} -> {after:?}");

@@ -77,6 +77,15 @@ impl Mesh {
         let [a, b, c] = self.triangle(t);
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
+    /// Area of triangle `t`, in f64 (sums of many stay exact enough to compare).
+    pub fn triangle_area(&self, t: usize) -> f64 {
+        let [a, b, c] = self.triangle_positions(t).map(|p| p.as_dvec3());
+        0.5 * (b - a).cross(c - a).length()
+    }
+    /// Total area of the triangles.
+    pub fn area(&self) -> f64 {
+        (0..self.triangle_count()).map(|t| self.triangle_area(t)).sum()
+    }
     /// Axis-aligned bounds (min, max); `(ZERO, ZERO)` for an empty mesh.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         if self.positions.is_empty() {

@@ -52,8 +52,7 @@ fn luminances(result: &TransferResult, sky: &[[f32; 3]]) -> Vec<f64> {
 fn vertex_areas(mesh: &Mesh) -> Vec<f64> {
     let mut area = vec![0.0f64; mesh.vertex_count()];
     for t in 0..mesh.triangle_count() {
-        let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
-        let third = (b - a).cross(c - a).length() / 6.0;
+        let third = mesh.triangle_area(t) / 3.0;
         for v in mesh.triangle(t) {
             area[v as usize] += third;
         }

@@ -32,8 +32,7 @@ pub fn surface_points(mesh: &Mesh, count: usize, seed: u64, keep: impl Fn(usize)
     let mut total = 0.0f64;
     for t in 0..mesh.triangle_count() {
         if keep(t) {
-            let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
-            total += 0.5 * (b - a).cross(c - a).length();
+            total += mesh.triangle_area(t);
         }
         cumulative.push(total);
     }
