@@ -56,6 +56,7 @@ mod degenerate;
 mod duplicates;
 pub mod fixtures;
 mod hub_pairs;
+mod intersect;
 mod orient;
 mod refine;
 mod report;
@@ -120,6 +121,11 @@ pub struct CleanParams {
     pub zip: bool,
     /// Keep one triangle per winding of a duplicated set (two-sided sheets); default false.
     pub keep_two_sided: bool,
+    /// Cut triangles along the lines where other triangles pass through them,
+    /// and keep the two sides of every such line apart (default false; see
+    /// [`intersect`]): a wall running past another, a floor running under and
+    /// past a wall stop leaking the light outside into the room.
+    pub cut_intersections: bool,
 }
 
 impl Default for CleanParams {
@@ -135,6 +141,7 @@ impl Default for CleanParams {
             remove_covered: true,
             zip: true,
             keep_two_sided: false,
+            cut_intersections: false,
         }
     }
 }
@@ -222,12 +229,13 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
     }
     let identity: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
     let mut flipped = refine::FlippedEdges::default();
-    let mut round = clean_once(mesh, params, &identity, &mut flipped);
+    let mut cut = intersect::CutPairs::default();
+    let mut round = clean_once(mesh, params, &identity, &mut flipped, &mut cut);
     let mut report = round.report.clone();
     report.rounds = 1;
     // Repeat until a round repairs nothing, so that cleaning a cleaned mesh is a no-op.
     while round.report.repairs() > 0 && report.rounds < MAX_ROUNDS {
-        round = clean_once(&round.mesh, params, &round.origin, &mut flipped);
+        round = clean_once(&round.mesh, params, &round.origin, &mut flipped, &mut cut);
         report.absorb(&round.report, round.removed_area);
         report.rounds += 1;
     }
@@ -254,7 +262,13 @@ struct Round {
 /// One pass of the pipeline over a validated mesh. `origin` maps `mesh`'s triangles
 /// to the original input's, for the ids in the report; `flipped` holds the edges
 /// earlier rounds flipped, which are not flipped again.
-fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut refine::FlippedEdges) -> Round {
+fn clean_once(
+    mesh: &Mesh,
+    params: &CleanParams,
+    origin: &[u32],
+    flipped: &mut refine::FlippedEdges,
+    cut: &mut intersect::CutPairs,
+) -> Round {
     let diagonal = referenced_diagonal(mesh);
     let weld_tol = params.weld_tolerance.resolve(diagonal);
     let plane_tol = params.coplanar_tolerance.resolve(diagonal);
@@ -279,7 +293,8 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
 
     // 1. Weld.
     let mut work = weld::weld_points(mesh, weld_tol);
-    r.welded_vertices = weld::merge_vertices(&mut work, cos_hard_edge);
+    let seams = params.cut_intersections;
+    r.welded_vertices = merge(&mut work, cos_hard_edge, seams, &mut r);
     r.boundary_edges_before = count_boundary_and_non_manifold(&work).0;
 
     // 2-4. Remove redundant triangles.
@@ -302,6 +317,17 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
         work.compact_triangles();
     }
 
+    // 5b. Cut where triangles cross (after zipping: cracks closed, copies gone).
+    if params.cut_intersections {
+        // A contact within the weld tolerance counts (never below 1e-9 of the diagonal).
+        let contact_tol = (weld_tol as f64).max(1e-9 * diagonal as f64);
+        let c = intersect::cut_intersections(&mut work, plane_tol as f64, contact_tol, zip_tol as f64, cut, origin);
+        r.intersections_cut = c.segments;
+        r.triangles_cut = c.triangles_cut;
+        r.cut_crossings_unshared = c.unshared_splits;
+        r.cut_failures = c.dropped_pieces + c.failed_triangles;
+    }
+
     // 6. Orient (before refining: flips need consistent winding).
     if params.orient {
         let o = orient::orient_components(&mut work);
@@ -310,7 +336,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
         r.unorientable_component_count = o.unorientable_count;
     }
     // Zipping and orienting make vertices agree; merged vertices let edges flip.
-    r.welded_vertices += weld::merge_vertices(&mut work, cos_hard_edge);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, seams, &mut r);
 
     // 7. Refine.
     let slivers_before = refine::count_slivers(&work, sliver_rad);
@@ -321,7 +347,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
 
     // 8. Weld again and write out.
-    r.welded_vertices += weld::merge_vertices(&mut work, cos_hard_edge);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, seams, &mut r);
     work.compact_triangles();
     let (boundary, non_manifold) = count_boundary_and_non_manifold(&work);
     r.boundary_edges_after = boundary;
@@ -339,6 +365,14 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
     r.unorientable_components.iter_mut().for_each(|c| c.seed_triangle = to_input(c.seed_triangle));
     let origin = work.tri_origin.iter().map(|&t| to_input(t)).collect();
     Round { mesh: out, report: r, origin, removed_area }
+}
+
+/// Merges vertices (steps 1, 6 and 8); with `seams`, first splits them per
+/// wedge, so cut lines stay hard. Returns the vertices merged.
+fn merge(work: &mut Work, cos_hard_edge: f32, seams: bool, r: &mut CleanReport) -> usize {
+    let (merged, split) = weld::merge_vertices(work, cos_hard_edge, seams);
+    r.seam_vertices_split += split;
+    merged
 }
 
 /// Steps 2 and 3; adds to the report's counts and returns the area removed.
