@@ -28,6 +28,11 @@
 //!    intersection is the overlap of the two. A pair that meets in a point
 //!    (a shared corner, a touch) is not cut, nor one whose segment lies on a
 //!    boundary edge of both (two patches' rims along each other: zipping's job).
+//!    Nor are segments shorter than the zip tolerance, pairs whose planes
+//!    meet at less than about 3° ([`MIN_CUT_SINE`]), or a pair of input
+//!    triangles cut before in this clean ([`CutPairs`]): each of these made
+//!    pieces thinner than the weld tolerance that the next round removed and
+//!    the cut re-made (the dining room did not converge).
 //! 3. *Points*: segment ends within the contact tolerance of a corner of the
 //!    pair are that corner; new ends closer than it to each other are one
 //!    point (the smallest id), so both triangles of a pair, and the pairs along
@@ -53,7 +58,12 @@
 //! split there for that triangle alone ([`CutOutcome::unshared_splits`]); a
 //! piece the triangulation still cannot insert is left out and counted
 //! ([`CutOutcome::dropped_pieces`]). Both are reported; both are zero on the
-//! fixtures.
+//! fixtures and the dining room (5 unshared crossings on the Ferrari). A piece
+//! is oriented by the triangle's frame, where new points sit at their rounded
+//! barycentric coordinates; their 3D positions are the rounded f32 points, so
+//! a piece a few tolerances wide can fold over its neighbour in 3D (the
+//! grey-white room reports a few overlaps between pieces of one triangle, of
+//! 1e-5 to 4e-5 m²). Measurements: docs/performance.md.
 
 use super::hub_pairs;
 use super::spatial::{cluster_points, Aabb};
@@ -82,6 +92,11 @@ pub(crate) struct CutOutcome {
 const QUANTUM: f64 = 1.0 / (1u64 << 30) as f64;
 /// The frame's corner `C` is rounded to multiples of this (relative to `|AB|`).
 const SHAPE_QUANTUM: f64 = 1.0 / 1024.0;
+/// Pairs whose planes meet at a smaller angle (sine; about 3°) are not cut:
+/// an offset δ of either moves their common line by δ / sin θ, so the cut is
+/// ill-conditioned, and such pairs are mostly one surface modelled twice a
+/// hair apart (a car's double-sided panels) rather than a wall through a floor.
+const MIN_CUT_SINE: f64 = 0.05;
 /// Rounds of the point propagation (each adds points; real meshes settle in 2).
 const MAX_PROPAGATION_ROUNDS: usize = 16;
 
@@ -317,8 +332,8 @@ fn pair_segment(a: [DVec3; 3], b: [DVec3; 3], plane_tol: f64, tol: f64) -> Optio
         return None;
     }
     let dir = normal(a).cross(normal(b));
-    // Planes too close to parallel to order points along their common line.
-    if dir.length() <= 1e-9 {
+    // Shallow crossings are not cut (see MIN_CUT_SINE).
+    if dir.length() < MIN_CUT_SINE {
         return None;
     }
     let (ea, eb) = (plane_crossing(a, da, sa)?, plane_crossing(b, db, sb)?);

@@ -1,6 +1,6 @@
 //! Mesh clean-up before baking: weld, remove degenerate, duplicate and covered
-//! coplanar triangles, zip cracks and T-junctions, split long edges, flip slivers,
-//! orient components.
+//! coplanar triangles, zip cracks and T-junctions, cut where surfaces pass
+//! through each other (optional), split long edges, flip slivers, orient components.
 //!
 //! Why: PRT samples visibility on the mesh, and CAD or scanned meshes break it
 //! (Sloan-style PRT on industrial data, §4.1.1: "duplicated triangles, cracks
@@ -19,6 +19,11 @@
 //! 3. remove duplicates, flipped included ([`duplicates`]);
 //! 4. remove coplanar triangles covered by others, report partial overlaps ([`coplanar`]);
 //! 5. zip boundary cracks and T-junctions ([`zip`]), then re-run 2, 3 and 4;
+//!    with `cut_intersections`, cut every triangle along the segments where
+//!    other triangles cross it ([`intersect`]: a wall running past a wall, a
+//!    floor under and past a wall); the welds below then keep the two sides
+//!    of each cut line apart (vertices are split and merged per wedge,
+//!    [`weld::merge_vertices`]);
 //! 6. orient components ([`orient`]), then weld vertices again (zipping and
 //!    orienting make new agreements, and flips need shared vertices);
 //! 7. split edges longer than `max_edge`, flip slivers ([`refine`]);
@@ -49,7 +54,13 @@
 //! crack's width; on the Ferrari, +1.8e-5 relative, as thin triangles along
 //! boundaries collapse).
 //!
-//! Not done (yet): general self-intersections (non-coplanar), hole filling.
+//! **Self-intersections** (non-coplanar) are cut only with `cut_intersections`
+//! (default off for now; measured on the dining room, the grey-white room and
+//! the Ferrari in docs/performance.md). Limits: segments shorter than the zip
+//! tolerance are not cut, and a pair of input triangles is cut at most once
+//! per clean (see [`intersect`]).
+//!
+//! Not done (yet): hole filling.
 
 mod coplanar;
 mod degenerate;
@@ -293,8 +304,14 @@ fn clean_once(
 
     // 1. Weld.
     let mut work = weld::weld_points(mesh, weld_tol);
-    let seams = params.cut_intersections;
-    r.welded_vertices = merge(&mut work, cos_hard_edge, seams, &mut r);
+    // With the cut, vertices of two wedges (the sides of a cut line) never
+    // merge; they are split per wedge only from step 6 on, once duplicates
+    // (whose shared edges look non-manifold) are gone.
+    let (keep, split) = match params.cut_intersections {
+        true => (weld::Seams::Keep, weld::Seams::Split),
+        false => (weld::Seams::Ignore, weld::Seams::Ignore),
+    };
+    r.welded_vertices = merge(&mut work, cos_hard_edge, keep, &mut r);
     r.boundary_edges_before = count_boundary_and_non_manifold(&work).0;
 
     // 2-4. Remove redundant triangles.
@@ -336,7 +353,7 @@ fn clean_once(
         r.unorientable_component_count = o.unorientable_count;
     }
     // Zipping and orienting make vertices agree; merged vertices let edges flip.
-    r.welded_vertices += merge(&mut work, cos_hard_edge, seams, &mut r);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &mut r);
 
     // 7. Refine.
     let slivers_before = refine::count_slivers(&work, sliver_rad);
@@ -347,7 +364,7 @@ fn clean_once(
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
 
     // 8. Weld again and write out.
-    r.welded_vertices += merge(&mut work, cos_hard_edge, seams, &mut r);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &mut r);
     work.compact_triangles();
     let (boundary, non_manifold) = count_boundary_and_non_manifold(&work);
     r.boundary_edges_after = boundary;
@@ -367,9 +384,9 @@ fn clean_once(
     Round { mesh: out, report: r, origin, removed_area }
 }
 
-/// Merges vertices (steps 1, 6 and 8); with `seams`, first splits them per
-/// wedge, so cut lines stay hard. Returns the vertices merged.
-fn merge(work: &mut Work, cos_hard_edge: f32, seams: bool, r: &mut CleanReport) -> usize {
+/// Merges vertices (steps 1, 6 and 8), keeping or splitting wedges apart
+/// (`seams`), so cut lines stay hard. Returns the vertices merged.
+fn merge(work: &mut Work, cos_hard_edge: f32, seams: weld::Seams, r: &mut CleanReport) -> usize {
     let (merged, split) = weld::merge_vertices(work, cos_hard_edge, seams);
     r.seam_vertices_split += split;
     merged

@@ -51,26 +51,33 @@ pub(crate) fn weld_points(mesh: &Mesh, tol: f32) -> Work {
     }
 }
 
+/// How [`merge_vertices`] treats wedges (see [`corner_wedges`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Seams {
+    /// Merge at a point whatever the wedges (the default clean).
+    Ignore,
+    /// Merge only vertices of one wedge (a vertex's wedge: its first corner's).
+    Keep,
+    /// Split vertices per wedge first ([`split_wedges`]), then as `Keep`.
+    Split,
+}
+
 /// Merges vertices that share a point and whose normals differ by at most the hard-edge
 /// angle (`cos_hard_edge` is its cosine) and whose UVs and colours agree within
 /// [`UV_WELD_TOLERANCE`] / [`COLOR_WELD_TOLERANCE`]. Returns the number of vertices
 /// merged into another, and the number of copies [`split_wedges`] made.
 ///
-/// With `seams`, vertices are first split per wedge ([`split_wedges`]) and only
-/// vertices of one wedge merge: the sides of a cut stay apart (see
-/// [`super::intersect`]), however alike their attributes.
+/// With [`Seams::Split`], vertices are first split per wedge ([`split_wedges`]);
+/// with it or [`Seams::Keep`], only vertices of one wedge merge: the sides of a
+/// cut stay apart (see [`super::intersect`]), however alike their attributes.
 ///
 /// Only vertices used by live triangles take part (unused ones are dropped on output).
 ///
 /// Greedy and deterministic: within a point, vertices are visited by index and each
 /// joins the first earlier representative it agrees with (so agreement never chains).
-pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32, seams: bool) -> (usize, usize) {
-    let (split, wedge) = if seams {
-        let split = split_wedges(work);
-        (split, vertex_wedges(work))
-    } else {
-        (0, vec![0; work.vertex_point.len()])
-    };
+pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32, seams: Seams) -> (usize, usize) {
+    let split = if seams == Seams::Split { split_wedges(work) } else { 0 };
+    let wedge = if seams == Seams::Ignore { vec![0; work.vertex_point.len()] } else { vertex_wedges(work) };
     let mut used = vec![false; work.vertex_point.len()];
     for (tri, _) in work.tris.iter().zip(&work.tri_alive).filter(|(_, &alive)| alive) {
         tri.iter().for_each(|&v| used[v as usize] = true);
@@ -230,11 +237,11 @@ mod tests {
         // 90 degrees apart: same point, two vertices.
         let mut w = weld_points(&two_vertices(Vec3::Y, Vec3::X), 1e-6);
         assert_eq!(w.vertex_point[0], w.vertex_point[1]);
-        assert_eq!(merge_vertices(&mut w, cos60, false), (0, 0));
+        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore), (0, 0));
         // 30 degrees apart: merged into the smaller index, which keeps its normal.
         let n2 = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
         let mut w = weld_points(&two_vertices(Vec3::Y, n2), 1e-6);
-        assert_eq!(merge_vertices(&mut w, cos60, false), (1, 0));
+        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore), (1, 0));
         assert_eq!(w.tris[1][0], 0);
         assert_eq!(w.normals[0], Vec3::Y);
     }
