@@ -9,9 +9,7 @@
 //! tobj gives each object/material block its own copy of the vertices it uses;
 //! a vertex identical in every attribute across blocks is one vertex again, so
 //! `write_obj` → `load_mesh` keeps the vertex count (and a cleaned mesh bakes
-//! the same through OBJ as inline). Within a block, two file vertices alike in
-//! every attribute stay two (the two sides of a cut line written by
-//! `clean --cut-intersections` must not weld back on loading). OBJ `l` polylines are skipped with a warning.
+//! the same through OBJ as inline). OBJ `l` polylines are skipped with a warning.
 //! A missing or broken `.mtl` is not fatal: parts fall back to a default grey
 //! material and a warning says why.
 
@@ -86,10 +84,9 @@ pub(crate) fn load_obj(
     let mut builder = MeshBuilder::new(materials);
     let mut default_material = None;
     let mut unresolved = false;
-    // First vertex with each key, and the block (tobj model) it came from.
-    let mut first_vertex: HashMap<VertexKey, (u32, usize)> = HashMap::new();
+    let mut first_vertex: HashMap<VertexKey, u32> = HashMap::new();
 
-    for (model_index, model) in models.iter().enumerate() {
+    for model in &models {
         let mesh = &model.mesh;
         let n = mesh.positions.len() / 3;
         if mesh.indices.is_empty() {
@@ -134,21 +131,12 @@ pub(crate) fn load_obj(
             // tobj gives each object/material block its own vertices: a vertex the
             // file shares between blocks (same position, normal, uv, colour) is
             // one vertex again, as it is in the file and in a GLB of the same mesh.
-            // Within a block tobj already keeps one vertex per file vertex: two
-            // file vertices alike in every attribute stay two (the sides of a
-            // cut, `clean --cut-intersections`).
             let key = VertexKey::new(position, normal, uv, color);
             let next = builder.vertex_count() as u32;
-            let index = match first_vertex.get(&key) {
-                Some(&(first, block)) if block != model_index => first,
-                found => {
-                    if found.is_none() {
-                        first_vertex.insert(key, (next, model_index));
-                    }
-                    builder.push_vertex(position, normal, uv, color);
-                    next
-                }
-            };
+            let index = *first_vertex.entry(key).or_insert(next);
+            if index == next {
+                builder.push_vertex(position, normal, uv, color);
+            }
             local_to_global.push(index);
         }
         for triangle in mesh.indices.chunks_exact(3) {
