@@ -138,6 +138,10 @@ struct BakeArgs {
     /// With --clean: split edges longer than this (world units), as `clean --max-edge` does.
     #[arg(long, requires = "clean")]
     max_edge: Option<f32>,
+    /// With --clean: cut triangles where geometry passes through geometry and keep
+    /// the two sides of each cut apart, as `clean --cut-intersections` does.
+    #[arg(long, requires = "clean")]
+    cut_intersections: bool,
     #[command(flatten)]
     refine: RefineArgs,
     /// Bake only shard K of N (K in 0..N): its share of the items, into a part (-o PART.prtp)
@@ -239,6 +243,11 @@ struct CleanArgs {
     /// Split edges longer than this (world units), recursively.
     #[arg(long)]
     max_edge: Option<f32>,
+    /// Cut triangles along the lines where other triangles pass through them (a wall
+    /// running past a wall, a floor under and past a wall) and keep the two sides of
+    /// each line apart, so the light outside does not bleed into the room.
+    #[arg(long)]
+    cut_intersections: bool,
     /// Keep one triangle per winding of a doubled sheet (two-sided surfaces).
     #[arg(long)]
     keep_two_sided: bool,
@@ -634,7 +643,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     };
     let clean = match a.clean {
         true => {
-            let params = CleanParams { max_edge: a.max_edge, ..CleanParams::cad() };
+            let params = CleanParams { max_edge: a.max_edge, cut_intersections: a.cut_intersections, ..CleanParams::cad() };
             params.validate()?;
             Some(params)
         }
@@ -701,6 +710,7 @@ fn clean_config(a: CleanArgs) -> anyhow::Result<cli::clean_cmd::CleanConfig> {
     }
     params.max_edge = a.max_edge.or(params.max_edge);
     params.keep_two_sided = a.keep_two_sided;
+    params.cut_intersections = a.cut_intersections;
     params.validate()?;
     Ok(cli::clean_cmd::CleanConfig {
         input: a.input,

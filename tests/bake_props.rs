@@ -282,3 +282,52 @@ fn no_window_halo_on_the_outer_face_of_a_wall() {
         }
     }
 }
+
+/// Issue 20 (cutting), the leak: a closed room of six separate inward patches
+/// whose floor runs 0.17 m and right wall 0.1 m past the back wall. Open mode,
+/// bounce 0: no sky is visible from inside a closed room, so the closed form
+/// is zero transfer at every vertex inside it. A vertex is inside when its
+/// position lies in the room's box and every triangle using it has its
+/// centroid there. Cleaned without the cut, triangles span the back wall's
+/// plane and inside vertices share them with the strips outside: some are
+/// lit (the leak this test must be able to see). Cleaned with
+/// `cut_intersections`, every inside vertex is exactly 0, and the vertices
+/// outside (past the back wall) still see the sky.
+#[test]
+fn cutting_where_walls_run_past_stops_the_leak_into_the_room() {
+    use prtbake::clean::{clean_mesh, CleanParams};
+    let room = shapes::room_with_walls_running_past();
+    let [sx, sy, sz] = shapes::PAST_ROOM_SIZE;
+    let in_box = |p: Vec3| (-1e-4..=sx + 1e-4).contains(&p.x) && (-1e-4..=sy + 1e-4).contains(&p.y) && (-1e-4..=sz + 1e-4).contains(&p.z);
+    let bake = |cut: bool| {
+        let (mesh, report) = clean_mesh(&room, &CleanParams { cut_intersections: cut, ..CleanParams::default() }).unwrap();
+        assert_eq!(report.intersections_cut > 0, cut, "{}", report.summary());
+        let params = BakeParams { order: 2, rays: 64, bounces: 0, mode: Mode::Open, ..BakeParams::default() };
+        let (result, _, _) = bake_mesh(&mesh, &params, &[]).unwrap();
+        let dc: Vec<f32> = (0..mesh.vertex_count()).map(|v| result.coefficients(v, 0)[0]).collect();
+        let mut inside: Vec<bool> = mesh.positions.iter().map(|&p| in_box(p)).collect();
+        for t in 0..mesh.triangle_count() {
+            let [a, b, c] = mesh.triangle_positions(t);
+            if !in_box((a + b + c) / 3.0) {
+                mesh.triangle(t).iter().for_each(|&v| inside[v as usize] = false);
+            }
+        }
+        (mesh, dc, inside)
+    };
+    let (plain, plain_dc, plain_inside) = bake(false);
+    let lit = (0..plain.vertex_count()).filter(|&v| plain_inside[v] && plain_dc[v] > 0.0).count();
+    let brightest = (0..plain.vertex_count()).filter(|&v| plain_inside[v]).map(|v| plain_dc[v]).fold(0.0f32, f32::max);
+    eprintln!("without the cut: {lit} inside vertices lit, brightest DC {brightest:.4}");
+    assert!(lit > 0, "the fixture no longer leaks without the cut");
+
+    let (cut, dc, inside) = bake(true);
+    assert!(inside.iter().filter(|&&i| i).count() > 30, "too few inside vertices to test");
+    for v in (0..cut.vertex_count()).filter(|&v| inside[v]) {
+        assert_eq!(dc[v], 0.0, "inside vertex {v} at {} is lit", cut.positions[v]);
+    }
+    let outside: Vec<usize> = (0..cut.vertex_count()).filter(|&v| cut.positions[v].z > sz + 1e-4).collect();
+    assert!(!outside.is_empty());
+    for &v in &outside {
+        assert!(dc[v] > 0.0, "outside vertex {v} at {} sees no sky", cut.positions[v]);
+    }
+}

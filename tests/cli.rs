@@ -308,3 +308,44 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
         assert!(!out.exists());
     }
 }
+
+/// Issue 20 (cutting): `clean --cut-intersections` reports the segments and
+/// triangles it cut (summary and JSON), `bake --clean --cut-intersections`
+/// bakes the same cleaned mesh as `clean --cut-intersections` to GLB then
+/// `bake`, an OBJ output warns that loading it welds the cut's sides back,
+/// and the flag means nothing without `--clean`.
+#[test]
+fn clean_and_bake_cut_intersections() {
+    let dir = Scratch::new("cut-intersections");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &prtbake::verify::shapes::room_with_walls_running_past()).unwrap();
+    let cleaned = dir.path("cut.glb");
+    let run = |args: &[&str]| {
+        let o = prtbake(args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (json, _) = run(&["clean", obj.to_str().unwrap(), "-o", cleaned.to_str().unwrap(), "--cut-intersections", "--json"]);
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!(report["intersections_cut"].as_u64().unwrap() > 0 && report["triangles_cut"].as_u64().unwrap() > 0, "{report}");
+    let (plain, _) = run(&["clean", obj.to_str().unwrap(), "-o", dir.path("plain.obj").to_str().unwrap()]);
+    assert!(plain.contains("intersections cut      0"), "{plain}");
+    let (_, warned) = run(&["clean", obj.to_str().unwrap(), "-o", dir.path("cut.obj").to_str().unwrap(), "--cut-intersections", "--quiet"]);
+    assert!(warned.contains("write .glb"), "{warned}");
+    let common = ["--rays", "16", "--bounces", "0", "--seed", "3", "--quiet"];
+    let bake = |input: &std::path::Path, out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend(common);
+        args.extend(extra);
+        run(&args);
+        prtbake::bundle::read_bundle(&out).unwrap()
+    };
+    let direct = bake(&obj, "direct.prtb", &["--clean", "--cut-intersections"]);
+    let via_file = bake(&cleaned, "via-file.prtb", &[]);
+    assert_eq!(direct.mesh.vertex_count(), via_file.mesh.vertex_count(), "vertex counts");
+    assert_eq!(direct.mesh.positions, via_file.mesh.positions);
+    assert_eq!(direct.mesh.indices, via_file.mesh.indices);
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("x.prtb").to_str().unwrap(), "--cut-intersections"]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+}

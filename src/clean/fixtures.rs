@@ -565,3 +565,63 @@ pub fn fan(shape: FanShape, n: usize) -> Mesh {
     }
     b.mesh
 }
+
+/// Two unit-thick quads crossing in an X (issue 20, cutting): quad A in the
+/// plane y = 0 (x, z in −1..1, facing +y, diagonal (−1, 0, 1)–(1, 0, −1)) and
+/// quad B in the plane x = 0 (y in −1..2, z in −1..1, facing −x, diagonal
+/// (0, −1, 1)–(0, 2, −1)). They cross along x = y = 0, z in −1..1, which A's
+/// diagonal meets at z = 0 and B's at z = 1/3: three segments (z from −1 to 0,
+/// 0 to 1/3, 1/3 to 1) and 16 pieces (see `clean::tests`).
+pub fn crossing_quads() -> Mesh {
+    let mut b = Builder::new(materials());
+    let (ga, gb) = (b.group("quad_a"), b.group("quad_b"));
+    b.grid(Vec3::new(-1.0, 0.0, 1.0), Vec3::X * 2.0, Vec3::NEG_Z * 2.0, 1, 1, 0, ga);
+    b.grid(Vec3::new(0.0, -1.0, 1.0), Vec3::Y * 3.0, Vec3::NEG_Z * 2.0, 1, 1, 0, gb);
+    b.mesh
+}
+
+/// A floor quad (y = 0, x and z in −1..1, facing +y, diagonal (−1, 0, 1)–(1,
+/// 0, −1)) and a wall quad standing on it (z = 0.25, x in −1.5..1.5, y in
+/// 0..1, facing +z) whose bottom edge crosses the whole floor: a T-contact
+/// along a line, the floor-under-wall case. The floor is cut along z = 0.25
+/// (two segments, meeting on its diagonal at x = −0.25); the wall's bottom
+/// edge takes the three points where it meets the floor's edges.
+pub fn wall_on_floor() -> Mesh {
+    let mut b = Builder::new(materials());
+    let (gf, gw) = (b.group("floor"), b.group("wall"));
+    b.grid(Vec3::new(-1.0, 0.0, 1.0), Vec3::X * 2.0, Vec3::NEG_Z * 2.0, 1, 1, 0, gf);
+    b.grid(Vec3::new(-1.5, 0.0, 0.25), Vec3::X * 3.0, Vec3::Y, 1, 1, 0, gw);
+    b.mesh
+}
+
+/// A floor triangle and a small wall triangle standing inside it (bottom edge
+/// from (−0.5, 0, 0) to (0.5, 0, 0)): the wall ends inside the floor, so the
+/// floor is slit along the edge, not separated.
+pub fn wall_inside_floor_triangle() -> Mesh {
+    let mut b = Builder::new(materials());
+    let (gf, gw) = (b.group("floor"), b.group("wall"));
+    let f = [Vec3::new(-2.0, 0.0, 2.0), Vec3::new(2.0, 0.0, 2.0), Vec3::new(0.0, 0.0, -2.0)].map(|p| b.vertex(p, Vec3::Y));
+    b.tri_facing(f, Vec3::Y, 0, gf);
+    let w = [Vec3::new(-0.5, 0.0, 0.0), Vec3::new(0.5, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)].map(|p| b.vertex(p, Vec3::Z));
+    b.tri_facing(w, Vec3::Z, 0, gw);
+    b.mesh
+}
+
+/// Pairs that touch without crossing: two triangles folded at 90° along a
+/// shared edge, a third meeting the first only at a shared corner, and a
+/// fourth (its own vertices) touching the first's plane in one corner.
+pub fn touching_triangles() -> Mesh {
+    let mut b = Builder::new(materials());
+    let g = b.group("fold");
+    let o = b.vertex(Vec3::ZERO, Vec3::Y);
+    let x = b.vertex(Vec3::X, Vec3::Y);
+    let z = b.vertex(Vec3::Z, Vec3::Y);
+    let up = b.vertex(Vec3::Y, Vec3::NEG_Z);
+    b.tri_facing([o, x, z], Vec3::Y, 0, g);
+    b.tri_facing([o, x, up], Vec3::NEG_Z, 0, g);
+    let far = [Vec3::new(-1.0, 0.5, -1.0), Vec3::new(-1.0, -0.5, -1.0)].map(|p| b.vertex(p, Vec3::X));
+    b.tri_facing([o, far[0], far[1]], Vec3::X, 0, g);
+    let touch = [Vec3::new(0.2, 0.0, 0.2), Vec3::new(0.2, 1.0, 0.2), Vec3::new(0.4, 1.0, 0.3)].map(|p| b.vertex(p, Vec3::X));
+    b.tri_facing(touch, Vec3::X, 0, g);
+    b.mesh
+}

@@ -1,6 +1,6 @@
 //! Mesh clean-up before baking: weld, remove degenerate, duplicate and covered
-//! coplanar triangles, zip cracks and T-junctions, split long edges, flip slivers,
-//! orient components.
+//! coplanar triangles, zip cracks and T-junctions, cut where surfaces pass
+//! through each other (optional), split long edges, flip slivers, orient components.
 //!
 //! Why: PRT samples visibility on the mesh, and CAD or scanned meshes break it
 //! (Sloan-style PRT on industrial data, §4.1.1: "duplicated triangles, cracks
@@ -19,6 +19,11 @@
 //! 3. remove duplicates, flipped included ([`duplicates`]);
 //! 4. remove coplanar triangles covered by others, report partial overlaps ([`coplanar`]);
 //! 5. zip boundary cracks and T-junctions ([`zip`]), then re-run 2, 3 and 4;
+//!    with `cut_intersections`, cut every triangle along the segments where
+//!    other triangles cross it ([`intersect`]: a wall running past a wall, a
+//!    floor under and past a wall); the welds below then keep the two sides
+//!    of each cut line apart (vertices are split and merged per wedge,
+//!    [`weld::merge_vertices`]);
 //! 6. orient components ([`orient`]), then weld vertices again (zipping and
 //!    orienting make new agreements, and flips need shared vertices);
 //! 7. split edges longer than `max_edge`, flip slivers ([`refine`]);
@@ -53,13 +58,20 @@
 //! crack's width; on the Ferrari, +1.8e-5 relative, as thin triangles along
 //! boundaries collapse).
 //!
-//! Not done (yet): general self-intersections (non-coplanar), hole filling.
+//! **Self-intersections** (non-coplanar) are cut only with `cut_intersections`
+//! (default off for now; measured on the dining room, the grey-white room and
+//! the Ferrari in docs/performance.md). Limits: segments shorter than the zip
+//! tolerance are not cut, and a pair of input triangles is cut at most once
+//! per clean (see [`intersect`]).
+//!
+//! Not done (yet): hole filling.
 
 mod coplanar;
 mod degenerate;
 mod duplicates;
 pub mod fixtures;
 mod hub_pairs;
+mod intersect;
 mod orient;
 mod refine;
 mod report;
@@ -126,6 +138,11 @@ pub struct CleanParams {
     pub zip: bool,
     /// Keep one triangle per winding of a duplicated set (two-sided sheets); default false.
     pub keep_two_sided: bool,
+    /// Cut triangles along the lines where other triangles pass through them,
+    /// and keep the two sides of every such line apart (default false; see
+    /// [`intersect`]): a wall running past another, a floor running under and
+    /// past a wall stop leaking the light outside into the room.
+    pub cut_intersections: bool,
 }
 
 impl Default for CleanParams {
@@ -141,6 +158,7 @@ impl Default for CleanParams {
             remove_covered: true,
             zip: true,
             keep_two_sided: false,
+            cut_intersections: false,
         }
     }
 }
@@ -228,12 +246,13 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
     }
     let identity: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
     let mut flipped = refine::FlippedEdges::default();
-    let mut round = clean_once(mesh, params, &identity, &mut flipped);
+    let mut cut = intersect::CutPairs::default();
+    let mut round = clean_once(mesh, params, &identity, &mut flipped, &mut cut);
     let mut report = round.report.clone();
     report.rounds = 1;
     // Repeat until a round repairs nothing, so that cleaning a cleaned mesh is a no-op.
     while round.report.repairs() > 0 && report.rounds < MAX_ROUNDS {
-        round = clean_once(&round.mesh, params, &round.origin, &mut flipped);
+        round = clean_once(&round.mesh, params, &round.origin, &mut flipped, &mut cut);
         report.absorb(&round.report, round.removed_area);
         report.rounds += 1;
     }
@@ -260,7 +279,13 @@ struct Round {
 /// One pass of the pipeline over a validated mesh. `origin` maps `mesh`'s triangles
 /// to the original input's, for the ids in the report; `flipped` holds the edges
 /// earlier rounds flipped, which are not flipped again.
-fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut refine::FlippedEdges) -> Round {
+fn clean_once(
+    mesh: &Mesh,
+    params: &CleanParams,
+    origin: &[u32],
+    flipped: &mut refine::FlippedEdges,
+    cut: &mut intersect::CutPairs,
+) -> Round {
     let diagonal = referenced_diagonal(mesh);
     let weld_tol = params.weld_tolerance.resolve(diagonal);
     let plane_tol = params.coplanar_tolerance.resolve(diagonal);
@@ -285,7 +310,14 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
 
     // 1. Weld.
     let mut work = weld::weld_points(mesh, weld_tol);
-    r.welded_vertices = weld::merge_vertices(&mut work, cos_hard_edge);
+    // With the cut, vertices of two wedges (the sides of a cut line) never
+    // merge; they are split per wedge only from step 6 on, once duplicates
+    // (whose shared edges look non-manifold) are gone.
+    let (keep, split) = match params.cut_intersections {
+        true => (weld::Seams::Keep, weld::Seams::Split),
+        false => (weld::Seams::Ignore, weld::Seams::Ignore),
+    };
+    r.welded_vertices = merge(&mut work, cos_hard_edge, keep, &mut r);
     r.boundary_edges_before = count_boundary_and_non_manifold(&work).0;
 
     // 2-4. Remove redundant triangles.
@@ -308,6 +340,17 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
         work.compact_triangles();
     }
 
+    // 5b. Cut where triangles cross (after zipping: cracks closed, copies gone).
+    if params.cut_intersections {
+        // A contact within the weld tolerance counts (never below 1e-9 of the diagonal).
+        let contact_tol = (weld_tol as f64).max(1e-9 * diagonal as f64);
+        let c = intersect::cut_intersections(&mut work, plane_tol as f64, contact_tol, zip_tol as f64, cut, origin);
+        r.intersections_cut = c.segments;
+        r.triangles_cut = c.triangles_cut;
+        r.cut_crossings_unshared = c.unshared_splits;
+        r.cut_failures = c.dropped_pieces + c.failed_triangles;
+    }
+
     // 6. Orient (before refining: flips need consistent winding).
     if params.orient {
         let o = orient::orient_components(&mut work);
@@ -316,7 +359,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
         r.unorientable_component_count = o.unorientable_count;
     }
     // Zipping and orienting make vertices agree; merged vertices let edges flip.
-    r.welded_vertices += weld::merge_vertices(&mut work, cos_hard_edge);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &mut r);
 
     // 7. Refine.
     let slivers_before = refine::count_slivers(&work, sliver_rad);
@@ -327,7 +370,7 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
 
     // 8. Weld again and write out.
-    r.welded_vertices += weld::merge_vertices(&mut work, cos_hard_edge);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &mut r);
     work.compact_triangles();
     let (boundary, non_manifold) = count_boundary_and_non_manifold(&work);
     r.boundary_edges_after = boundary;
@@ -345,6 +388,14 @@ fn clean_once(mesh: &Mesh, params: &CleanParams, origin: &[u32], flipped: &mut r
     r.unorientable_components.iter_mut().for_each(|c| c.seed_triangle = to_input(c.seed_triangle));
     let origin = work.tri_origin.iter().map(|&t| to_input(t)).collect();
     Round { mesh: out, report: r, origin, removed_area }
+}
+
+/// Merges vertices (steps 1, 6 and 8), keeping or splitting wedges apart
+/// (`seams`), so cut lines stay hard. Returns the vertices merged.
+fn merge(work: &mut Work, cos_hard_edge: f32, seams: weld::Seams, r: &mut CleanReport) -> usize {
+    let (merged, split) = weld::merge_vertices(work, cos_hard_edge, seams);
+    r.seam_vertices_split += split;
+    merged
 }
 
 /// Steps 2 and 3; adds to the report's counts and returns the area removed.

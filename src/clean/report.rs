@@ -80,6 +80,21 @@ pub struct CleanReport {
     pub tjunctions_fixed: usize,
     /// Edges split because they were longer than `max_edge`.
     pub edges_split: usize,
+    /// Intersection segments cut into the mesh (one per pair of crossing
+    /// triangles; `cut_intersections`).
+    pub intersections_cut: usize,
+    /// Triangles replaced by their pieces along those segments (with the edge
+    /// neighbours that took a point of a segment, so no T-junction appears).
+    pub triangles_cut: usize,
+    /// Vertex copies made so that no vertex spans a cut line or another
+    /// non-manifold edge (with `cut_intersections`).
+    pub seam_vertices_split: usize,
+    /// Crossings of two segments that one triangle's triangulation found and
+    /// split alone (normally 0: three triangles meeting at a point share it).
+    pub cut_crossings_unshared: usize,
+    /// Segment pieces the triangulation could not insert, and triangles whose
+    /// triangulation failed (left uncut; normally 0).
+    pub cut_failures: usize,
     /// Slivers before refinement minus slivers after.
     pub slivers_fixed: usize,
     /// Edge flips made to improve slivers.
@@ -127,7 +142,7 @@ const LISTED_EDGE_FRACTION: f32 = 0.5;
 
 impl CleanReport {
     /// Every repair count by name, as in the JSON report.
-    pub fn repair_counts(&self) -> [(&'static str, usize); 10] {
+    pub fn repair_counts(&self) -> [(&'static str, usize); 12] {
         [
             ("welded_vertices", self.welded_vertices),
             ("degenerate_removed", self.degenerate_removed),
@@ -136,6 +151,8 @@ impl CleanReport {
             ("covered_coplanar_removed", self.covered_coplanar_removed),
             ("zipped_edges", self.zipped_edges),
             ("tjunctions_fixed", self.tjunctions_fixed),
+            ("intersections_cut", self.intersections_cut),
+            ("seam_vertices_split", self.seam_vertices_split),
             ("edges_split", self.edges_split),
             ("sliver_flips", self.sliver_flips),
             ("triangles_flipped", self.triangles_flipped),
@@ -158,6 +175,11 @@ impl CleanReport {
         self.covered_coplanar_removed += later.covered_coplanar_removed;
         self.zipped_edges += later.zipped_edges;
         self.tjunctions_fixed += later.tjunctions_fixed;
+        self.intersections_cut += later.intersections_cut;
+        self.triangles_cut += later.triangles_cut;
+        self.seam_vertices_split += later.seam_vertices_split;
+        self.cut_crossings_unshared += later.cut_crossings_unshared;
+        self.cut_failures += later.cut_failures;
         self.edges_split += later.edges_split;
         self.slivers_fixed += later.slivers_fixed;
         self.sliver_flips += later.sliver_flips;
@@ -203,6 +225,11 @@ impl CleanReport {
         let _ = writeln!(s, "covered coplanar       {}", self.covered_coplanar_removed);
         let _ = writeln!(s, "partial overlaps       {}", self.partial_overlap_count);
         let _ = writeln!(s, "zipped edges           {} ({} T-junctions)", self.zipped_edges, self.tjunctions_fixed);
+        let _ = writeln!(
+            s,
+            "intersections cut      {} ({} triangles cut, {} seam vertices split; {} crossings unshared, {} failures)",
+            self.intersections_cut, self.triangles_cut, self.seam_vertices_split, self.cut_crossings_unshared, self.cut_failures
+        );
         let _ = writeln!(s, "edges split            {}", self.edges_split);
         let _ = writeln!(s, "slivers fixed          {} ({} flips)", self.slivers_fixed, self.sliver_flips);
         let _ = writeln!(

@@ -470,3 +470,154 @@ fn shared_data(rel: &str) -> Option<String> {
     }
     present.then_some(path)
 }
+
+/// The default parameters with `cut_intersections` on.
+fn cut_params() -> CleanParams {
+    CleanParams { cut_intersections: true, ..CleanParams::default() }
+}
+
+/// Cleans `mesh` with the cut, checks what every cut must keep (valid, area
+/// within 1e-6, converged, a second clean cuts and changes nothing) and
+/// returns the output and report.
+fn clean_cut(name: &str, mesh: &Mesh) -> (Mesh, CleanReport) {
+    let (out, r) = clean_mesh(mesh, &cut_params()).unwrap();
+    eprintln!("{name}:\n{}", r.summary());
+    out.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+    let (before, after) = (mesh_area(mesh), mesh_area(&out));
+    assert!(((after - before) / before).abs() <= AREA_REL_TOL, "{name}: area {before} -> {after}");
+    assert!(r.converged, "{name}: {}", r.summary());
+    let (again, r2) = clean_mesh(&out, &cut_params()).unwrap();
+    assert_eq!((r2.intersections_cut, r2.triangles_cut), (0, 0), "{name}: the second clean cut again\n{}", r2.summary());
+    assert_eq!(r2.repairs(), 0, "{name}: the second clean repaired\n{}", r2.summary());
+    assert_eq!(again, out, "{name}: the second clean changed the mesh");
+    (out, r)
+}
+
+/// True when no vertex is used by triangles on both sides of the plane
+/// `side(p) = 0` (triangles touching it count by their centroid), among the
+/// triangles `keep` selects: the cut line is a hard seam.
+fn sides_share_no_vertex(mesh: &Mesh, keep: impl Fn(usize) -> bool, side: impl Fn(Vec3) -> f32) -> bool {
+    let mut seen: std::collections::HashMap<u32, bool> = std::collections::HashMap::new();
+    for t in (0..mesh.triangle_count()).filter(|&t| keep(t)) {
+        let [a, b, c] = mesh.triangle_positions(t);
+        let positive = side((a + b + c) / 3.0) > 0.0;
+        for v in mesh.triangle(t) {
+            if *seen.entry(v).or_insert(positive) != positive {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// No triangle selected by `keep` has corners strictly on both sides of `side`.
+fn no_triangle_spans(mesh: &Mesh, keep: impl Fn(usize) -> bool, side: impl Fn(Vec3) -> f32) -> bool {
+    (0..mesh.triangle_count()).filter(|&t| keep(t)).all(|t| {
+        let s = mesh.triangle_positions(t).map(&side);
+        !(s.iter().any(|&x| x > 1e-6) && s.iter().any(|&x| x < -1e-6))
+    })
+}
+
+/// Issue 20 (cutting): two quads crossing in an X. Their common line x = y = 0
+/// is met by A's diagonal at z = 0 and by B's at z = 1/3, so the pairs of
+/// triangles cross in three segments. A's triangle over z ≥ 0 gains an edge
+/// point (z = 1), a diagonal point (z = 0) and an interior point (z = 1/3):
+/// six points, five on its hull, a chain of constraints: 2·6 − 5 − 2 = 5
+/// pieces; A's other triangle gains two edge points joined by a chord: 3;
+/// likewise B: 3 and 5. 4 triangles → 16.
+#[test]
+fn crossing_quads_are_cut_along_their_common_line() {
+    let mesh = fixtures::crossing_quads();
+    let (out, r) = clean_cut("crossing quads", &mesh);
+    assert_eq!((r.intersections_cut, r.triangles_cut, out.triangle_count()), (3, 4, 16));
+    let group = |name: &str| out.groups.iter().position(|g| g == name).unwrap() as u32;
+    let (a, b) = (group("quad_a"), group("quad_b"));
+    let in_a = |t: usize| out.tri_group[t] == a;
+    let in_b = |t: usize| out.tri_group[t] == b;
+    assert!(no_triangle_spans(&out, in_a, |p| p.x) && no_triangle_spans(&out, in_b, |p| p.y));
+    assert!(sides_share_no_vertex(&out, in_a, |p| p.x), "A's sides share a vertex");
+    assert!(sides_share_no_vertex(&out, in_b, |p| p.y), "B's sides share a vertex");
+    // Without the flag nothing is cut.
+    let (plain, r) = clean_mesh(&mesh, &CleanParams::default()).unwrap();
+    assert_eq!((r.intersections_cut, plain.triangle_count()), (0, 4));
+}
+
+/// Issue 20 (cutting), the floor-under-wall case: a wall whose bottom edge lies
+/// on a floor quad and crosses it. Each floor triangle gains two edge points
+/// joined by a chord (3 pieces each); the wall's bottom triangle gains three
+/// points on its bottom edge (4 pieces), its other triangle none: 4 → 11.
+#[test]
+fn a_wall_standing_on_a_floor_cuts_the_floor_along_its_foot() {
+    let (out, r) = clean_cut("wall on floor", &fixtures::wall_on_floor());
+    assert_eq!((r.intersections_cut, r.triangles_cut, out.triangle_count()), (2, 3, 11));
+    let floor = out.groups.iter().position(|g| g == "floor").unwrap() as u32;
+    let on_floor = |t: usize| out.tri_group[t] == floor;
+    assert!(no_triangle_spans(&out, on_floor, |p| p.z - 0.25));
+    assert!(sides_share_no_vertex(&out, on_floor, |p| p.z - 0.25), "the floor's sides share a vertex");
+    // The foot is a seam on points: the floor's pieces and the wall share it.
+    let (_, non_manifold) = work::count_boundary_and_non_manifold(&weld::weld_points(&out, 0.0));
+    assert_eq!(non_manifold, 2, "the foot: x from -1 to -0.25 and to 1");
+}
+
+/// A wall ending inside a floor triangle slits it: two interior points and
+/// the slit between them, 2·5 − 3 − 2 = 5 pieces; the wall is not cut.
+#[test]
+fn a_wall_ending_inside_a_floor_triangle_slits_it() {
+    let (out, r) = clean_cut("wall inside floor triangle", &fixtures::wall_inside_floor_triangle());
+    assert_eq!((r.intersections_cut, r.triangles_cut, out.triangle_count()), (1, 1, 6));
+}
+
+/// Pairs that share an edge, share a corner or touch a plane in one point
+/// are not cut; neither are coplanar overlaps (the coplanar step reports them).
+#[test]
+fn touching_and_coplanar_pairs_are_not_cut() {
+    for (name, mesh) in [("touching", fixtures::touching_triangles()), ("coplanar", fixtures::fixture_partial_overlap().mesh)] {
+        let (out, r) = clean_cut(name, &mesh);
+        let (plain, plain_report) = clean_mesh(&mesh, &CleanParams::default()).unwrap();
+        assert_eq!((r.intersections_cut, r.triangles_cut), (0, 0), "{name}");
+        assert_eq!(out.triangle_count(), plain.triangle_count(), "{name}");
+        assert_eq!(r.partial_overlap_count, plain_report.partial_overlap_count, "{name}");
+    }
+}
+
+/// The fixtures do not cross themselves: with the cut on they clean to what
+/// they clean to without it.
+#[test]
+fn the_cut_changes_nothing_on_fixtures_that_do_not_cross_themselves() {
+    for f in fixtures::all_fixtures() {
+        let (plain, _) = clean(&f);
+        let (cut, r) = clean_mesh(&f.mesh, &CleanParams { cut_intersections: true, ..f.params }).unwrap();
+        assert_eq!((r.intersections_cut, r.triangles_cut), (0, 0), "{}", f.name);
+        assert_eq!(cut, plain, "{}\n{}", f.name, r.summary());
+    }
+}
+
+/// Issue 20 (cutting) on the room whose floor and right wall run past the back
+/// wall: every crossing is cut, the floor and right wall are split along the
+/// back wall's plane with no vertex on both sides, the clean converges and
+/// a second clean changes nothing; same input, same bytes.
+#[test]
+fn the_room_with_walls_running_past_is_cut_at_the_back_wall() {
+    let mesh = crate::verify::shapes::room_with_walls_running_past();
+    let (out, r) = clean_cut("room", &mesh);
+    assert!(r.intersections_cut > 0 && r.triangles_cut > 0 && r.seam_vertices_split > 0, "{}", r.summary());
+    let back = crate::verify::shapes::PAST_ROOM_SIZE[2];
+    assert!(no_triangle_spans(&out, |_| true, |p| p.z - back));
+    assert!(sides_share_no_vertex(&out, |_| true, |p| p.z - back), "a vertex spans the back wall");
+    let bits = |m: &Mesh| m.positions.iter().flat_map(|p| p.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+    let (again, _) = clean_mesh(&mesh, &cut_params()).unwrap();
+    assert_eq!(again, out);
+    assert_eq!(bits(&again), bits(&out));
+}
+
+/// The cut's broad phase is near-linear around a high-valence point: a 10k fan
+/// does not cross itself, and cleaning it with the cut converges quickly.
+#[test]
+fn a_high_valence_fan_does_not_cut_itself() {
+    let mesh = fixtures::fan(fixtures::FanShape::Disc, 10_000);
+    let start = std::time::Instant::now();
+    let (out, r) = clean_mesh(&mesh, &cut_params()).unwrap();
+    eprintln!("disc 10k with the cut: {:.2} s", start.elapsed().as_secs_f64());
+    assert_eq!((r.intersections_cut, r.triangles_cut), (0, 0));
+    assert_eq!(out.triangle_count(), clean_mesh(&mesh, &CleanParams::default()).unwrap().0.triangle_count());
+}

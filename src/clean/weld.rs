@@ -7,8 +7,9 @@
 //! welded mesh changes nothing.
 
 use super::spatial::cluster_points;
-use super::work::Work;
+use super::work::{edge_runs, sorted_edges, EdgeUse, Work};
 use crate::mesh::Mesh;
+use std::collections::HashMap;
 
 /// Two vertices at one point keep separate UVs when these differ by more (UV units).
 pub(crate) const UV_WELD_TOLERANCE: f32 = 1e-4;
@@ -50,26 +51,44 @@ pub(crate) fn weld_points(mesh: &Mesh, tol: f32) -> Work {
     }
 }
 
+/// How [`merge_vertices`] treats wedges (see [`corner_wedges`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Seams {
+    /// Merge at a point whatever the wedges (the default clean).
+    Ignore,
+    /// Merge only vertices of one wedge (a vertex's wedge: its first corner's).
+    Keep,
+    /// Split vertices per wedge first ([`split_wedges`]), then as `Keep`.
+    Split,
+}
+
 /// Merges vertices that share a point and whose normals differ by at most the hard-edge
 /// angle (`cos_hard_edge` is its cosine) and whose UVs and colours agree within
 /// [`UV_WELD_TOLERANCE`] / [`COLOR_WELD_TOLERANCE`]. Returns the number of vertices
-/// merged into another.
+/// merged into another, and the number of copies [`split_wedges`] made.
+///
+/// With [`Seams::Split`], vertices are first split per wedge ([`split_wedges`]);
+/// with it or [`Seams::Keep`], only vertices of one wedge merge: the sides of a
+/// cut stay apart (see [`super::intersect`]), however alike their attributes.
 ///
 /// Only vertices used by live triangles take part (unused ones are dropped on output).
 ///
 /// Greedy and deterministic: within a point, vertices are visited by index and each
 /// joins the first earlier representative it agrees with (so agreement never chains).
-pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32) -> usize {
+pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32, seams: Seams) -> (usize, usize) {
+    let split = if seams == Seams::Split { split_wedges(work) } else { 0 };
+    let wedge = if seams == Seams::Ignore { vec![0; work.vertex_point.len()] } else { vertex_wedges(work) };
     let mut used = vec![false; work.vertex_point.len()];
     for (tri, _) in work.tris.iter().zip(&work.tri_alive).filter(|(_, &alive)| alive) {
         tri.iter().for_each(|&v| used[v as usize] = true);
     }
+    let key = |v: u32| (work.vertex_point[v as usize], wedge[v as usize]);
     let mut order: Vec<u32> = (0..work.vertex_point.len() as u32).filter(|&v| used[v as usize]).collect();
-    order.sort_unstable_by_key(|&v| (work.vertex_point[v as usize], v));
+    order.sort_unstable_by_key(|&v| (key(v), v));
     let mut remap: Vec<u32> = (0..work.vertex_point.len() as u32).collect();
     let mut merged = 0;
     let mut reps: Vec<u32> = Vec::new();
-    for group in order.chunk_by(|&a, &b| work.vertex_point[a as usize] == work.vertex_point[b as usize]) {
+    for group in order.chunk_by(|&a, &b| key(a) == key(b)) {
         reps.clear();
         for &v in group {
             match reps.iter().find(|&&r| attributes_agree(work, r, v, cos_hard_edge)) {
@@ -84,7 +103,103 @@ pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32) -> usize {
     if merged > 0 {
         work.remap_vertices(&remap);
     }
-    merged
+    (merged, split)
+}
+
+/// Wedges: around each point, the corners of the live triangles joined across
+/// manifold edges (exactly two users). A cut line is an edge of three or more
+/// triangles (the two sides of the cut surface and the cutting one), so it
+/// separates wedges, as a boundary does; so does any other non-manifold edge
+/// or a bow-tie point. Returns the wedge of every corner (`3 t + c`) as the
+/// smallest corner index in it; collapsed triangles' corners are wedges of their own.
+pub(crate) fn corner_wedges(work: &Work) -> Vec<u32> {
+    let mut parent: Vec<u32> = (0..3 * work.tris.len() as u32).collect();
+    let edges = sorted_edges(work);
+    let corner_at = |e: &EdgeUse, p: u32| {
+        let c = e.corner as u32;
+        let start = if e.forward { e.lo } else { e.hi };
+        3 * e.tri + if p == start { c } else { (c + 1) % 3 }
+    };
+    for run in edge_runs(&edges) {
+        if let [e, f] = run {
+            if collapsed(work, e.tri as usize) || collapsed(work, f.tri as usize) {
+                continue;
+            }
+            for p in [e.lo, e.hi] {
+                union(&mut parent, corner_at(e, p), corner_at(f, p));
+            }
+        }
+    }
+    (0..parent.len() as u32).map(|c| find(&mut parent, c)).collect()
+}
+
+/// Gives each vertex used in several wedges ([`corner_wedges`]) one copy per
+/// extra wedge (the wedge of its first corner keeps it), so that no vertex
+/// spans a cut line; returns the number of copies. Collapsed triangles are
+/// left alone (they are about to be removed).
+pub(crate) fn split_wedges(work: &mut Work) -> usize {
+    let wedge = corner_wedges(work);
+    let mut first_wedge: Vec<u32> = vec![u32::MAX; work.vertex_point.len()];
+    let mut copies: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut split = 0;
+    for t in 0..work.tris.len() {
+        if !work.tri_alive[t] || collapsed(work, t) {
+            continue;
+        }
+        for c in 0..3 {
+            let v = work.tris[t][c];
+            let w = wedge[3 * t + c];
+            if first_wedge[v as usize] == u32::MAX {
+                first_wedge[v as usize] = w;
+            }
+            if first_wedge[v as usize] != w {
+                let copy = *copies.entry((v, w)).or_insert_with(|| {
+                    split += 1;
+                    work.push_vertex_copy(v)
+                });
+                work.tris[t][c] = copy;
+            }
+        }
+    }
+    split
+}
+
+/// The wedge of each vertex: that of its first live corner ([`corner_wedges`]),
+/// `u32::MAX` for a vertex no live triangle uses.
+fn vertex_wedges(work: &Work) -> Vec<u32> {
+    let wedge = corner_wedges(work);
+    let mut of = vec![u32::MAX; work.vertex_point.len()];
+    for t in (0..work.tris.len()).filter(|&t| work.tri_alive[t]) {
+        for c in 0..3 {
+            let v = work.tris[t][c] as usize;
+            if of[v] == u32::MAX {
+                of[v] = wedge[3 * t + c];
+            }
+        }
+    }
+    of
+}
+
+fn collapsed(work: &Work, t: usize) -> bool {
+    let [a, b, c] = work.tri_points(t);
+    a == b || b == c || c == a
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        let up = parent[parent[i as usize] as usize];
+        parent[i as usize] = up;
+        i = up;
+    }
+    i
+}
+
+/// Joins two sets; the smaller root stays the root, so roots are the smallest members.
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
 }
 
 fn attributes_agree(work: &Work, a: u32, b: u32, cos_hard_edge: f32) -> bool {
@@ -122,11 +237,11 @@ mod tests {
         // 90 degrees apart: same point, two vertices.
         let mut w = weld_points(&two_vertices(Vec3::Y, Vec3::X), 1e-6);
         assert_eq!(w.vertex_point[0], w.vertex_point[1]);
-        assert_eq!(merge_vertices(&mut w, cos60), 0);
+        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore), (0, 0));
         // 30 degrees apart: merged into the smaller index, which keeps its normal.
         let n2 = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
         let mut w = weld_points(&two_vertices(Vec3::Y, n2), 1e-6);
-        assert_eq!(merge_vertices(&mut w, cos60), 1);
+        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore), (1, 0));
         assert_eq!(w.tris[1][0], 0);
         assert_eq!(w.normals[0], Vec3::Y);
     }

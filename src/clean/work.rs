@@ -90,6 +90,39 @@ impl Work {
         (self.vertex_point.len() - 1) as u32
     }
 
+    /// Appends a vertex whose attributes are the blend of vertices `v` with
+    /// barycentric weights `w`, placed at `point`; returns its id. The normal is
+    /// renormalised (left zero when the blend cancels).
+    pub fn push_vertex_bary(&mut self, v: [u32; 3], w: [f32; 3], point: u32) -> u32 {
+        let v = v.map(|x| x as usize);
+        let n = self.normals[v[0]] * w[0] + self.normals[v[1]] * w[1] + self.normals[v[2]] * w[2];
+        self.normals.push(n.normalize_or_zero());
+        if !self.uvs.is_empty() {
+            let uv = self.uvs[v[0]] * w[0] + self.uvs[v[1]] * w[1] + self.uvs[v[2]] * w[2];
+            self.uvs.push(uv);
+        }
+        if !self.colors.is_empty() {
+            let c = [0, 1, 2].map(|i| self.colors[v[0]][i] * w[0] + self.colors[v[1]][i] * w[1] + self.colors[v[2]][i] * w[2]);
+            self.colors.push(c);
+        }
+        self.vertex_point.push(point);
+        (self.vertex_point.len() - 1) as u32
+    }
+
+    /// Appends a copy of vertex `v` (same point and attributes); returns its id.
+    pub fn push_vertex_copy(&mut self, v: u32) -> u32 {
+        let v = v as usize;
+        self.normals.push(self.normals[v]);
+        if !self.uvs.is_empty() {
+            self.uvs.push(self.uvs[v]);
+        }
+        if !self.colors.is_empty() {
+            self.colors.push(self.colors[v]);
+        }
+        self.vertex_point.push(self.vertex_point[v]);
+        (self.vertex_point.len() - 1) as u32
+    }
+
     /// Appends a triangle that inherits material, group and origin from triangle `parent`.
     pub fn push_tri_like(&mut self, tri: [u32; 3], parent: usize) {
         self.tris.push(tri);

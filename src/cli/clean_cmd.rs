@@ -57,6 +57,14 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
     super::check_outputs(&[&config.input], &outputs, config.force)?;
     let mesh = super::load_mesh(&config.input, config.up, config.quiet, &outputs, config.force)?;
     let (cleaned, report) = clean_loaded(&mesh, &config.params, &config.input)?;
+    if mtl.is_some() && report.seam_vertices_split > 0 {
+        // The OBJ loader welds vertices alike in every attribute: the two sides
+        // of a cut line, written as two vertices, would be one again.
+        eprintln!(
+            "warning: {}: the cut lines' two sides are separate vertices alike in every attribute, which loading an OBJ welds back; write .glb (or bake --clean --cut-intersections) to keep them apart",
+            config.output.display()
+        );
+    }
     // All outputs land together or none does.
     let mut staged = Staged::new();
     if mtl.is_some() {

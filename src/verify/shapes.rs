@@ -259,6 +259,53 @@ pub fn room_with_pane_outside_opening() -> (Mesh, std::ops::Range<usize>) {
     (mesh, wall_first as usize..wall_end as usize)
 }
 
+/// The side of the room in [`room_with_walls_running_past`] (m).
+pub const PAST_ROOM_SIZE: [f32; 3] = [4.0, 3.0, 4.0];
+
+/// A closed 4 × 3 × 4 m room (x, y, z from 0) of six separate patches facing
+/// inward, not welded to each other, where geometry runs past the walls as
+/// in architectural models (issue 20, cutting): the floor runs 0.17 m past
+/// the back wall (z = 4) and the right wall (x = 4) 0.1 m past it. The floor
+/// (4 × 4 cells) and the right wall (4 × 3 cells) have triangles that span
+/// the back wall's plane, so their vertices inside the room share triangles
+/// with the strips outside, which see the sky.
+pub fn room_with_walls_running_past() -> Mesh {
+    let mut mesh = Mesh { materials: vec![Material::opaque("wall", 0.5)], groups: vec!["room".into()], ..Mesh::default() };
+    // A patch of nu × nv cells spanning origin + s·du + t·dv, facing du × dv.
+    let patch = |mesh: &mut Mesh, origin: Vec3, du: Vec3, dv: Vec3, nu: u32, nv: u32| {
+        let normal = du.cross(dv).normalize();
+        let base = mesh.positions.len() as u32;
+        for j in 0..=nv {
+            for i in 0..=nu {
+                mesh.positions.push(origin + du * (i as f32 / nu as f32) + dv * (j as f32 / nv as f32));
+                mesh.normals.push(normal);
+            }
+        }
+        let at = |i: u32, j: u32| base + j * (nu + 1) + i;
+        for j in 0..nv {
+            for i in 0..nu {
+                mesh.indices.extend([at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+                mesh.tri_material.extend([0; 2]);
+                mesh.tri_group.extend([0; 2]);
+            }
+        }
+    };
+    let v = Vec3::new;
+    let [sx, sy, sz] = PAST_ROOM_SIZE;
+    // Floor (+y), running 0.17 m past the back wall.
+    patch(&mut mesh, v(0., 0., 0.), v(0., 0., sz + 0.17), v(sx, 0., 0.), 4, 4);
+    // Ceiling (−y).
+    patch(&mut mesh, v(0., sy, 0.), v(sx, 0., 0.), v(0., 0., sz), 2, 2);
+    // Front wall z = 0 (+z) and back wall z = 4 (−z).
+    patch(&mut mesh, v(0., 0., 0.), v(sx, 0., 0.), v(0., sy, 0.), 2, 2);
+    patch(&mut mesh, v(0., 0., sz), v(0., sy, 0.), v(sx, 0., 0.), 2, 2);
+    // Left wall x = 0 (+x) and right wall x = 4 (−x), running 0.1 m past the back wall.
+    patch(&mut mesh, v(0., 0., 0.), v(0., sy, 0.), v(0., 0., sz), 2, 2);
+    patch(&mut mesh, v(sx, 0., 0.), v(0., 0., sz + 0.1), v(0., sy, 0.), 4, 3);
+    mesh.validate().expect("a valid room");
+    mesh
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
