@@ -174,8 +174,9 @@ struct BakeArgs {
 struct RefineArgs {
     /// Refine the mesh where its light changes: split edges whose two vertices differ by more
     /// than ERROR, re-bake the vertices around the splits, repeat. `bake`: shaded luminance under
-    /// twelve clear skies, as a fraction of the scene's mean (e.g. 0.1); `sun`: direct sun
-    /// (bit × cosine) as a fraction of the sun's normal irradiance.
+    /// twelve clear skies, relative to the edge's own level or, where darker, the scene's mean
+    /// (e.g. 0.1); `sun`: direct sun (bit × cosine) over the day, as a fraction of the sun's
+    /// normal irradiance.
     #[arg(long, value_name = "ERROR", conflicts_with_all = ["shard"])]
     refine: Option<f64>,
     /// Refine (by largest error × edge length first) up to at most N vertices

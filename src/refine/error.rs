@@ -75,13 +75,24 @@ fn edges(mesh: &Mesh) -> Vec<[u32; 2]> {
 }
 
 /// Each edge's transfer error: the largest luminance difference between its
-/// vertices over the skies, over that sky's mean.
+/// vertices over the skies, over the larger of the two vertices' mean and
+/// that sky's mean shading of the scene.
 pub fn transfer_edge_errors(mesh: &Mesh, result: &TransferResult, mean: &MeanShading) -> Vec<EdgeError> {
     let shaded: Vec<Vec<f64>> = mean.skies.iter().map(|sky| luminances(result, sky)).collect();
     edges(mesh)
         .into_par_iter()
         .map(|edge @ [a, b]| {
-            let error = shaded.iter().zip(&mean.means).map(|(y, m)| (y[a as usize] - y[b as usize]).abs() / m).fold(0.0, f64::max);
+            let error = shaded
+                .iter()
+                .zip(&mean.means)
+                .map(|(y, &m)| {
+                    let (ya, yb) = (y[a as usize], y[b as usize]);
+                    // Relative where the edge is brighter than the scene's
+                    // mean (as a tone-mapped view shows it), against the mean
+                    // in the dark, so noise in the dark does not count as light.
+                    (ya - yb).abs() / m.max(0.5 * (ya + yb))
+                })
+                .fold(0.0, f64::max);
             EdgeError { edge, error }
         })
         .collect()

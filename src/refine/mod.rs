@@ -9,9 +9,11 @@
 //! **Edge error.** For the transfer ([`refine_transfer`]): each vertex is
 //! shaded (luminance) under [`crate::budget::reference_lightings`], twelve
 //! clear skies; an edge's error is the largest difference between its two
-//! vertices over the skies, divided by that sky's area-weighted mean
-//! shading of the input mesh (so `0.1` means a tenth of the scene's mean
-//! brightness, in a dim cabin as under an open sky). For sun masks
+//! vertices over the skies, divided by the larger of their mean and that
+//! sky's area-weighted mean shading of the input mesh. So `0.1` is a 10 %
+//! step where the edge is brighter than the scene's mean (as a tone-mapped
+//! view shows it), and a tenth of the mean in the dark, in a dim cabin as
+//! under an open sky. For sun masks
 //! ([`refine_sun`]): at each day step a vertex's direct sun is `bit × cos`
 //! (the cosine of its normal to the sun, two-sided in window mode); an
 //! edge's error is the difference averaged over the day's steps, in units
