@@ -17,6 +17,9 @@
 //!   mesh: open mode, escapes and the face turned to the sun; window mode,
 //!   the first hit is glass), the mean absolute difference over points and
 //!   day steps: the fraction of the surface drawn wrong, on average over the day.
+//!
+//! With `BY_MATERIAL=1`, stderr also splits the sun-mask disagreement (and
+//! the drawn and reference lit fractions) by the reference mesh's material.
 
 use glam::Vec3;
 use prtbake::bake::{BuildQuality, Scene, SunMasks, Surfaces};
@@ -66,8 +69,7 @@ fn main() {
     let surfaces = Surfaces::resolve(&reference.mesh, &patterns).expect("surfaces");
     let opaque = |t: usize| surfaces.window_transmittance[t].is_none();
     let points = prtbake::refine::probe::surface_points(&reference.mesh, count, 1, opaque);
-    let (lo, hi) = reference.mesh.positions.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-    let reach = 1e-5 * (hi - lo).length();
+    let reach = 1e-5 * reference.mesh.diagonal();
     let reference_located = located_on(&reference, &points, reach);
     let found = reference_located.iter().filter(|l| l.is_some()).count();
     println!("reference {reference_path}: {} vertices; {found} of {count} points found", reference.mesh.vertex_count());

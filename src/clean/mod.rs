@@ -286,7 +286,7 @@ fn clean_once(
     flipped: &mut refine::FlippedEdges,
     cut: &mut intersect::CutPairs,
 ) -> Round {
-    let diagonal = referenced_diagonal(mesh);
+    let diagonal = mesh.referenced_diagonal();
     let weld_tol = params.weld_tolerance.resolve(diagonal);
     let plane_tol = params.coplanar_tolerance.resolve(diagonal);
     let zip_tol = params.zip_tolerance.resolve(diagonal);
@@ -449,21 +449,6 @@ fn check_input(mesh: &Mesh) -> Result<(), CleanError> {
 
 /// Bounding-box diagonal of the vertices the triangles use (unused vertices do not
 /// count, so a cleaned mesh resolves relative tolerances the same way).
-fn referenced_diagonal(mesh: &Mesh) -> f32 {
-    let mut lo = glam::Vec3::INFINITY;
-    let mut hi = glam::Vec3::NEG_INFINITY;
-    for &i in &mesh.indices {
-        let p = mesh.positions[i as usize];
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    if mesh.indices.is_empty() {
-        0.0
-    } else {
-        (hi - lo).length()
-    }
-}
-
 /// Writes the live triangles and their vertices (in id order) to a new mesh,
 /// without the vertices no triangle uses.
 fn write_mesh(work: &Work, input: &Mesh) -> Mesh {

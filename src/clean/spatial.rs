@@ -222,7 +222,8 @@ impl Hasher for CellHasher {
     }
 }
 
-fn find(parent: &mut [u32], mut i: u32) -> u32 {
+/// The root of `i`'s set (path halving).
+pub(crate) fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         let up = parent[parent[i as usize] as usize];
         parent[i as usize] = up;
@@ -231,7 +232,8 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
-fn union(parent: &mut [u32], a: u32, b: u32) {
+/// Joins two sets; the smaller root stays the root, so roots are the smallest members.
+pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
     let (ra, rb) = (find(parent, a), find(parent, b));
     if ra != rb {
         // Attach the larger root under the smaller: roots stay deterministic.

@@ -347,7 +347,7 @@ fn high_valence_fans_clean_and_converge() {
 fn coplanar_work_grows_linearly_on_fans() {
     let per_triangle = |shape, n| {
         let mesh = fixtures::fan(shape, n);
-        let tol = CleanParams::default().coplanar_tolerance.resolve(referenced_diagonal(&mesh));
+        let tol = CleanParams::default().coplanar_tolerance.resolve(mesh.referenced_diagonal());
         let mut work = weld::weld_points(&mesh, 0.0);
         let pairs = coplanar::remove_covered_coplanar(&mut work, tol, false, true).pairs_enumerated;
         pairs as f64 / mesh.triangle_count() as f64

@@ -6,7 +6,7 @@
 //! and a representative keeps its own attributes (no averaging), so welding a
 //! welded mesh changes nothing.
 
-use super::spatial::cluster_points;
+use super::spatial::{cluster_points, find, union};
 use super::work::{edge_runs, sorted_edges, EdgeUse, Work};
 use crate::mesh::Mesh;
 use std::collections::HashMap;
@@ -183,23 +183,6 @@ fn vertex_wedges(work: &Work) -> Vec<u32> {
 fn collapsed(work: &Work, t: usize) -> bool {
     let [a, b, c] = work.tri_points(t);
     a == b || b == c || c == a
-}
-
-fn find(parent: &mut [u32], mut i: u32) -> u32 {
-    while parent[i as usize] != i {
-        let up = parent[parent[i as usize] as usize];
-        parent[i as usize] = up;
-        i = up;
-    }
-    i
-}
-
-/// Joins two sets; the smaller root stays the root, so roots are the smallest members.
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        parent[ra.max(rb) as usize] = ra.min(rb);
-    }
 }
 
 fn attributes_agree(work: &Work, a: u32, b: u32, cos_hard_edge: f32) -> bool {

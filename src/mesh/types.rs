@@ -98,6 +98,20 @@ impl Mesh {
         let (lo, hi) = self.bounds();
         (hi - lo).length()
     }
+    /// Length of the bounding-box diagonal of the vertices triangles use
+    /// (0 without triangles): the scale of clean's and refine's tolerances.
+    pub fn referenced_diagonal(&self) -> f32 {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for &i in &self.indices {
+            lo = lo.min(self.positions[i as usize]);
+            hi = hi.max(self.positions[i as usize]);
+        }
+        if self.indices.is_empty() {
+            0.0
+        } else {
+            (hi - lo).length()
+        }
+    }
     /// The same mesh in the writers' canonical order: triangles stably sorted
     /// by (group, material), vertices renumbered in order of first use (unused
     /// ones dropped). OBJ and GLB files of a mesh in this order load back in

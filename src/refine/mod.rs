@@ -75,7 +75,7 @@ impl RefineParams {
         RefineParams {
             error,
             max_vertices: max_vertices.unwrap_or(mesh.vertex_count().saturating_mul(DEFAULT_BUDGET_FACTOR)),
-            min_edge: min_edge.unwrap_or(DEFAULT_MIN_EDGE_FRACTION * bounding_diagonal(mesh)),
+            min_edge: min_edge.unwrap_or(DEFAULT_MIN_EDGE_FRACTION * mesh.referenced_diagonal()),
             max_rounds: DEFAULT_MAX_ROUNDS,
         }
     }
@@ -370,20 +370,6 @@ fn extend_rows<T: Copy + Default>(rows: &[T], before: usize, after: usize) -> Ve
     let mut out = rows.to_vec();
     out.resize(after * stride, T::default());
     out
-}
-
-/// The bounding-box diagonal of the vertices triangles use.
-fn bounding_diagonal(mesh: &Mesh) -> f32 {
-    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for &i in &mesh.indices {
-        lo = lo.min(mesh.positions[i as usize]);
-        hi = hi.max(mesh.positions[i as usize]);
-    }
-    if mesh.indices.is_empty() {
-        0.0
-    } else {
-        (hi - lo).length()
-    }
 }
 
 #[cfg(test)]
