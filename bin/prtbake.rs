@@ -85,6 +85,11 @@ struct BakeArgs {
     /// Interior samples per vertex on average (spread by area in rotation triples, ≥ 3 per triangle).
     #[arg(long, default_value_t = 2.0)]
     samples_per_vertex: f32,
+    /// Adaptive allocation: after bounce 0's points, add about FACTOR × as many
+    /// where their spread shows the most noise (a vertex's effective points grow
+    /// as its noise; docs/speed-accuracy.md). 0 = off. Not with --shard.
+    #[arg(long, value_name = "FACTOR", default_value_t = 0.0, conflicts_with_all = ["shard"])]
+    adaptive: f32,
     /// Colour channels: 1, 3, or auto (1 when every material is grey).
     #[arg(long, default_value = "auto", value_parser = ["auto", "1", "3"])]
     channels: String,
@@ -608,6 +613,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         bounces: a.bounces,
         channels,
         store_bounces: a.store_bounces,
+        adaptive: a.adaptive,
         pattern: match a.pattern {
             PatternArg::Sobol => DirectionPattern::Sobol,
             PatternArg::Random => DirectionPattern::Random,

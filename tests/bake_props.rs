@@ -10,19 +10,23 @@ fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
     rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(f)
 }
 
-/// Same seed, 1 and 2 threads: identical transfer bits (window mode, bounces, colour).
+/// Same seed, 1 and 2 threads: identical transfer bits (window mode, bounces,
+/// colour), with and without adaptive allocation.
 #[test]
 fn bake_is_identical_for_any_thread_count() {
     let (mut mesh, _) = shapes::integrating_sphere(3, 0.6, 0.7, shapes::Opening::Window);
     mesh.materials[0].albedo = [0.7, 0.5, 0.3];
-    let params = BakeParams { order: 3, rays: 64, bounces: 2, mode: Mode::Window, store_bounces: true, ..BakeParams::default() };
-    let one = in_pool(1, || bake_mesh(&mesh, &params, &[]).unwrap().0);
-    let two = in_pool(2, || bake_mesh(&mesh, &params, &[]).unwrap().0);
-    assert_eq!(one.channels, 3);
-    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    assert_eq!(bits(&one.total), bits(&two.total));
-    for (a, b) in one.bounces.iter().zip(&two.bounces) {
-        assert_eq!(bits(a), bits(b));
+    let base = BakeParams { order: 3, rays: 64, bounces: 2, mode: Mode::Window, store_bounces: true, ..BakeParams::default() };
+    for params in [base, BakeParams { adaptive: 1.0, ..base }] {
+        let one = in_pool(1, || bake_mesh(&mesh, &params, &[]).unwrap().0);
+        let two = in_pool(2, || bake_mesh(&mesh, &params, &[]).unwrap().0);
+        assert_eq!(one.channels, 3);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&one.total), bits(&two.total), "adaptive {}", params.adaptive);
+        for (a, b) in one.bounces.iter().zip(&two.bounces) {
+            assert_eq!(bits(a), bits(b));
+        }
+        assert_eq!(bits(&one.noise), bits(&two.noise));
     }
 }
 
@@ -42,26 +46,32 @@ fn re_traced_bounces_equal_cached_gathers_and_match_the_closed_form() {
     {
         let (mut mesh, f) = shapes::integrating_sphere(3, 0.6, cap_height, opening);
         mesh.materials[0].albedo = albedo;
-        let params = BakeParams { order: 3, rays: 256, bounces: 2, mode, store_bounces: true, ..BakeParams::default() };
-        let cached = bake_mesh(&mesh, &params, &[]).unwrap().0;
-        let (traced, surfaces, _) = bake_mesh(&mesh, &BakeParams { hit_cache_bytes: 0, ..params }, &[]).unwrap();
-        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        for b in 0..=2 {
-            assert_eq!(bits(&cached.bounces[b]), bits(&traced.bounces[b]), "{mode:?}, bounce {b}: cached and re-traced differ");
-        }
-        assert_eq!(bits(&cached.total), bits(&traced.total));
-        let (coeffs, channels) = (prtbake::sh::coeff_count(params.order), traced.channels);
-        assert_eq!(channels, if mode == Mode::Window { 3 } else { 1 });
-        let touches_window = |i: usize| {
-            (0..mesh.triangle_count()).any(|t| surfaces.window_transmittance[t].is_some() && mesh.triangle(t).contains(&(i as u32)))
-        };
-        let wall: Vec<usize> = (0..mesh.vertex_count()).filter(|&i| mesh.positions[i].y < cap_height && !touches_window(i)).collect();
-        for b in 0..=2 {
-            for (c, &rho) in albedo.iter().enumerate().take(channels) {
-                let dc = |i: usize| traced.bounces[b][(i * channels + c) * coeffs] as f64;
-                let got = wall.iter().map(|&i| dc(i)).sum::<f64>() / wall.len() as f64;
-                let expected = prtbake::verify::Y00 * f * (rho as f64 * (1.0 - f)).powi(b as i32);
-                assert!((got - expected).abs() / expected < 0.01, "{mode:?}, bounce {b}, channel {c}: {got} vs {expected}");
+        // Adaptive allocation too: its extra points join the hit cache and the re-traced bounces.
+        for adaptive in [0.0, 1.0] {
+            let params = BakeParams { order: 3, rays: 256, bounces: 2, mode, store_bounces: true, adaptive, ..BakeParams::default() };
+            let cached = bake_mesh(&mesh, &params, &[]).unwrap().0;
+            let (traced, surfaces, _) = bake_mesh(&mesh, &BakeParams { hit_cache_bytes: 0, ..params }, &[]).unwrap();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            for b in 0..=2 {
+                assert_eq!(bits(&cached.bounces[b]), bits(&traced.bounces[b]), "{mode:?}, bounce {b}: cached and re-traced differ");
+            }
+            assert_eq!(bits(&cached.total), bits(&traced.total));
+            let (coeffs, channels) = (prtbake::sh::coeff_count(params.order), traced.channels);
+            assert_eq!(channels, if mode == Mode::Window { 3 } else { 1 });
+            let touches_window = |i: usize| {
+                (0..mesh.triangle_count()).any(|t| surfaces.window_transmittance[t].is_some() && mesh.triangle(t).contains(&(i as u32)))
+            };
+            let wall: Vec<usize> = (0..mesh.vertex_count()).filter(|&i| mesh.positions[i].y < cap_height && !touches_window(i)).collect();
+            for b in 0..=2 {
+                for (c, &rho) in albedo.iter().enumerate().take(channels) {
+                    let dc = |i: usize| traced.bounces[b][(i * channels + c) * coeffs] as f64;
+                    let got = wall.iter().map(|&i| dc(i)).sum::<f64>() / wall.len() as f64;
+                    let expected = prtbake::verify::Y00 * f * (rho as f64 * (1.0 - f)).powi(b as i32);
+                    assert!(
+                        (got - expected).abs() / expected < 0.01,
+                        "{mode:?}, adaptive {adaptive}, bounce {b}, channel {c}: {got} vs {expected}"
+                    );
+                }
             }
         }
     }

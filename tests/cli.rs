@@ -349,3 +349,33 @@ fn clean_and_bake_cut_intersections() {
     let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("x.prtb").to_str().unwrap(), "--cut-intersections"]);
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// Issue 17: `bake --adaptive F` adds points after bounce 0 and records the
+/// factor in META; a factor outside 0..=16, or one with `--shard`, is
+/// refused with exit 2 and nothing written.
+#[test]
+fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
+    let dir = Scratch::new("adaptive");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let base_out = dir.path("base.prtb");
+    let adaptive_out = dir.path("adaptive.prtb");
+    let base = ["bake", obj.to_str().unwrap(), "--rays", "32", "--bounces", "1", "--quiet", "--json"];
+    let mut points = Vec::new();
+    for (out, extra) in [(&base_out, &[][..]), (&adaptive_out, &["--adaptive", "1"][..])] {
+        let o = prtbake(&[&base[..], &["-o", out.to_str().unwrap()], extra].concat());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        points.push(report["stats"]["points"].as_u64().unwrap());
+    }
+    assert!(points[1] > points[0] && points[1] <= 2 * points[0], "points {points:?}");
+    let meta = |path: &std::path::Path| prtbake::bundle::read_bundle(path).unwrap().meta;
+    assert_eq!(meta(&adaptive_out)["params"]["adaptive"].as_f64(), Some(1.0));
+    assert!(meta(&base_out)["params"].get("adaptive").is_none(), "a bake without it records nothing new");
+    for bad in [&["--adaptive", "-1"][..], &["--adaptive", "nan"], &["--adaptive", "17"], &["--adaptive", "1", "--shard", "0/2"]] {
+        let out = dir.path("bad.prtb");
+        let o = prtbake(&[&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
+        assert_eq!(o.status.code(), Some(2), "{bad:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(!out.exists());
+    }
+}

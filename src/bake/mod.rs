@@ -2,6 +2,7 @@
 //! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
 //! arrays and statistics.
 
+mod adaptive;
 pub mod bvh8;
 pub mod cull;
 mod enclosure;
@@ -87,6 +88,11 @@ pub struct BakeParams {
     pub channels: Channels,
     /// Keep each bounce's transfer, not only the total.
     pub store_bounces: bool,
+    /// Adaptive allocation (interior sampling): bounce 0 adds about this
+    /// many times the base layout's points where its own points measure the
+    /// most noise (`bake::adaptive`); 0 = off.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub adaptive: f32,
     pub pattern: DirectionPattern,
     /// Window mode: bounce 0 also traces `rays` directions aimed at the glass
     /// (a pane picked by area, a direction uniform over its solid angle) and
@@ -131,6 +137,7 @@ impl Default for BakeParams {
             bounces: 0,
             channels: Channels::Auto,
             store_bounces: false,
+            adaptive: 0.0,
             pattern: DirectionPattern::Sobol,
             window_sampling: false,
             keep_outside_sides: false,
@@ -149,6 +156,12 @@ impl BakeParams {
         }
         if self.rays == 0 || self.rays > sampling::MAX_RAYS_PER_POINT {
             return Err(BakeError::Params(format!("rays per sample {} is outside 1..={}", self.rays, sampling::MAX_RAYS_PER_POINT)));
+        }
+        if !(0.0..=16.0).contains(&self.adaptive) {
+            return Err(BakeError::Params(format!(
+                "adaptive allocation {} is outside 0..=16 (extra points per base point)",
+                self.adaptive
+            )));
         }
         if self.bounces > 16 {
             return Err(BakeError::Params(format!("{} bounces is more than 16", self.bounces)));
@@ -231,6 +244,10 @@ pub struct TransferResult {
     pub total: Vec<f32>,
     /// Each bounce (0 = direct) when `store_bounces`, else empty.
     pub bounces: Vec<Vec<f32>>,
+    /// Per vertex, the standard error of bounce 0's DC estimate, from its
+    /// points' spread (`bake::adaptive::Moments`); empty when not measured
+    /// (vertex sampling, sharded bakes). Not stored in bundles.
+    pub noise: Vec<f32>,
     pub stats: BakeStats,
 }
 
@@ -289,4 +306,8 @@ pub fn bake_mesh(
     let build_seconds = scene.build_time.as_secs_f64();
     let result = bake_transfer(mesh, &scene, &surfaces, params)?;
     Ok((result, surfaces, build_seconds))
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }

@@ -22,6 +22,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::adaptive::Moments;
 use super::enclosure::Sides;
 use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
@@ -105,11 +106,18 @@ struct Point {
 /// The work items of a bake and how their points map to vertices. Their
 /// order is the order every sum runs in, whole bake or shards.
 pub(crate) enum Items {
-    /// Triangles with `counts[k]` samples each; `first_sample[k]` is the global index of the first.
+    /// Triangles with `counts[k]` samples each; `first_sample[k]` is the
+    /// global index of the first. An item holds the triangle's samples
+    /// `first_index[k]..first_index[k] + counts[k]` (empty: from 0) of
+    /// `weight_count[k]` in all (empty: `counts[k]`), which sets each
+    /// sample's weight: a triangle can be split over two items when
+    /// adaptive allocation (`bake::adaptive`) adds samples to it.
     Interior {
         triangles: Vec<u32>,
         counts: Vec<u32>,
         first_sample: Vec<u32>,
+        first_index: Vec<u32>,
+        weight_count: Vec<u32>,
     },
     Vertex {
         vertices: Vec<u32>,
@@ -193,6 +201,8 @@ pub(crate) struct Pass<'a> {
     /// the rays are the same, only the values at their ends change.
     hit_cache: Option<HitRecords<'a>>,
     record_hits: bool,
+    /// Bounce 0: keep each item corner's [`Moments`] (for the noise estimate).
+    track_noise: bool,
     /// Window triangles to sample directly for bounce 0 (window mode).
     windows: Option<&'a WindowLights>,
 }
@@ -209,6 +219,9 @@ struct TaskOutput {
     traced: u64,
     /// Hit records of this task's points, in point order (bounce 0 with caching).
     hits: Vec<u64>,
+    /// Per item and corner, the moments of the points' DC (bounce 0 when
+    /// the pass tracks noise, else empty).
+    moments: Vec<Moments>,
 }
 
 /// Bounce 0's hit records of the points from `first_point` on (a whole
@@ -321,6 +334,7 @@ impl<'a> Plan<'a> {
             reject_distance: self.params.inside_distance * self.scene.diagonal,
             hit_cache: if bounce > 0 { cached } else { None },
             record_hits: bounce == 0 && record_hits,
+            track_noise: bounce == 0 && self.items.corners() == 3,
             windows: self.windows.as_ref(),
         }
     }
@@ -345,6 +359,9 @@ pub(crate) struct RangeSums {
     pub(crate) sums: Vec<f32>,
     /// Bounce 0: each vertex's summed sample weight ([`sample_weights`]), as `sums`.
     pub(crate) weights: Vec<f32>,
+    /// Bounce 0 (interior sampling): each vertex's [`Moments`] of its
+    /// points' DC, as `weights` but for the vertices `late` holds.
+    pub(crate) moments: Vec<Moments>,
     pub(crate) late: LateSums,
     /// Global indices of the points found inside geometry (bounce 0).
     pub(crate) rejected: Vec<u32>,
@@ -368,63 +385,88 @@ pub(crate) fn add_row(target: &mut [f32], row: &[f32]) {
 /// contributions to vertices first touched before it go to
 /// [`RangeSums::late`] instead.
 pub(crate) fn run_range(pass: &Pass, range: std::ops::Range<usize>, first_items: Option<&[u32]>, progress: &Progress) -> RangeSums {
-    let items = pass.items;
-    let stride = pass.channels * pass.coeffs;
-    let vertex_count = pass.mesh.vertex_count();
-    // Every point of bounce 0 records one hit per ray, at `point · rays`.
-    // Each task copies its points' records to their place, so the 8 bytes
-    // a ray of fresh pages fault in on every thread, not in the merge.
-    let record_count = |points: usize| if pass.record_hits { points * pass.params.rays as usize } else { 0 };
-    let mut hits: Vec<u64> = vec![0; record_count(items.first_point(range.end) - items.first_point(range.start))];
-    let mut unfilled_hits = hits.as_mut_slice();
-    let mut out = RangeSums {
-        sums: vec![0.0; vertex_count * stride],
-        weights: vec![0.0; vertex_count],
-        late: LateSums::default(),
-        rejected: Vec::new(),
-        rays: 0,
-        traced: 0,
-        hits: Vec::new(),
-    };
+    let mut out = RangeSums::empty(pass);
+    let mut hits = HitSlots::new(pass, range.clone());
     for merge_start in range.clone().step_by(ITEMS_PER_MERGE) {
         let merge_end = (merge_start + ITEMS_PER_MERGE).min(range.end);
-        let tasks: Vec<(usize, &mut [u64])> = (merge_start..merge_end)
-            .step_by(ITEMS_PER_TASK)
-            .map(|task_start| {
-                let task_end = (task_start + ITEMS_PER_TASK).min(merge_end);
-                let points = items.first_point(task_end) - items.first_point(task_start);
-                let (hits, rest) = std::mem::take(&mut unfilled_hits).split_at_mut(record_count(points));
-                unfilled_hits = rest;
-                (task_start, hits)
-            })
-            .collect();
-        let outputs: Vec<TaskOutput> = tasks
-            .into_par_iter()
-            .map(|(task_start, hits)| {
-                let mut out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(merge_end));
-                hits.copy_from_slice(&out.hits);
-                // Freed now, not after the merge: a merge's records would otherwise be held twice.
-                out.hits = Vec::new();
-                progress.add(out.rays);
-                out
-            })
-            .collect();
+        let outputs = trace_tasks(pass, merge_start..merge_end, &mut hits, progress);
         // In item order: the only place results meet, so the sum order is fixed.
-        for (task_index, task) in outputs.into_iter().enumerate() {
-            out.add_task(pass, merge_start + task_index * ITEMS_PER_TASK, task, first_items.map(|f| (f, range.start)));
+        for (task_start, task) in outputs {
+            out.add_task(pass, task_start, &task, first_items.map(|f| (f, range.start)));
         }
     }
-    out.hits = hits;
+    out.hits = hits.records;
     out
 }
 
+/// Bounce 0's hit records of a range of items (one per point and ray, when
+/// the pass records them), and the part no task has filled yet.
+pub(crate) struct HitSlots {
+    records: Vec<u64>,
+    /// Index in `records` of the first unfilled slot.
+    filled: usize,
+}
+
+impl HitSlots {
+    fn new(pass: &Pass, range: std::ops::Range<usize>) -> HitSlots {
+        let points = pass.items.first_point(range.end) - pass.items.first_point(range.start);
+        HitSlots { records: vec![0; pass.record_count(points)], filled: 0 }
+    }
+}
+
+/// Evaluates every point of the items in `range` for `pass`'s bounce, in
+/// parallel tasks of [`ITEMS_PER_TASK`] items; returns each task's first item
+/// and output, in item order. Each task copies its points' hit records to
+/// their place in `hits`, so the 8 bytes a ray of fresh pages fault in on
+/// every thread, not in the merge.
+fn trace_tasks(pass: &Pass, range: std::ops::Range<usize>, hits: &mut HitSlots, progress: &Progress) -> Vec<(usize, TaskOutput)> {
+    let mut unfilled = &mut hits.records[hits.filled..];
+    let tasks: Vec<(usize, &mut [u64])> = range
+        .clone()
+        .step_by(ITEMS_PER_TASK)
+        .map(|task_start| {
+            let task_end = (task_start + ITEMS_PER_TASK).min(range.end);
+            let points = pass.items.first_point(task_end) - pass.items.first_point(task_start);
+            let (task_hits, rest) = std::mem::take(&mut unfilled).split_at_mut(pass.record_count(points));
+            unfilled = rest;
+            hits.filled += task_hits.len();
+            (task_start, task_hits)
+        })
+        .collect();
+    tasks
+        .into_par_iter()
+        .map(|(task_start, task_hits)| {
+            let mut out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(range.end));
+            task_hits.copy_from_slice(&out.hits);
+            // Freed now, not after the merge: a merge's records would otherwise be held twice.
+            out.hits = Vec::new();
+            progress.add(out.rays);
+            (task_start, out)
+        })
+        .collect()
+}
+
 impl RangeSums {
+    fn empty(pass: &Pass) -> RangeSums {
+        let vertex_count = pass.mesh.vertex_count();
+        RangeSums {
+            sums: vec![0.0; vertex_count * pass.channels * pass.coeffs],
+            weights: vec![0.0; vertex_count],
+            moments: if pass.track_noise { vec![Moments::default(); vertex_count] } else { Vec::new() },
+            late: LateSums::default(),
+            rejected: Vec::new(),
+            rays: 0,
+            traced: 0,
+            hits: Vec::new(),
+        }
+    }
+
     /// Adds one task's item sums, in item and corner order. `late_before`:
     /// vertices whose first item is before this item index go to `late`.
-    fn add_task(&mut self, pass: &Pass, task_start: usize, task: TaskOutput, late_before: Option<(&[u32], usize)>) {
+    fn add_task(&mut self, pass: &Pass, task_start: usize, task: &TaskOutput, late_before: Option<(&[u32], usize)>) {
         self.rays += task.rays;
         self.traced += task.traced;
-        self.rejected.extend(task.rejected);
+        self.rejected.extend_from_slice(&task.rejected);
         let corners = pass.items.corners();
         let stride = pass.channels * pass.coeffs;
         let with_weights = pass.bounce == 0;
@@ -443,6 +485,9 @@ impl RangeSums {
                 }
                 if with_weights {
                     self.weights[v] += weight;
+                }
+                if let (Some(total), Some(moments)) = (self.moments.get_mut(v), task.moments.get(local * corners + corner)) {
+                    total.merge(moments);
                 }
                 add_row(&mut self.sums[v * stride..(v + 1) * stride], sums);
             }
@@ -571,11 +616,13 @@ fn bake_layers(
     kept: Option<&Kept>,
 ) -> Result<TransferResult, BakeError> {
     let started = Instant::now();
-    let plan = Plan::new(mesh, scene, surfaces, params, receivers)?;
+    let mut plan = Plan::new(mesh, scene, surfaces, params, receivers)?;
     let (coeffs, channels) = (plan.coeffs, plan.channels);
-    let point_count = plan.items.point_count();
+    let adaptive = params.adaptive > 0.0 && matches!(plan.items, Items::Interior { .. });
+    // With adaptive allocation bounce 0 adds up to `adaptive` × the base points.
+    let planned_points = (plan.items.point_count() as f64 * (1.0 + if adaptive { f64::from(params.adaptive) } else { 0.0 })) as u64;
     let mut stats = plan.base_stats();
-    let cache_bytes = point_count * params.rays as u64 * 8;
+    let cache_bytes = planned_points * params.rays as u64 * 8;
     let use_cache = params.bounces > 0 && cache_bytes <= params.hit_cache_bytes;
     if !params.quiet {
         if params.bounces > 0 && !use_cache {
@@ -589,21 +636,31 @@ fn bake_layers(
         let Batching { closest_hit, occlusion } = scene.batching();
         eprintln!("rays: closest hit {closest_hit}, occlusion {occlusion} (the faster on this scene's probe rays)");
     }
-    let mut rejected = vec![false; point_count as usize];
+    let mut rejected = vec![false; plan.items.point_count() as usize];
     let mut hit_cache: Vec<u64> = Vec::new();
     let mut vertex_weight: Vec<f32> = Vec::new();
+    let mut noise: Vec<f32> = Vec::new();
     let mut source = SourceRows::empty();
     let mut layers: Vec<Vec<f32>> = Vec::new();
     let mut total = vec![0.0f32; mesh.vertex_count() * channels * coeffs];
     for bounce in 0..=params.bounces {
         let phase_start = Instant::now();
-        let progress = Progress::start(format!("bounce {}/{}", bounce, params.bounces), point_count * params.rays as u64, params.quiet);
-        let cached = use_cache.then_some(HitRecords { records: &hit_cache, first_point: 0 });
-        let pass = plan.pass(bounce, &source, &rejected, cached, use_cache);
-        let sums = run_range(&pass, 0..plan.items.len(), None, &progress);
+        let points = if bounce == 0 { planned_points } else { plan.items.point_count() };
+        let progress = Progress::start(format!("bounce {}/{}", bounce, params.bounces), points * params.rays as u64, params.quiet);
+        let sums = if bounce == 0 && adaptive {
+            let sums = adaptive_first_bounce(&mut plan, &source, use_cache, &progress)?;
+            rejected.resize(plan.items.point_count() as usize, false);
+            stats.points = plan.items.point_count();
+            sums
+        } else {
+            let cached = use_cache.then_some(HitRecords { records: &hit_cache, first_point: 0 });
+            let pass = plan.pass(bounce, &source, &rejected, cached, use_cache);
+            run_range(&pass, 0..plan.items.len(), None, &progress)
+        };
         drop(progress);
-        drop(pass);
         if bounce == 0 {
+            let stride = coeffs; // bounce 0 is traced in one channel
+            noise = super::adaptive::standard_errors(&sums.weights, sums.sums.iter().step_by(stride).copied(), &sums.moments);
             vertex_weight = sums.weights;
             if use_cache {
                 hit_cache = sums.hits;
@@ -645,7 +702,68 @@ fn bake_layers(
     stats.rays_gathered = if use_cache { stats.rays_per_bounce.iter().skip(1).sum() } else { 0 };
     stats.rays_per_second = stats.rays_traced as f64 / stats.seconds.max(1e-9);
     stats.evaluations_per_second = stats.rays as f64 / stats.seconds.max(1e-9);
-    Ok(TransferResult { order: params.order, channels, total, bounces: layers, stats })
+    Ok(TransferResult { order: params.order, channels, total, bounces: layers, noise, stats })
+}
+
+/// Bounce 0 with adaptive allocation (`bake::adaptive`): the base points
+/// first, whose moments place about `params.adaptive` × as many extra
+/// points, then those; `plan.items` becomes all of them (base points
+/// first, so their indices stay). The base points' sums are re-weighted
+/// by their triangle's new count before the sums meet in item order.
+fn adaptive_first_bounce(plan: &mut Plan, source: &SourceRows, record_hits: bool, progress: &Progress) -> Result<RangeSums, BakeError> {
+    let base_len = plan.items.len();
+    let (mut base_tasks, base_hits, extra) = {
+        let pass = plan.pass(0, source, &[], None, record_hits);
+        let mut hits = HitSlots::new(&pass, 0..base_len);
+        let tasks = trace_tasks(&pass, 0..base_len, &mut hits, progress);
+        let mut pilot = RangeSums::empty(&pass);
+        for (start, task) in &tasks {
+            pilot.add_task(&pass, *start, task, None);
+        }
+        let dc_sums = pilot.sums.iter().step_by(plan.coeffs).copied().collect();
+        let pilot = super::adaptive::Pilot { weights: &pilot.weights, dc_sums, moments: &pilot.moments };
+        let budget = (plan.items.point_count() as f64 * f64::from(plan.params.adaptive)) as u64;
+        let max_per_triangle = match plan.params.sampling {
+            Sampling::Interior { max_per_triangle, .. } => max_per_triangle,
+            Sampling::Vertex => 0,
+        };
+        let extra = super::adaptive::extra_counts(plan.mesh, &plan.items, &pilot, budget, max_per_triangle);
+        (tasks, hits.records, extra)
+    };
+    let Items::Interior { counts, .. } = &plan.items else { unreachable!("adaptive allocation runs on interior samples") };
+    let stride = plan.coeffs;
+    for (start, task) in &mut base_tasks {
+        let items = task.weights.len() / 3;
+        for local in 0..items {
+            let (n, e) = (counts[*start + local], extra[*start + local]);
+            if e == 0 {
+                continue;
+            }
+            let k = n as f32 / (n + e) as f32;
+            task.sums[local * 3 * stride..(local + 1) * 3 * stride].iter_mut().for_each(|s| *s *= k);
+            task.weights[local * 3..(local + 1) * 3].iter_mut().for_each(|w| *w *= k);
+            for m in task.moments[local * 3..(local + 1) * 3].iter_mut() {
+                *m = m.scaled(f64::from(k));
+            }
+        }
+    }
+    let all = super::adaptive::with_extra(&plan.items, &extra);
+    check_point_count(all.point_count())?;
+    plan.items = all;
+    let pass = plan.pass(0, source, &[], None, record_hits);
+    // The extra points' records go after the base points', in one buffer
+    // grown once (not a second buffer appended: that would hold both).
+    let filled = base_hits.len();
+    let mut records = base_hits;
+    records.resize(pass.record_count(plan.items.point_count() as usize), 0);
+    let mut hits = HitSlots { records, filled };
+    let extra_tasks = trace_tasks(&pass, base_len..plan.items.len(), &mut hits, progress);
+    let mut out = RangeSums::empty(&pass);
+    for (start, task) in base_tasks.iter().chain(&extra_tasks) {
+        out.add_task(&pass, *start, task, None);
+    }
+    out.hits = hits.records;
+    Ok(out)
 }
 
 /// Lists the work items: the `sampled` triangles (interior sampling), or
@@ -675,7 +793,7 @@ fn build_items(mesh: &Mesh, sampled: Vec<u32>, params: &BakeParams, receivers: O
                 // Saturates past u32: `check_point_count` refuses such a bake.
                 next = next.saturating_add(c);
             }
-            Items::Interior { triangles, counts, first_sample }
+            Items::Interior { triangles, counts, first_sample, first_index: Vec::new(), weight_count: Vec::new() }
         }
     }
 }
@@ -840,6 +958,7 @@ impl Pass<'_> {
             rays: 0,
             traced: 0,
             hits: Vec::new(),
+            moments: if self.track_noise { vec![Moments::default(); (end - start) * corners] } else { Vec::new() },
         };
         let mut point_result = vec![0.0f32; stride];
         let mut scratch = Scratch { basis: vec![0.0f32; self.coeffs], ..Scratch::default() };
@@ -864,8 +983,10 @@ impl Pass<'_> {
                     out.weights[local] = 1.0;
                     out.sums[local * stride..(local + 1) * stride].copy_from_slice(&point_result);
                 }
-                Items::Interior { triangles, counts, first_sample } => {
+                Items::Interior { triangles, counts, first_sample, first_index, weight_count } => {
                     let t = triangles[item];
+                    let first_index = first_index.get(item).copied().unwrap_or(0);
+                    let weight_count = weight_count.get(item).copied().unwrap_or(counts[item]);
                     let [ia, ib, ic] = self.mesh.triangle(t as usize);
                     let [pa, pb, pc] = self.mesh.triangle_positions(t as usize);
                     let [na, nb, nc] = [ia, ib, ic].map(|i| self.mesh.normals[i as usize]);
@@ -877,7 +998,7 @@ impl Pass<'_> {
                             continue;
                         }
                         let seed = self.params.point_seed.unwrap_or(self.params.seed);
-                        let b = triangle_sample(self.params.pattern, seed, t, [ia, ib, ic], s);
+                        let b = triangle_sample(self.params.pattern, seed, t, [ia, ib, ic], first_index + s);
                         point_result.fill(0.0);
                         let (traced, inside) = if self.gather_cached(global as u64, &mut point_result) {
                             (0, false)
@@ -886,7 +1007,7 @@ impl Pass<'_> {
                                 position: pa * b[0] + pb * b[1] + pc * b[2],
                                 normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
                                 face_normal,
-                                seed: hash_seed(&[self.params.seed, TAG_DIRECTION, t, s]),
+                                seed: hash_seed(&[self.params.seed, TAG_DIRECTION, t, first_index + s]),
                             };
                             self.trace_point(&point, bounce, bounce == 0, &mut point_result, &mut scratch, &mut out.hits)
                         };
@@ -896,8 +1017,12 @@ impl Pass<'_> {
                             out.rejected.push(global);
                             continue;
                         }
-                        for (corner, w) in sample_weights(b, area, counts[item]).into_iter().enumerate() {
+                        let dc = point_result[0];
+                        for (corner, w) in sample_weights(b, area, weight_count).into_iter().enumerate() {
                             out.weights[local * 3 + corner] += w;
+                            if let Some(moments) = out.moments.get_mut(local * 3 + corner) {
+                                moments.add(w, dc);
+                            }
                             let dst = &mut out.sums[(local * 3 + corner) * stride..][..stride];
                             dst.iter_mut().zip(&point_result).for_each(|(d, r)| *d += w * r);
                         }
@@ -906,6 +1031,15 @@ impl Pass<'_> {
             }
         }
         out
+    }
+
+    /// Hit records `points` points leave in bounce 0 (one per ray, when recorded).
+    fn record_count(&self, points: usize) -> usize {
+        if self.record_hits {
+            points * self.params.rays as usize
+        } else {
+            0
+        }
     }
 
     /// Each ray's weight: directions are drawn ∝ c(n,ω), so 1/N over the

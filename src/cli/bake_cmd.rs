@@ -247,6 +247,11 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
             let compacted = TransferResult {
                 total: move_layer(&result.total),
                 bounces: result.bounces.iter().map(|l| move_layer(l)).collect(),
+                noise: if result.noise.is_empty() {
+                    Vec::new()
+                } else {
+                    bake::cull::compact_vertex_data(&result.noise, 1, &map, kept.vertex_count())
+                },
                 ..result
             };
             (std::borrow::Cow::Owned(kept), compacted)

@@ -289,7 +289,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         rays_traced,
         ..BakeStats::default()
     };
-    let result = TransferResult { order: params.order, channels, total, bounces: layers, stats };
+    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise: Vec::new(), stats };
     Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key })
 }
 

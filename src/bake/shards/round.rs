@@ -54,6 +54,10 @@ pub fn bake_transfer_shard(
 ) -> Result<RoundOutput, ShardError> {
     let started = Instant::now();
     let params = crate::bake::BakeParams { quiet, ..key.params };
+    if params.adaptive > 0.0 {
+        // Where extra points go depends on every vertex's bounce 0: one process decides it.
+        return Err(BakeError::Params("adaptive allocation runs in one process: a sharded bake cannot use it".into()).into());
+    }
     if round > params.bounces {
         return Err(BakeError::Params(format!(
             "round {round} of a bake of {} bounce(s): rounds run 0..={}",

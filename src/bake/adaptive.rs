@@ -1,0 +1,312 @@
+//! Sample points where the noise is (issue 17, `--adaptive`): bounce 0 is
+//! first traced at the base layout (points by area), which also measures
+//! each vertex's noise; then extra points go to the triangles around the
+//! noisiest vertices, and every later bounce runs over all the points.
+//!
+//! A vertex's value is a ratio Σ w·x / Σ w over its one-ring's points
+//! (`transfer::sample_weights`). Its noise is estimated from the points'
+//! DC by the delta method, `Var ≈ Σ w² (x − m)² / (Σ w)²`, whose per-point
+//! spread `σ² = Σ w² (x − m)² / Σ w²` does not depend on how many points
+//! there are. The squared error summed over vertices, which is what a
+//! relative RMS over vertices counts, is least for a given number of
+//! points when a vertex's effective point count grows as its σ (Neyman
+//! allocation); a vertex's σ is taken as the largest over its one-ring's
+//! corners, so a vertex whose few points all missed the light, next to
+//! noisy ones, is not left alone. Extra points are continued from the same
+//! Sobol sequence of the triangle (its samples `n..n + e`), and every sample
+//! of a triangle is weighted by `area / (n + e)`: the estimate stays the
+//! hat-weighted one-ring mean, only less noisy where the points were added.
+
+use super::transfer::Items;
+use crate::mesh::Mesh;
+
+/// Sums over a vertex's (or an item corner's) points of the moments of
+/// their DC `x` under their weights `w`: what the noise estimate needs
+/// besides Σ w and Σ w·x.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct Moments {
+    pub(crate) w2: f64,
+    pub(crate) w2x: f64,
+    pub(crate) w2x2: f64,
+}
+
+impl Moments {
+    #[inline]
+    pub(crate) fn add(&mut self, w: f32, x: f32) {
+        let (w2, x) = (f64::from(w) * f64::from(w), f64::from(x));
+        self.w2 += w2;
+        self.w2x += w2 * x;
+        self.w2x2 += w2 * x * x;
+    }
+
+    #[inline]
+    pub(crate) fn merge(&mut self, other: &Moments) {
+        self.w2 += other.w2;
+        self.w2x += other.w2x;
+        self.w2x2 += other.w2x2;
+    }
+
+    /// The moments had every weight been multiplied by `k`.
+    pub(crate) fn scaled(&self, k: f64) -> Moments {
+        let k2 = k * k;
+        Moments { w2: self.w2 * k2, w2x: self.w2x * k2, w2x2: self.w2x2 * k2 }
+    }
+
+    /// `Σ w² (x − mean)²`.
+    fn spread(&self, mean: f64) -> f64 {
+        (self.w2x2 - 2.0 * mean * self.w2x + mean * mean * self.w2).max(0.0)
+    }
+
+    /// Standard error of the ratio estimate `mean` = Σ w·x / `weight`.
+    pub(crate) fn standard_error(&self, weight: f64, mean: f64) -> f64 {
+        if weight > 0.0 {
+            self.spread(mean).sqrt() / weight
+        } else {
+            0.0
+        }
+    }
+
+    /// Effective number of points, `(Σ w)² / Σ w²`.
+    fn effective_count(&self, weight: f64) -> f64 {
+        if self.w2 > 0.0 {
+            weight * weight / self.w2
+        } else {
+            0.0
+        }
+    }
+
+    /// Per-point spread σ, `sqrt(Σ w² (x − mean)² / Σ w²)`.
+    fn sigma(&self, mean: f64) -> f64 {
+        if self.w2 > 0.0 {
+            (self.spread(mean) / self.w2).sqrt()
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Each vertex's bounce-0 DC standard error from its weight, DC sum and moments.
+pub(crate) fn standard_errors(weights: &[f32], dc_sums: impl Iterator<Item = f32>, moments: &[Moments]) -> Vec<f32> {
+    weights
+        .iter()
+        .zip(dc_sums)
+        .zip(moments)
+        .map(|((&w, s), m)| {
+            let w = f64::from(w);
+            let mean = if w > 0.0 { f64::from(s) / w } else { 0.0 };
+            m.standard_error(w, mean) as f32
+        })
+        .collect()
+}
+
+/// What the pilot measured per vertex.
+pub(crate) struct Pilot<'a> {
+    pub(crate) weights: &'a [f32],
+    /// Σ w·x of the DC per vertex.
+    pub(crate) dc_sums: Vec<f32>,
+    pub(crate) moments: &'a [Moments],
+}
+
+/// Extra samples per item of `items` (the base layout: one item per
+/// triangle, samples from 0), about `budget` in all, in whole rotation
+/// triples, each triangle at most `max_per_triangle` in all.
+pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &Pilot, budget: u64, max_per_triangle: u32) -> Vec<u32> {
+    let Items::Interior { triangles, counts, .. } = items else { return Vec::new() };
+    let vertex_count = mesh.vertex_count();
+    let mut sigma = vec![0.0f64; vertex_count];
+    let mut effective = vec![0.0f64; vertex_count];
+    for v in 0..vertex_count {
+        let w = f64::from(pilot.weights[v]);
+        if w > 0.0 {
+            sigma[v] = pilot.moments[v].sigma(f64::from(pilot.dc_sums[v]) / w);
+            effective[v] = pilot.moments[v].effective_count(w);
+        }
+    }
+    // σ pooled over each one-ring: the largest of its triangles' corners.
+    let mut pooled = sigma.clone();
+    for &t in triangles {
+        let corners = mesh.triangle(t as usize);
+        let largest = corners.iter().map(|&v| sigma[v as usize]).fold(0.0, f64::max);
+        for v in corners {
+            pooled[v as usize] = pooled[v as usize].max(largest);
+        }
+    }
+    // Growth factor each item would get when vertices want λ·σ effective points.
+    let factors = |lambda: f64| -> Vec<f64> {
+        triangles
+            .iter()
+            .zip(counts)
+            .map(|(&t, &n)| {
+                let want = mesh
+                    .triangle(t as usize)
+                    .iter()
+                    .map(|&v| {
+                        let v = v as usize;
+                        if effective[v] > 0.0 {
+                            lambda * pooled[v] / effective[v]
+                        } else {
+                            1.0
+                        }
+                    })
+                    .fold(1.0, f64::max);
+                want.min(f64::from(max_per_triangle.max(n)) / f64::from(n))
+            })
+            .collect()
+    };
+    let extra = |lambda: f64| -> Vec<u32> {
+        factors(lambda).iter().zip(counts).map(|(&k, &n)| 3 * ((f64::from(n) * (k - 1.0) / 3.0).round() as u32)).collect()
+    };
+    let total = |e: &[u32]| e.iter().map(|&e| u64::from(e)).sum::<u64>();
+    if budget == 0 || pooled.iter().all(|&s| s <= 0.0) {
+        return vec![0; counts.len()];
+    }
+    // λ by bisection on a log scale: the extra count grows with λ.
+    let (mut low, mut high) = (0.0f64, 1.0f64);
+    while total(&extra(high)) < budget && high < 1e30 {
+        low = high;
+        high *= 16.0;
+    }
+    for _ in 0..60 {
+        let mid = if low > 0.0 { (low * high).sqrt() } else { high / 16.0 };
+        if total(&extra(mid)) <= budget {
+            low = mid;
+        } else {
+            high = mid;
+        }
+    }
+    extra(low)
+}
+
+/// The items of a bake with `extra` samples added to the base `items`: the
+/// base items, now weighted by their triangle's new count, then one item
+/// per triangle that gained samples, holding them (after all base points,
+/// so the base points keep their indices).
+pub(crate) fn with_extra(items: &Items, extra: &[u32]) -> Items {
+    let Items::Interior { triangles, counts, first_sample, .. } = items else {
+        unreachable!("adaptive allocation needs interior sampling")
+    };
+    let mut all_triangles = triangles.clone();
+    let mut all_counts = counts.clone();
+    let mut all_first_sample = first_sample.clone();
+    let mut first_index = vec![0u32; triangles.len()];
+    let mut weight_count: Vec<u32> = counts.iter().zip(extra).map(|(&n, &e)| n + e).collect();
+    let mut next = counts.iter().map(|&c| c as u64).sum::<u64>();
+    for (k, &e) in extra.iter().enumerate().filter(|&(_, &e)| e > 0) {
+        all_triangles.push(triangles[k]);
+        all_counts.push(e);
+        // Saturates past u32: `check_point_count` refuses such a bake.
+        all_first_sample.push(next.min(u32::MAX as u64) as u32);
+        first_index.push(counts[k]);
+        weight_count.push(counts[k] + e);
+        next += u64::from(e);
+    }
+    Items::Interior { triangles: all_triangles, counts: all_counts, first_sample: all_first_sample, first_index, weight_count }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::verify::shapes;
+
+    /// The moments give the delta-method standard error of a weighted mean,
+    /// and scaling every weight leaves the mean's error unchanged.
+    #[test]
+    fn moments_give_the_weighted_mean_standard_error() {
+        let points = [(0.5f32, 1.0f32), (1.0, 3.0), (0.25, 2.0), (2.0, 0.5)];
+        let mut m = Moments::default();
+        for &(w, x) in &points {
+            m.add(w, x);
+        }
+        let weight: f64 = points.iter().map(|&(w, _)| w as f64).sum();
+        let mean = points.iter().map(|&(w, x)| w as f64 * x as f64).sum::<f64>() / weight;
+        let expected = points.iter().map(|&(w, x)| (w as f64 * (x as f64 - mean)).powi(2)).sum::<f64>().sqrt() / weight;
+        assert!((m.standard_error(weight, mean) - expected).abs() < 1e-12);
+        let scaled = m.scaled(0.3);
+        assert!((scaled.standard_error(0.3 * weight, mean) - expected).abs() < 1e-12);
+        assert!((m.effective_count(weight) - weight * weight / points.iter().map(|&(w, _)| (w * w) as f64).sum::<f64>()).abs() < 1e-12);
+        // Equal values: no spread, no error; no weight: none either.
+        let mut flat = Moments::default();
+        (0..4).for_each(|_| flat.add(1.0, 2.0));
+        assert_eq!(flat.standard_error(4.0, 2.0), 0.0);
+        assert_eq!(Moments::default().standard_error(0.0, 0.0), 0.0);
+    }
+
+    /// A 4×4 grid, 6 samples per triangle; vertex `noisy` alone has spread.
+    fn grid_pilot(noisy: usize) -> (Mesh, Items, Vec<f32>, Vec<f32>, Vec<Moments>) {
+        let mesh = shapes::plane_grid(4, 1.0);
+        let triangles: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
+        let counts = vec![6u32; triangles.len()];
+        let first_sample = (0..triangles.len() as u32).map(|k| 6 * k).collect();
+        let items = Items::Interior { triangles, counts, first_sample, first_index: Vec::new(), weight_count: Vec::new() };
+        let n = mesh.vertex_count();
+        let weights = vec![1.0f32; n];
+        let dc_sums = vec![0.5f32; n];
+        let mut moments = vec![Moments::default(); n];
+        for (v, m) in moments.iter_mut().enumerate() {
+            // Six points of weight 1/6 around the mean 0.5; spread only at `noisy`.
+            let half_range = if v == noisy { 0.4 } else { 0.0 };
+            for k in 0..6 {
+                m.add(1.0 / 6.0, 0.5 + if k % 2 == 0 { half_range } else { -half_range });
+            }
+        }
+        (mesh, items, weights, dc_sums, moments)
+    }
+
+    #[test]
+    fn extra_points_go_around_the_noisy_vertex_within_the_budget() {
+        let noisy = 12; // the grid's centre vertex
+        let (mesh, items, weights, dc_sums, moments) = grid_pilot(noisy);
+        let pilot = Pilot { weights: &weights, dc_sums, moments: &moments };
+        let Items::Interior { triangles, counts, .. } = &items else { unreachable!() };
+        let base: u64 = counts.iter().map(|&c| c as u64).sum();
+        for budget in [0u64, 30, base, 4 * base] {
+            let extra = extra_counts(&mesh, &items, &pilot, budget, 48);
+            let total: u64 = extra.iter().map(|&e| e as u64).sum();
+            assert!(total <= budget, "budget {budget}: {total} extra");
+            assert!(extra.iter().all(|&e| e % 3 == 0 && e + 6 <= 48), "whole triples, at most 48 in a triangle: {extra:?}");
+            // Only triangles with a corner within one ring of the noisy vertex (pooled σ) gain.
+            let near = |t: u32| {
+                let ring: Vec<u32> =
+                    (0..mesh.triangle_count()).map(|u| mesh.triangle(u)).filter(|c| c.contains(&(noisy as u32))).flatten().collect();
+                mesh.triangle(t as usize).iter().any(|v| ring.contains(v))
+            };
+            for (k, &e) in extra.iter().enumerate() {
+                assert!(e == 0 || near(triangles[k]), "triangle {} far from the noise got {e}", triangles[k]);
+            }
+            // (30 extra cannot give each triangle near the noise a whole triple: none gets any.)
+            if budget >= base {
+                let around: u64 = extra
+                    .iter()
+                    .enumerate()
+                    .filter(|&(k, _)| mesh.triangle(triangles[k] as usize).contains(&(noisy as u32)))
+                    .map(|(_, &e)| e as u64)
+                    .sum();
+                assert!(around > 0, "budget {budget}: nothing went next to the noisy vertex");
+            }
+        }
+        // No spread anywhere: nothing to add.
+        let (mesh, items, weights, dc_sums, moments) = grid_pilot(usize::MAX);
+        let extra = extra_counts(&mesh, &items, &Pilot { weights: &weights, dc_sums, moments: &moments }, 1000, 256);
+        assert!(extra.iter().all(|&e| e == 0));
+    }
+
+    /// The extra samples follow every base point, continue their triangle's
+    /// sample indices, and all of a triangle's samples share one weight count.
+    #[test]
+    fn extra_items_continue_the_triangles_samples_after_all_base_points() {
+        let (_, items, ..) = grid_pilot(0);
+        let mut extra = vec![0u32; items.len()];
+        extra[3] = 9;
+        extra[7] = 3;
+        let all = with_extra(&items, &extra);
+        let Items::Interior { triangles, counts, first_sample, first_index, weight_count } = &all else { unreachable!() };
+        let base = items.len();
+        assert_eq!(triangles.len(), base + 2);
+        assert_eq!((triangles[base], counts[base], first_index[base], weight_count[base]), (3, 9, 6, 15));
+        assert_eq!((triangles[base + 1], counts[base + 1], first_index[base + 1], weight_count[base + 1]), (7, 3, 6, 9));
+        assert_eq!((weight_count[3], weight_count[7], weight_count[0]), (15, 9, 6));
+        assert_eq!(first_sample[base], 6 * base as u32);
+        assert_eq!(first_sample[base + 1], 6 * base as u32 + 9);
+        assert_eq!(all.point_count(), items.point_count() + 12);
+    }
+}
