@@ -1,7 +1,10 @@
 //! The DC error of bundles against a reference bundle of the same mesh, as
 //! docs/speed-accuracy.md reports it for the Ferrari.
 //!
-//! cargo run --release --example transfer_error -- REFERENCE.prtb BUNDLE.prtb…
+//! cargo run --release --example transfer_error -- REFERENCE.prtb[,REFERENCE2.prtb…] BUNDLE.prtb…
+//!
+//! Several references (comma-separated, e.g. two seeds of a converged bake)
+//! are averaged per vertex, which halves the variance two seeds leave.
 //!
 //! Over the vertices the reference lights (total DC > 0): the relative RMS
 //! error of DC, sqrt(Σ (b − r)² / Σ r²) (as `budget::relative_rms`), the mean
@@ -24,7 +27,9 @@ fn main() {
         eprintln!("usage: transfer_error REFERENCE.prtb BUNDLE.prtb…");
         std::process::exit(2);
     };
-    let reference = dc_of(reference_path);
+    let references: Vec<Vec<f64>> = reference_path.split(',').map(dc_of).collect();
+    let reference: Vec<f64> =
+        (0..references[0].len()).map(|v| references.iter().map(|r| r[v]).sum::<f64>() / references.len() as f64).collect();
     let lit: Vec<usize> = (0..reference.len()).filter(|&v| reference[v] > 0.0).collect();
     println!("reference {reference_path}: {} vertices, {} lit", reference.len(), lit.len());
     println!("| bundle | relative RMS DC | mean ratio | black of lit | error share of the worst 1% |");
