@@ -370,6 +370,8 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     }
     assert!(points[1] > points[0] && points[1] <= 2 * points[0], "points {points:?}");
     let meta = |path: &std::path::Path| prtbake::bundle::read_bundle(path).unwrap().meta;
+    let added = meta(&adaptive_out)["stats"]["points_added"].as_u64();
+    assert_eq!(added, Some(points[1] - points[0]), "META counts the added points");
     assert_eq!(meta(&adaptive_out)["params"]["adaptive"].as_f64(), Some(1.0));
     assert!(meta(&base_out)["params"].get("adaptive").is_none(), "a bake without it records nothing new");
     for bad in [&["--adaptive", "-1"][..], &["--adaptive", "nan"], &["--adaptive", "17"], &["--adaptive", "1", "--shard", "0/2"]] {

@@ -213,6 +213,8 @@ pub struct BakeStats {
     pub points: u64,
     /// Interior samples rejected as lying inside geometry.
     pub points_rejected: u64,
+    /// Of `points`, those adaptive allocation added after bounce 0 (`BakeParams::adaptive`).
+    pub points_added: u64,
     /// Vertices no sample reached (only on window or degenerate triangles): their transfer is zero.
     pub vertices_without_samples: u64,
     /// Rays evaluated per bounce (bounces ≥ 1 reuse bounce 0's hits when they fit in memory).

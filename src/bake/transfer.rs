@@ -650,6 +650,7 @@ fn bake_layers(
         let sums = if bounce == 0 && adaptive {
             let sums = adaptive_first_bounce(&mut plan, &source, use_cache, &progress)?;
             rejected.resize(plan.items.point_count() as usize, false);
+            stats.points_added = plan.items.point_count() - stats.points;
             stats.points = plan.items.point_count();
             sums
         } else {

@@ -62,6 +62,9 @@ pub fn make_bundle_stored(
         },
         "conventions": conventions(),
     });
+    if s.points_added > 0 {
+        meta["stats"]["points_added"] = json!(s.points_added);
+    }
     if let (Some(m), serde_json::Value::Object(extra)) = (meta.as_object_mut(), extra_meta) {
         m.extend(extra);
     }

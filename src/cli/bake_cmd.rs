@@ -338,11 +338,12 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
         }));
     }
     println!(
-        "baked {}: {} triangles, {} vertices, {} points ({} rejected), {} rays traced in {:.2}s ({:.2} Mrays/s traced; {} evaluations, {} of them gathered from hit records), order {}, {} channel(s), {} bytes",
+        "baked {}: {} triangles, {} vertices, {} points ({}{} rejected), {} rays traced in {:.2}s ({:.2} Mrays/s traced; {} evaluations, {} of them gathered from hit records), order {}, {} channel(s), {} bytes",
         report.output.display(),
         s.triangles,
         s.vertices,
         s.points,
+        if s.points_added > 0 { format!("{} added by --adaptive, ", s.points_added) } else { String::new() },
         s.points_rejected,
         s.rays_traced,
         s.seconds,
