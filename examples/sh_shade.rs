@@ -42,7 +42,11 @@ fn main() {
     // y_00 = 1/√(4π): a uniform light `lift` has L_00 = lift·√(4π).
     grey[0] += lift * (4.0 * std::f64::consts::PI).sqrt();
     let lighting = serde_json::json!({ "order": order, "coefficients": grey, "lift": lift, "minimum_before_lift": lowest });
-    std::fs::write(out_dir.join("lighting.json"), lighting.to_string()).unwrap();
+    let write = |name: String, bytes: &[u8]| {
+        let path = out_dir.join(name);
+        prtbake::files::atomic::write_atomic(&path, bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    };
+    write("lighting.json".into(), lighting.to_string().as_bytes());
     for (k, path) in args[3..].iter().enumerate() {
         let bundle = prtbake::bundle::read_bundle(path.as_ref()).unwrap_or_else(|e| panic!("{e}"));
         let transfer = bundle.transfer.unwrap_or_else(|| panic!("{path}: no transfer section"));
@@ -58,10 +62,10 @@ fn main() {
             })
             .collect();
         let stem = Path::new(path).file_stem().unwrap().to_string_lossy().into_owned();
-        std::fs::write(out_dir.join(format!("{stem}.shade.f32")), shade).unwrap();
+        write(format!("{stem}.shade.f32"), &shade);
         if k == 0 {
             let positions: Vec<u8> = bundle.mesh.positions.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect();
-            std::fs::write(out_dir.join(format!("{stem}.positions.f32")), positions).unwrap();
+            write(format!("{stem}.positions.f32"), &positions);
         }
     }
 }

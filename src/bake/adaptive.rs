@@ -85,32 +85,41 @@ impl Moments {
     }
 }
 
-/// Each vertex's bounce-0 DC standard error from its weight, DC sum and moments.
-pub(crate) fn standard_errors(weights: &[f32], dc_sums: impl Iterator<Item = f32>, moments: &[Moments]) -> Vec<f32> {
-    weights
-        .iter()
-        .zip(dc_sums)
-        .zip(moments)
-        .map(|((&w, s), m)| {
-            let w = f64::from(w);
-            let mean = if w > 0.0 { f64::from(s) / w } else { 0.0 };
-            m.standard_error(w, mean) as f32
-        })
-        .collect()
-}
-
-/// What the pilot measured per vertex.
-pub(crate) struct Pilot<'a> {
+/// Each vertex's bounce-0 DC statistics: what the noise estimate and the
+/// allocation read.
+pub(crate) struct VertexDc<'a> {
     pub(crate) weights: &'a [f32],
     /// Σ w·x of the DC per vertex.
     pub(crate) dc_sums: Vec<f32>,
     pub(crate) moments: &'a [Moments],
 }
 
+impl<'a> VertexDc<'a> {
+    /// From bounce 0's per-vertex sums (`[vertex][coeff]`, one channel).
+    pub(crate) fn new(weights: &'a [f32], sums: &[f32], coeffs: usize, moments: &'a [Moments]) -> VertexDc<'a> {
+        VertexDc { weights, dc_sums: sums.iter().step_by(coeffs).copied().collect(), moments }
+    }
+
+    /// Each vertex's mean DC, 0 without weight.
+    fn mean(&self, v: usize) -> f64 {
+        let w = f64::from(self.weights[v]);
+        if w > 0.0 {
+            f64::from(self.dc_sums[v]) / w
+        } else {
+            0.0
+        }
+    }
+
+    /// Each vertex's DC standard error (empty without moments).
+    pub(crate) fn standard_errors(&self) -> Vec<f32> {
+        (0..self.moments.len()).map(|v| self.moments[v].standard_error(f64::from(self.weights[v]), self.mean(v)) as f32).collect()
+    }
+}
+
 /// Extra samples per item of `items` (the base layout: one item per
 /// triangle, samples from 0), about `budget` in all, in whole rotation
 /// triples, each triangle at most `max_per_triangle` in all.
-pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &Pilot, budget: u64, max_per_triangle: u32) -> Vec<u32> {
+pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &VertexDc, budget: u64, max_per_triangle: u32) -> Vec<u32> {
     let Items::Interior { triangles, counts, .. } = items else { return Vec::new() };
     let vertex_count = mesh.vertex_count();
     let mut sigma = vec![0.0f64; vertex_count];
@@ -118,7 +127,7 @@ pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &Pilot, budget: u6
     for v in 0..vertex_count {
         let w = f64::from(pilot.weights[v]);
         if w > 0.0 {
-            sigma[v] = pilot.moments[v].sigma(f64::from(pilot.dc_sums[v]) / w);
+            sigma[v] = pilot.moments[v].sigma(pilot.mean(v));
             effective[v] = pilot.moments[v].effective_count(w);
         }
     }
@@ -131,30 +140,24 @@ pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &Pilot, budget: u6
             pooled[v as usize] = pooled[v as usize].max(largest);
         }
     }
-    // Growth factor each item would get when vertices want λ·σ effective points.
-    let factors = |lambda: f64| -> Vec<f64> {
-        triangles
+    // Per item, the largest σ / effective points of its corners: when
+    // vertices want λ·σ effective points, the item grows by λ times it (at least 1).
+    let ratios: Vec<f64> = triangles
+        .iter()
+        .map(|&t| {
+            let corners = mesh.triangle(t as usize).map(|v| v as usize);
+            corners.iter().filter(|&&v| effective[v] > 0.0).map(|&v| pooled[v] / effective[v]).fold(0.0, f64::max)
+        })
+        .collect();
+    let extra = |lambda: f64| -> Vec<u32> {
+        ratios
             .iter()
             .zip(counts)
-            .map(|(&t, &n)| {
-                let want = mesh
-                    .triangle(t as usize)
-                    .iter()
-                    .map(|&v| {
-                        let v = v as usize;
-                        if effective[v] > 0.0 {
-                            lambda * pooled[v] / effective[v]
-                        } else {
-                            1.0
-                        }
-                    })
-                    .fold(1.0, f64::max);
-                want.min(f64::from(max_per_triangle.max(n)) / f64::from(n))
+            .map(|(&ratio, &n)| {
+                let k = (lambda * ratio).max(1.0).min(f64::from(max_per_triangle.max(n)) / f64::from(n));
+                3 * ((f64::from(n) * (k - 1.0) / 3.0).round() as u32)
             })
             .collect()
-    };
-    let extra = |lambda: f64| -> Vec<u32> {
-        factors(lambda).iter().zip(counts).map(|(&k, &n)| 3 * ((f64::from(n) * (k - 1.0) / 3.0).round() as u32)).collect()
     };
     let total = |e: &[u32]| e.iter().map(|&e| u64::from(e)).sum::<u64>();
     if budget == 0 || pooled.iter().all(|&s| s <= 0.0) {
@@ -256,7 +259,7 @@ mod tests {
     fn extra_points_go_around_the_noisy_vertex_within_the_budget() {
         let noisy = 12; // the grid's centre vertex
         let (mesh, items, weights, dc_sums, moments) = grid_pilot(noisy);
-        let pilot = Pilot { weights: &weights, dc_sums, moments: &moments };
+        let pilot = VertexDc { weights: &weights, dc_sums, moments: &moments };
         let Items::Interior { triangles, counts, .. } = &items else { unreachable!() };
         let base: u64 = counts.iter().map(|&c| c as u64).sum();
         for budget in [0u64, 30, base, 4 * base] {
@@ -286,7 +289,7 @@ mod tests {
         }
         // No spread anywhere: nothing to add.
         let (mesh, items, weights, dc_sums, moments) = grid_pilot(usize::MAX);
-        let extra = extra_counts(&mesh, &items, &Pilot { weights: &weights, dc_sums, moments: &moments }, 1000, 256);
+        let extra = extra_counts(&mesh, &items, &VertexDc { weights: &weights, dc_sums, moments: &moments }, 1000, 256);
         assert!(extra.iter().all(|&e| e == 0));
     }
 

@@ -22,7 +22,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adaptive::Moments;
+use super::adaptive::{Moments, VertexDc};
 use super::enclosure::Sides;
 use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
@@ -660,8 +660,7 @@ fn bake_layers(
         };
         drop(progress);
         if bounce == 0 {
-            let stride = coeffs; // bounce 0 is traced in one channel
-            noise = super::adaptive::standard_errors(&sums.weights, sums.sums.iter().step_by(stride).copied(), &sums.moments);
+            noise = VertexDc::new(&sums.weights, &sums.sums, coeffs, &sums.moments).standard_errors();
             vertex_weight = sums.weights;
             if use_cache {
                 hit_cache = sums.hits;
@@ -717,12 +716,11 @@ fn adaptive_first_bounce(plan: &mut Plan, source: &SourceRows, record_hits: bool
         let pass = plan.pass(0, source, &[], None, record_hits);
         let mut hits = HitSlots::new(&pass, 0..base_len);
         let tasks = trace_tasks(&pass, 0..base_len, &mut hits, progress);
-        let mut pilot = RangeSums::empty(&pass);
+        let mut base = RangeSums::empty(&pass);
         for (start, task) in &tasks {
-            pilot.add_task(&pass, *start, task, None);
+            base.add_task(&pass, *start, task, None);
         }
-        let dc_sums = pilot.sums.iter().step_by(plan.coeffs).copied().collect();
-        let pilot = super::adaptive::Pilot { weights: &pilot.weights, dc_sums, moments: &pilot.moments };
+        let pilot = VertexDc::new(&base.weights, &base.sums, plan.coeffs, &base.moments);
         let budget = (plan.items.point_count() as f64 * f64::from(plan.params.adaptive)) as u64;
         let max_per_triangle = match plan.params.sampling {
             Sampling::Interior { max_per_triangle, .. } => max_per_triangle,
