@@ -87,7 +87,7 @@ struct BakeArgs {
     samples_per_vertex: f32,
     /// Adaptive allocation: after bounce 0's points, add about FACTOR × as many
     /// where their spread shows the most noise (a vertex's effective points grow
-    /// as its noise; docs/speed-accuracy.md). 0 = off. Not with --shard.
+    /// as its noise; docs/speed-accuracy.md). 0 = off. Interior sampling only; not with --shard.
     #[arg(long, value_name = "FACTOR", default_value_t = 0.0, conflicts_with_all = ["shard"])]
     adaptive: f32,
     /// Colour channels: 1, 3, or auto (1 when every material is grey).

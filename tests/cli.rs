@@ -351,8 +351,8 @@ fn clean_and_bake_cut_intersections() {
 }
 
 /// Issue 17: `bake --adaptive F` adds points after bounce 0 and records the
-/// factor in META; a factor outside 0..=16, or one with `--shard`, is
-/// refused with exit 2 and nothing written.
+/// factor in META; a factor outside 0..=16, or one with `--shard` or
+/// `--sampling vertex`, is refused with exit 2 and nothing written.
 #[test]
 fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     let dir = Scratch::new("adaptive");
@@ -374,7 +374,13 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     assert_eq!(added, Some(points[1] - points[0]), "META counts the added points");
     assert_eq!(meta(&adaptive_out)["params"]["adaptive"].as_f64(), Some(1.0));
     assert!(meta(&base_out)["params"].get("adaptive").is_none(), "a bake without it records nothing new");
-    for bad in [&["--adaptive", "-1"][..], &["--adaptive", "nan"], &["--adaptive", "17"], &["--adaptive", "1", "--shard", "0/2"]] {
+    for bad in [
+        &["--adaptive", "-1"][..],
+        &["--adaptive", "nan"],
+        &["--adaptive", "17"],
+        &["--adaptive", "1", "--shard", "0/2"],
+        &["--adaptive", "1", "--sampling", "vertex"],
+    ] {
         let out = dir.path("bad.prtb");
         let o = prtbake(&[&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
         assert_eq!(o.status.code(), Some(2), "{bad:?}: {}", String::from_utf8_lossy(&o.stderr));

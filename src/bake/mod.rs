@@ -163,6 +163,10 @@ impl BakeParams {
                 self.adaptive
             )));
         }
+        if self.adaptive > 0.0 && self.sampling == Sampling::Vertex {
+            // It adds points inside triangles; vertex sampling has one point per vertex.
+            return Err(BakeError::Params("adaptive allocation adds interior samples: it needs --sampling interior".into()));
+        }
         if self.bounces > 16 {
             return Err(BakeError::Params(format!("{} bounces is more than 16", self.bounces)));
         }
