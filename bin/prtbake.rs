@@ -496,6 +496,16 @@ enum Command {
         /// A small sweep (seconds), for tests.
         #[arg(long)]
         quick: bool,
+        /// The real scenes instead (the Ferrari in window mode, the grey-white
+        /// room, the demo cabin; 3 bounces), total error against converged
+        /// references cached in the output folder (about an hour to bake
+        /// them once, minutes after).
+        #[arg(long)]
+        real: bool,
+        /// With --real: the folder holding car-ferrari458/ and
+        /// room-grey-white/ (scenes not found are skipped with a notice).
+        #[arg(long, default_value = "../shared/data", requires = "real")]
+        data: PathBuf,
         #[arg(long, default_value_t = 0)]
         threads: usize,
         #[arg(long)]
@@ -990,7 +1000,8 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         }
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
-        Command::Chart { output, quick, threads, json } => cli::chart_cmd::run(&output, quick, threads, json),
+        Command::Chart { output, quick, real: true, data, threads, json } => cli::chart_cmd::run_real(&output, &data, quick, threads, json),
+        Command::Chart { output, quick, real: false, threads, json, .. } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)?).map(|_| Outcome::Ok),
         Command::Panel(args) => cli::panel_cmd::run(&panel_config(args)?).map(|_| Outcome::Ok),

@@ -37,3 +37,54 @@ fn quick_chart_writes_csv_svg_and_summary() {
     assert!(out.join("speed-accuracy-summary.json").exists());
     assert!(out.join("cabin-reference-quick.prtb").exists(), "the cabin reference is cached");
 }
+
+/// `chart --real --quick`: the coarse cabin against its two-seed reference.
+/// The reference is baked once and cached; a cached bundle baked with other
+/// parameters is not trusted but re-baked; errors fall with rays and stay
+/// above the reference's own floor.
+#[test]
+fn quick_real_chart_scores_against_a_cached_two_seed_reference() {
+    let dir = Scratch::new("chart-real");
+    let out = dir.path("out");
+    let args = ["chart", "--real", "--quick", "--threads", "2", "-o", out.to_str().unwrap(), "--json"];
+    let first = prtbake(&args);
+    assert!(first.status.success(), "chart --real failed: {}", String::from_utf8_lossy(&first.stderr));
+    assert_eq!(String::from_utf8_lossy(&first.stderr).matches("baking the cabin reference").count(), 2);
+    let summary: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
+    let scene = &summary["scenes"][0];
+    assert_eq!(scene["scene"], "cabin");
+    let lit = scene["lit_vertices"].as_u64().unwrap();
+    assert!(lit > 0 && lit <= scene["vertices"].as_u64().unwrap());
+    let floor = scene["reference"]["seed_difference_dc"].as_f64().unwrap();
+    assert!(floor > 0.0 && floor < 0.03, "the reference's seeds differ by {floor}");
+    let csv = std::fs::read_to_string(out.join("real-scenes.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next().unwrap(), prtbake::chart::real::CSV_HEADER);
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    let error = |setting: &str| -> Vec<f64> { rows.iter().filter(|r| r[1] == setting).map(|r| r[7].parse().unwrap()).collect() };
+    for setting in ["uniform", "adaptive 1"] {
+        let e = error(setting);
+        // 4× the rays: the noise halves; the reference's floor (≈ floor/2) keeps it from quite halving.
+        assert!(e[1] < 0.6 * e[0] && e[1] > 0.5 * floor, "{setting}: {e:?}");
+    }
+    assert!(out.join("real-scenes.svg").exists() && out.join("real-scenes-summary.json").exists());
+
+    // Cached: the second run bakes no reference and scores the same (the bake is deterministic).
+    let again = prtbake(&args);
+    assert!(again.status.success());
+    assert!(!String::from_utf8_lossy(&again.stderr).contains("baking"), "{}", String::from_utf8_lossy(&again.stderr));
+    let second: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
+    assert_eq!(second["scenes"][0]["reference"]["seed_difference_dc"], scene["reference"]["seed_difference_dc"]);
+    assert_eq!(second["rows"][0]["dc_error"], summary["rows"][0]["dc_error"]);
+
+    // A bundle of the same mesh baked with other parameters is re-baked, not trusted.
+    let s12 = out.join("cabin-reference-s12.prtb");
+    std::fs::copy(out.join("cabin-reference-s11.prtb"), &s12).unwrap();
+    let stale = prtbake(&args);
+    assert!(stale.status.success());
+    let stderr = String::from_utf8_lossy(&stale.stderr);
+    assert!(stderr.contains("seed 12") && !stderr.contains("seed 11"), "{stderr}");
+    let third: serde_json::Value = serde_json::from_slice(&stale.stdout).unwrap();
+    assert_eq!(third["scenes"][0]["reference"]["seed_difference_dc"], scene["reference"]["seed_difference_dc"]);
+}

@@ -10,11 +10,14 @@
 //! build included) on the current thread pool.
 //!
 //! - `scenes`: the scenes, their references and how a bake is scored;
+//! - `real`: `--real`, the Ferrari, the room and the cabin against their
+//!   own converged references (total error, not ray noise alone);
 //! - `pareto`: the Pareto front and equal-time comparisons;
 //! - `plot`: the SVG (plotters).
 
 pub mod pareto;
 pub mod plot;
+pub mod real;
 pub mod scenes;
 
 use crate::bake::{DirectionPattern, Sampling};

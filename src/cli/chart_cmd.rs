@@ -1,6 +1,9 @@
 //! `prtbake chart [-o DIR]`: the speed-accuracy sweep (src/chart), written as
 //! `speed-accuracy.csv`, `speed-accuracy.svg` and `speed-accuracy-summary.json`
 //! (equal-time comparisons), with the cabin reference bake cached in DIR.
+//! `--real`: the real scenes instead (src/chart/real.rs), written as
+//! `real-scenes.csv`, `real-scenes.svg` and `real-scenes-summary.json`, with
+//! their reference bakes cached in DIR.
 
 use std::path::Path;
 
@@ -29,26 +32,11 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
     let size = if quick { Size::Quick } else { Size::Full };
     let started = std::time::Instant::now();
     let rows = super::with_threads(threads, || chart::scenes::sweep(size, dir))??;
-    let csv_path = dir.join("speed-accuracy.csv");
-    crate::files::write_atomic(&csv_path, chart::to_csv(&rows).as_bytes())
-        .with_context(|| format!("cannot write {}", csv_path.display()))?;
-    let svg = chart::plot::render_svg(&rows).map_err(anyhow::Error::msg).context("cannot draw the chart")?;
-    let svg_path = dir.join("speed-accuracy.svg");
-    crate::files::write_atomic(&svg_path, svg.as_bytes()).with_context(|| format!("cannot write {}", svg_path.display()))?;
     let comparisons: Vec<pareto::Comparison> = COMPARISONS.iter().map(|(s, a, b)| pareto::compare(&rows, s, a, b)).collect();
     let front: Vec<_> = rows.iter().filter(|r| r.pareto).collect();
-    let summary = json!({
-        "csv": super::json_path(&csv_path),
-        "svg": super::json_path(&svg_path),
-        "bakes": rows.len(),
-        "sweep_seconds": started.elapsed().as_secs_f64(),
-        "quick": quick,
-        "equal_time": comparisons,
-        "pareto_front": front,
-    });
-    let summary_path = dir.join("speed-accuracy-summary.json");
-    crate::files::write_atomic(&summary_path, serde_json::to_string_pretty(&summary)?.as_bytes())
-        .with_context(|| format!("cannot write {}", summary_path.display()))?;
+    let extra = json!({ "equal_time": comparisons, "pareto_front": front });
+    let (csv_path, svg_path, summary) =
+        write_outputs(dir, "speed-accuracy", &chart::to_csv(&rows), &rows, rows.len(), started, quick, extra)?;
     if as_json {
         super::print_json(&summary)?;
     } else {
@@ -68,4 +56,118 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
         }
     }
     Ok(super::Outcome::Ok)
+}
+
+/// `chart --real`: the real scenes found in `data` (and the generated cabin)
+/// against their converged references, cached in `dir`.
+pub fn run_real(dir: &Path, data: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Result<super::Outcome> {
+    use crate::chart::real::{self, Reach};
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let size = if quick { Size::Quick } else { Size::Full };
+    let started = std::time::Instant::now();
+    let sweeps = super::with_threads(threads, || -> anyhow::Result<Vec<real::SceneSweep>> {
+        let scenes = real::scenes(data, size)?;
+        real::sweep(&scenes, size, dir)
+    })??;
+    let rows: Vec<real::RealRow> = sweeps.iter().flat_map(|s| s.rows.iter().cloned()).collect();
+    // The SVG plots DC error (the targets' figure) against seconds, one curve per setting.
+    let plotted: Vec<chart::Row> = rows
+        .iter()
+        .map(|r| chart::Row {
+            scene: r.scene.clone(),
+            setting: r.setting.clone(),
+            pattern: "sobol".into(),
+            sampling: "interior".into(),
+            order: 3,
+            bounces: 3,
+            rays: r.rays,
+            seconds: r.seconds,
+            error: r.score.dc_error,
+            pareto: false,
+        })
+        .collect();
+    let scenes: Vec<serde_json::Value> = sweeps
+        .iter()
+        .map(|s| {
+            let mut settings: Vec<&str> = Vec::new();
+            s.rows.iter().for_each(|r| if !settings.contains(&r.setting.as_str()) { settings.push(&r.setting) });
+            let reach: Vec<serde_json::Value> = settings
+                .iter()
+                .map(|setting| {
+                    let mut curve: Vec<(f64, f64)> =
+                        s.rows.iter().filter(|r| r.setting == *setting).map(|r| (r.seconds, r.score.dc_error)).collect();
+                    curve.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    let times: Vec<(f64, Reach)> = real::TARGETS.iter().map(|&t| (t, real::time_to_reach(&curve, t))).collect();
+                    json!({ "setting": setting, "dc_error_reached": times.iter().map(|(t, r)| json!({ "target": t, "seconds": r })).collect::<Vec<_>>() })
+                })
+                .collect();
+            json!({
+                "scene": s.name,
+                "vertices": s.vertices,
+                "lit_vertices": s.reference.lit.len(),
+                "reference": {
+                    "params": s.reference_params,
+                    "seeds": real::REFERENCE_SEEDS,
+                    "seed_difference_dc": s.reference.seed_difference,
+                    "baked_seconds": s.reference.baked_seconds,
+                },
+                "time_to_reach": reach,
+            })
+        })
+        .collect();
+    let extra = json!({ "scenes": scenes, "rows": rows });
+    let (csv_path, svg_path, summary) =
+        write_outputs(dir, "real-scenes", &real::to_csv(&rows), &plotted, rows.len(), started, quick, extra)?;
+    if as_json {
+        super::print_json(&summary)?;
+    } else {
+        println!("{} bakes in {:.1}s: {}, {}", rows.len(), started.elapsed().as_secs_f64(), csv_path.display(), svg_path.display());
+        for s in &sweeps {
+            println!("  {}: {} lit vertices; reference seeds differ by {:.4}", s.name, s.reference.lit.len(), s.reference.seed_difference);
+            for r in &s.rows {
+                println!(
+                    "    {:<10} {:>4} rays {:>8.2}s  DC error {:.4}  shaded {:.4}  black lit {}",
+                    r.setting, r.rays, r.seconds, r.score.dc_error, r.score.shaded_error, r.score.black_lit
+                );
+            }
+        }
+    }
+    Ok(super::Outcome::Ok)
+}
+
+/// Writes `<stem>.csv`, `<stem>.svg` (of `plotted`, its Pareto fronts
+/// marked here) and `<stem>-summary.json` (the common fields plus `extra`'s)
+/// into `dir`, each atomically; returns the first two paths and the summary.
+#[allow(clippy::too_many_arguments)]
+fn write_outputs(
+    dir: &Path,
+    stem: &str,
+    csv: &str,
+    plotted: &[chart::Row],
+    bakes: usize,
+    started: std::time::Instant,
+    quick: bool,
+    extra: serde_json::Value,
+) -> anyhow::Result<(std::path::PathBuf, std::path::PathBuf, serde_json::Value)> {
+    let write =
+        |path: &Path, bytes: &[u8]| crate::files::write_atomic(path, bytes).with_context(|| format!("cannot write {}", path.display()));
+    let csv_path = dir.join(format!("{stem}.csv"));
+    write(&csv_path, csv.as_bytes())?;
+    let mut plotted = plotted.to_vec();
+    pareto::mark_fronts(&mut plotted);
+    let svg = chart::plot::render_svg(&plotted).map_err(anyhow::Error::msg).context("cannot draw the chart")?;
+    let svg_path = dir.join(format!("{stem}.svg"));
+    write(&svg_path, svg.as_bytes())?;
+    let mut summary = json!({
+        "csv": super::json_path(&csv_path),
+        "svg": super::json_path(&svg_path),
+        "bakes": bakes,
+        "sweep_seconds": started.elapsed().as_secs_f64(),
+        "quick": quick,
+    });
+    if let (Some(fields), serde_json::Value::Object(more)) = (summary.as_object_mut(), extra) {
+        fields.extend(more);
+    }
+    write(&dir.join(format!("{stem}-summary.json")), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    Ok((csv_path, svg_path, summary))
 }

@@ -29,8 +29,7 @@ pub fn demo_params(quiet: bool) -> BakeParams {
     BakeParams { order: 3, rays: 192, bounces: 3, mode: Mode::Window, quiet, ..BakeParams::default() }
 }
 
-/// Cells per metre of the demo cabin's tessellation (≈ 3.3·10⁵ triangles).
-pub const DEMO_DETAIL: f32 = 64.0;
+pub use crate::fixtures::cabin::DEMO_DETAIL;
 
 pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> anyhow::Result<Outcome> {
     super::check_threads(threads)?;

@@ -1,0 +1,381 @@
+//! `chart --real`: accuracy per second on the meshes users judge by (the
+//! Ferrari in window mode, the grey-white room open through its openings,
+//! the demo cabin), each against its own converged reference.
+//!
+//! **Reference.** The per-vertex mean of two bakes with independent seeds
+//! (11 and 12) at many more points and rays than any swept bake, cached in
+//! the output folder as ordinary bundles (`<scene>-reference-s<seed>.prtb`;
+//! a bundle baked by `prtbake bake` with the same mesh and parameters is
+//! used as it is). Its convergence is reported, not assumed: the relative RMS
+//! DC difference of the two seeds. The mean's own noise is about half of it,
+//! so errors near that floor are overstated by it.
+//!
+//! **Error** (total: sample positions, rays and bounces together), over the
+//! vertices the reference lights (DC > 0):
+//! - `dc_error`: relative RMS of DC, `sqrt(Σ (b − r)² / Σ r²)`, the figure of
+//!   issue 17's targets;
+//! - `shaded_error`: the worst over [`budget::reference_lightings`] of the
+//!   relative RMS of shaded radiance, the definition `--max-error` budgets
+//!   storage with (there against the bake itself);
+//! - `black_lit`: lit vertices the bake leaves at DC 0.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+
+use super::scenes::Size;
+use crate::bake::{bake_mesh, BakeParams, Channels, Mode};
+use crate::budget::{self, Lighting};
+use crate::mesh::Mesh;
+use crate::sh;
+
+/// Seeds of the two reference bakes (the swept bakes use the default seed, 1).
+pub const REFERENCE_SEEDS: [u32; 2] = [11, 12];
+
+/// Errors the summary reports the time to reach.
+pub const TARGETS: [f64; 3] = [0.10, 0.05, 0.02];
+
+/// A real scene ready to sweep.
+pub struct RealScene {
+    pub name: &'static str,
+    pub mesh: Mesh,
+    pub window_patterns: Vec<String>,
+    /// Mode, order, bounces, channels; rays = the CLI default for the scene.
+    pub base: BakeParams,
+    /// Rays and adaptive factor of the reference bakes.
+    pub reference_rays: u32,
+    pub reference_adaptive: f32,
+}
+
+impl RealScene {
+    fn reference_params(&self, seed: u32) -> BakeParams {
+        BakeParams { rays: self.reference_rays, adaptive: self.reference_adaptive, seed, ..self.base }
+    }
+
+    /// The swept settings: (label, rays, adaptive factor). Today's default
+    /// (uniform points) at 1/8 … 1 of the scene's default rays, and
+    /// `--adaptive 1` at half those (the same traced rays per base point).
+    fn settings(&self, size: Size) -> Vec<(&'static str, u32, f32)> {
+        let r = self.base.rays;
+        let fractions: &[u32] = if size == Size::Quick { &[8, 2] } else { &[8, 4, 2, 1] };
+        let mut out: Vec<(&'static str, u32, f32)> = fractions.iter().map(|&f| ("uniform", r / f, 0.0)).collect();
+        out.extend(fractions.iter().map(|&f| ("adaptive 1", (r / f / 2).max(1), 1.0)));
+        out
+    }
+}
+
+/// Order 3, 3 bounces, one channel, the hit cache as large as `bake`'s CLI default.
+fn base(mode: Mode, rays: u32) -> BakeParams {
+    let hit_cache_bytes = crate::bake::transfer::available_hit_cache_bytes();
+    BakeParams { order: 3, bounces: 3, channels: Channels::One, mode, rays, quiet: true, hit_cache_bytes, ..BakeParams::default() }
+}
+
+/// The Ferrari, the room and the cabin. The first two are read from `data`
+/// (the layout of ../shared/data: `car-ferrari458/ferrari_nodraco.glb`,
+/// `room-grey-white/grey_white_room_flat.obj`) and skipped with a notice on
+/// stderr when absent; the cabin is generated. `Size::Quick` is the cabin
+/// alone at a coarse tessellation (seconds, for tests).
+pub fn scenes(data: &Path, size: Size) -> anyhow::Result<Vec<RealScene>> {
+    let cad = crate::clean::CleanParams::cad();
+    let cabin_detail = if size == Size::Quick { 4.0 } else { crate::fixtures::cabin::DEMO_DETAIL };
+    let (raw, _) = crate::fixtures::cabin::generate_cabin(cabin_detail);
+    let (cabin, _) = crate::clean::clean_mesh(&raw, &cad)?;
+    let cabin = RealScene {
+        name: "cabin",
+        mesh: cabin,
+        window_patterns: Vec::new(),
+        base: base(Mode::Window, 192),
+        reference_rays: if size == Size::Quick { 256 } else { 512 },
+        reference_adaptive: 3.0,
+    };
+    if size == Size::Quick {
+        return Ok(vec![cabin]);
+    }
+    let mut out = Vec::new();
+    let load = |relative: &str| -> anyhow::Result<Option<(Mesh, PathBuf)>> {
+        let path = data.join(relative);
+        if !path.is_file() {
+            eprintln!("chart --real: {} not found, scene skipped", path.display());
+            return Ok(None);
+        }
+        let loaded = crate::mesh::load_mesh(&path, &crate::mesh::LoadOptions::default())
+            .with_context(|| format!("cannot load {}", path.display()))?;
+        Ok(Some((loaded.mesh, path)))
+    };
+    if let Some((mesh, _)) = load("car-ferrari458/ferrari_nodraco.glb")? {
+        out.push(RealScene {
+            name: "ferrari",
+            mesh,
+            window_patterns: vec!["Glass_Gray".into()],
+            base: base(Mode::Window, 256),
+            reference_rays: 128,
+            reference_adaptive: 8.0,
+        });
+    }
+    if let Some((raw, path)) = load("room-grey-white/grey_white_room_flat.obj")? {
+        let (mesh, _) = crate::clean::clean_mesh(&raw, &cad).with_context(|| format!("{}: cannot clean", path.display()))?;
+        out.push(RealScene {
+            name: "room",
+            mesh,
+            window_patterns: Vec::new(),
+            base: base(Mode::Open, 256),
+            reference_rays: 256,
+            reference_adaptive: 8.0,
+        });
+    }
+    out.push(cabin);
+    Ok(out)
+}
+
+/// A scene's converged reference.
+pub struct RealReference {
+    /// Mean of the seeds' total transfer, `[vertex][coeff]` (one channel).
+    pub transfer: Vec<f32>,
+    pub order: usize,
+    /// Vertices the reference lights (DC > 0).
+    pub lit: Vec<usize>,
+    /// Relative RMS DC difference of the two seeds over `lit`.
+    pub seed_difference: f64,
+    /// Wall seconds spent baking references in this run (0 when all were cached).
+    pub baked_seconds: f64,
+}
+
+/// The bundle at `path` when it holds a bake of `mesh` with `params`.
+fn cached_transfer(path: &Path, mesh: &Mesh, params: &BakeParams) -> Option<Vec<f32>> {
+    let bundle = crate::bundle::read_bundle(path).ok()?;
+    let same_params = bundle.meta.get("params") == serde_json::to_value(params).ok().as_ref();
+    let same_mesh = bundle.mesh.positions == mesh.positions && bundle.mesh.indices == mesh.indices;
+    let transfer = bundle.transfer.filter(|t| t.order as usize == params.order && t.channels == 1)?;
+    (same_params && same_mesh).then(|| transfer.total())
+}
+
+/// Reads the scene's reference bakes from `cache_dir`, baking (and writing)
+/// those that are missing or stale. Progress on stderr.
+pub fn reference(scene: &RealScene, cache_dir: &Path) -> anyhow::Result<RealReference> {
+    let mut seeds = Vec::new();
+    let mut baked_seconds = 0.0;
+    for seed in REFERENCE_SEEDS {
+        let params = scene.reference_params(seed);
+        let path = cache_dir.join(format!("{}-reference-s{seed}.prtb", scene.name));
+        let transfer = match cached_transfer(&path, &scene.mesh, &params) {
+            Some(t) => t,
+            None => {
+                eprintln!(
+                    "chart --real: baking the {} reference, seed {seed} ({} rays, --adaptive {}, {} bounces) into {}",
+                    scene.name,
+                    params.rays,
+                    params.adaptive,
+                    params.bounces,
+                    path.display()
+                );
+                let started = Instant::now();
+                let (result, _, _) = bake_mesh(&scene.mesh, &params, &scene.window_patterns)?;
+                baked_seconds += started.elapsed().as_secs_f64();
+                let meta = serde_json::json!({ "source": scene.name, "window_patterns": scene.window_patterns });
+                crate::bundle::write_bundle(&path, &crate::bundle::make_bundle(&scene.mesh, &result, &params, meta))?;
+                result.total
+            }
+        };
+        seeds.push(transfer);
+    }
+    let order = scene.base.order;
+    let n = sh::coeff_count(order);
+    let transfer: Vec<f32> = seeds[0].iter().zip(&seeds[1]).map(|(a, b)| 0.5 * (a + b)).collect();
+    let lit: Vec<usize> = (0..transfer.len() / n).filter(|&v| transfer[v * n] > 0.0).collect();
+    let dc = |t: &[f32]| lit.iter().map(|&v| t[v * n] as f64).collect::<Vec<f64>>();
+    let seed_difference = relative_rms(&dc(&seeds[0]), &dc(&seeds[1]));
+    Ok(RealReference { transfer, order, lit, seed_difference, baked_seconds })
+}
+
+/// `sqrt(Σ (b − r)² / Σ r²)`.
+fn relative_rms(reference: &[f64], other: &[f64]) -> f64 {
+    let num: f64 = reference.iter().zip(other).map(|(r, b)| (b - r).powi(2)).sum();
+    let den: f64 = reference.iter().map(|r| r * r).sum();
+    (num / den).sqrt()
+}
+
+/// Errors of one bake's total transfer against the reference.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Score {
+    pub dc_error: f64,
+    pub shaded_error: f64,
+    pub black_lit: usize,
+}
+
+/// Scores a one-channel transfer of the reference's order and vertex count.
+pub fn score(transfer: &[f32], reference: &RealReference, lightings: &[Lighting]) -> Score {
+    let n = sh::coeff_count(reference.order);
+    let pick = |t: &[f32]| reference.lit.iter().flat_map(|&v| t[v * n..][..n].to_vec()).collect::<Vec<f32>>();
+    let (baked, exact) = (pick(transfer), pick(&reference.transfer));
+    let dc = |t: &[f32]| t.iter().step_by(n).map(|&x| x as f64).collect::<Vec<f64>>();
+    let (baked_dc, exact_dc) = (dc(&baked), dc(&exact));
+    let shaded_error = lightings
+        .iter()
+        .map(|l| budget::relative_rms(&budget::shade(&exact, reference.order, 1, &l.sh), &budget::shade(&baked, reference.order, 1, &l.sh)))
+        .fold(0.0, f64::max);
+    Score { dc_error: relative_rms(&exact_dc, &baked_dc), shaded_error, black_lit: baked_dc.iter().filter(|&&d| d == 0.0).count() }
+}
+
+/// One swept bake of a real scene.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RealRow {
+    pub scene: String,
+    pub setting: String,
+    pub rays: u32,
+    pub adaptive: f32,
+    pub seconds: f64,
+    pub points: u64,
+    pub rays_traced: u64,
+    #[serde(flatten)]
+    pub score: Score,
+}
+
+/// The CSV header, in column order.
+pub const CSV_HEADER: &str = "scene,setting,rays,adaptive,seconds,points,rays_traced,dc_error,shaded_error,black_lit";
+
+pub fn to_csv(rows: &[RealRow]) -> String {
+    let mut s = String::from(CSV_HEADER);
+    s.push('\n');
+    for r in rows {
+        s += &format!(
+            "{},{},{},{},{:.3},{},{},{:.6},{:.6},{}\n",
+            r.scene,
+            r.setting,
+            r.rays,
+            r.adaptive,
+            r.seconds,
+            r.points,
+            r.rays_traced,
+            r.score.dc_error,
+            r.score.shaded_error,
+            r.score.black_lit
+        );
+    }
+    s
+}
+
+/// A scene's reference and its swept bakes.
+pub struct SceneSweep {
+    pub name: &'static str,
+    pub vertices: usize,
+    pub reference: RealReference,
+    pub reference_params: BakeParams,
+    pub rows: Vec<RealRow>,
+}
+
+/// Sweeps each scene against its reference (cached in `cache_dir`).
+pub fn sweep(scenes: &[RealScene], size: Size, cache_dir: &Path) -> anyhow::Result<Vec<SceneSweep>> {
+    let mut out = Vec::new();
+    for scene in scenes {
+        let reference = reference(scene, cache_dir)?;
+        eprintln!(
+            "chart --real: {} reference: {} of {} vertices lit, seeds differ by {:.4} (DC relative RMS)",
+            scene.name,
+            reference.lit.len(),
+            scene.mesh.vertex_count(),
+            reference.seed_difference
+        );
+        let lightings = budget::reference_lightings(reference.order);
+        // One untimed bake first, so the first timed point does not pay for cold caches.
+        bake_mesh(&scene.mesh, &BakeParams { rays: 4, bounces: 0, ..scene.base }, &scene.window_patterns)?;
+        let mut rows = Vec::new();
+        for (setting, rays, adaptive) in scene.settings(size) {
+            let params = BakeParams { rays, adaptive, ..scene.base };
+            let started = Instant::now();
+            let (result, _, _) = bake_mesh(&scene.mesh, &params, &scene.window_patterns)?;
+            let seconds = started.elapsed().as_secs_f64();
+            let score = score(&result.total, &reference, &lightings);
+            eprintln!(
+                "chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  DC error {:.4}  shaded {:.4}  black lit {}",
+                scene.name, setting, rays, seconds, score.dc_error, score.shaded_error, score.black_lit
+            );
+            rows.push(RealRow {
+                scene: scene.name.into(),
+                setting: setting.into(),
+                rays,
+                adaptive,
+                seconds,
+                points: result.stats.points,
+                rays_traced: result.stats.rays_traced,
+                score,
+            });
+        }
+        out.push(SceneSweep {
+            name: scene.name,
+            vertices: scene.mesh.vertex_count(),
+            reference_params: scene.reference_params(REFERENCE_SEEDS[0]),
+            reference,
+            rows,
+        });
+    }
+    Ok(out)
+}
+
+/// When a setting's curve (points in increasing time) first reaches `target`:
+/// `Reached(seconds)` interpolated log–log between the bracketing bakes,
+/// `AtFirst(seconds)` when its cheapest bake is already below (the time is an
+/// upper bound), `NotReached` within the sweep.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reach {
+    Reached(f64),
+    AtFirst(f64),
+    NotReached,
+}
+
+pub fn time_to_reach(curve: &[(f64, f64)], target: f64) -> Reach {
+    let Some(&(t0, e0)) = curve.first() else { return Reach::NotReached };
+    if e0 <= target {
+        return Reach::AtFirst(t0);
+    }
+    for w in curve.windows(2) {
+        let ((ta, ea), (tb, eb)) = (w[0], w[1]);
+        if ea > target && eb <= target {
+            let f = (ea.ln() - target.ln()) / (ea.ln() - eb.ln());
+            return Reach::Reached((ta.ln() + f * (tb.ln() - ta.ln())).exp());
+        }
+    }
+    Reach::NotReached
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_to_reach_interpolates_log_log_and_says_when_it_cannot() {
+        // Error ∝ t^-1/2: from (10 s, 0.2) to (40 s, 0.1); 0.1414 is reached at 20 s.
+        let curve = [(10.0, 0.2), (40.0, 0.1)];
+        match time_to_reach(&curve, 0.2 / 2f64.sqrt()) {
+            Reach::Reached(t) => assert!((t - 20.0).abs() < 1e-9, "{t}"),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(time_to_reach(&curve, 0.3), Reach::AtFirst(10.0));
+        assert_eq!(time_to_reach(&curve, 0.05), Reach::NotReached);
+        assert_eq!(time_to_reach(&[], 0.05), Reach::NotReached);
+        // A curve that rises again past the target is reached at its first crossing.
+        assert!(matches!(time_to_reach(&[(1.0, 0.3), (2.0, 0.1), (4.0, 0.2)], 0.15), Reach::Reached(t) if t > 1.0 && t < 2.0));
+    }
+
+    #[test]
+    fn score_is_zero_for_the_reference_and_counts_black_lit_vertices() {
+        let n = sh::coeff_count(2);
+        // Three vertices; the middle one is dark in the reference and not scored.
+        let transfer = vec![0.3, 0.1, 0.0, 0.05, 0.0, 0.0, 0.0, 0.0, 0.2, -0.1, 0.02, 0.0];
+        let lit: Vec<usize> = (0..3).filter(|&v| transfer[v * n] > 0.0).collect();
+        assert_eq!(lit, vec![0, 2]);
+        let reference = RealReference { transfer: transfer.clone(), order: 2, lit, seed_difference: 0.0, baked_seconds: 0.0 };
+        let lightings = budget::reference_lightings(2);
+        let exact = score(&transfer, &reference, &lightings);
+        assert_eq!(exact, Score { dc_error: 0.0, shaded_error: 0.0, black_lit: 0 });
+        let mut off = transfer.clone();
+        off[4] = 7.0; // the unlit vertex: not scored
+        off[2 * n] = 0.0; // a lit vertex turned black
+        let s = score(&off, &reference, &lightings);
+        assert_eq!(s.black_lit, 1);
+        // DC error: sqrt(0.2² / (0.3² + 0.2²)).
+        assert!((s.dc_error - (0.04f64 / 0.13).sqrt()).abs() < 1e-6, "{}", s.dc_error);
+        assert!(s.shaded_error > 0.0);
+    }
+}
