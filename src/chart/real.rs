@@ -65,9 +65,8 @@ impl RealScene {
     }
 }
 
-/// Order 3, 3 bounces, one channel, the hit cache as large as `bake`'s CLI default.
-fn base(mode: Mode, rays: u32) -> BakeParams {
-    let hit_cache_bytes = crate::bake::transfer::available_hit_cache_bytes();
+/// Order 3, 3 bounces, one channel.
+fn base(mode: Mode, rays: u32, hit_cache_bytes: u64) -> BakeParams {
     BakeParams { order: 3, bounces: 3, channels: Channels::One, mode, rays, quiet: true, hit_cache_bytes, ..BakeParams::default() }
 }
 
@@ -75,8 +74,9 @@ fn base(mode: Mode, rays: u32) -> BakeParams {
 /// (the layout of ../shared/data: `car-ferrari458/ferrari_nodraco.glb`,
 /// `room-grey-white/grey_white_room_flat.obj`) and skipped with a notice on
 /// stderr when absent; the cabin is generated. `Size::Quick` is the cabin
-/// alone at a coarse tessellation (seconds, for tests).
-pub fn scenes(data: &Path, size: Size) -> anyhow::Result<Vec<RealScene>> {
+/// alone at a coarse tessellation (seconds, for tests). Every bake keeps up
+/// to `hit_cache_bytes` of bounce 0's hits for the later bounces.
+pub fn scenes(data: &Path, size: Size, hit_cache_bytes: u64) -> anyhow::Result<Vec<RealScene>> {
     let cad = crate::clean::CleanParams::cad();
     let cabin_detail = if size == Size::Quick { 4.0 } else { crate::fixtures::cabin::DEMO_DETAIL };
     let (raw, _) = crate::fixtures::cabin::generate_cabin(cabin_detail);
@@ -85,7 +85,7 @@ pub fn scenes(data: &Path, size: Size) -> anyhow::Result<Vec<RealScene>> {
         name: "cabin",
         mesh: cabin,
         window_patterns: Vec::new(),
-        base: base(Mode::Window, 192),
+        base: base(Mode::Window, 192, hit_cache_bytes),
         reference_rays: if size == Size::Quick { 256 } else { 512 },
         reference_adaptive: 3.0,
     };
@@ -108,7 +108,7 @@ pub fn scenes(data: &Path, size: Size) -> anyhow::Result<Vec<RealScene>> {
             name: "ferrari",
             mesh,
             window_patterns: vec!["Glass_Gray".into()],
-            base: base(Mode::Window, 256),
+            base: base(Mode::Window, 256, hit_cache_bytes),
             reference_rays: 128,
             reference_adaptive: 8.0,
         });
@@ -119,7 +119,7 @@ pub fn scenes(data: &Path, size: Size) -> anyhow::Result<Vec<RealScene>> {
             name: "room",
             mesh,
             window_patterns: Vec::new(),
-            base: base(Mode::Open, 256),
+            base: base(Mode::Open, 256, hit_cache_bytes),
             reference_rays: 256,
             reference_adaptive: 8.0,
         });
@@ -162,11 +162,12 @@ pub fn reference(scene: &RealScene, cache_dir: &Path) -> anyhow::Result<RealRefe
             Some(t) => t,
             None => {
                 eprintln!(
-                    "chart --real: baking the {} reference, seed {seed} ({} rays, --adaptive {}, {} bounces) into {}",
+                    "chart --real: baking the {} reference, seed {seed} ({} rays, --adaptive {}, {} bounces, hit cache up to {:.1} GiB: --hit-cache-mib) into {}",
                     scene.name,
                     params.rays,
                     params.adaptive,
                     params.bounces,
+                    params.hit_cache_bytes as f64 / (1u64 << 30) as f64,
                     path.display()
                 );
                 let started = Instant::now();

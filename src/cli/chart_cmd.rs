@@ -59,14 +59,22 @@ pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Re
 }
 
 /// `chart --real`: the real scenes found in `data` (and the generated cabin)
-/// against their converged references, cached in `dir`.
-pub fn run_real(dir: &Path, data: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Result<super::Outcome> {
+/// against their converged references, cached in `dir`; every bake keeps up
+/// to `hit_cache_bytes` of bounce 0's hits.
+pub fn run_real(
+    dir: &Path,
+    data: &Path,
+    hit_cache_bytes: u64,
+    quick: bool,
+    threads: usize,
+    as_json: bool,
+) -> anyhow::Result<super::Outcome> {
     use crate::chart::real::{self, Reach};
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let size = if quick { Size::Quick } else { Size::Full };
     let started = std::time::Instant::now();
     let sweeps = super::with_threads(threads, || -> anyhow::Result<Vec<real::SceneSweep>> {
-        let scenes = real::scenes(data, size)?;
+        let scenes = real::scenes(data, size, hit_cache_bytes)?;
         real::sweep(&scenes, size, dir)
     })??;
     let rows: Vec<real::RealRow> = sweeps.iter().flat_map(|s| s.rows.iter().cloned()).collect();
