@@ -10,7 +10,7 @@
 //! error of DC, sqrt(Σ (b − r)² / Σ r²) (as `budget::relative_rms`), the mean
 //! ratio Σ b / Σ r, how many of them the bundle leaves black (DC = 0), and
 //! how concentrated the error is: the share of Σ (b − r)² carried by the 1%
-//! of lit vertices with the largest squared error.
+//! of lit vertices with the largest squared error, and by the black ones.
 
 use prtbake::bundle::read_bundle;
 
@@ -32,24 +32,33 @@ fn main() {
         (0..references[0].len()).map(|v| references.iter().map(|r| r[v]).sum::<f64>() / references.len() as f64).collect();
     let lit: Vec<usize> = (0..reference.len()).filter(|&v| reference[v] > 0.0).collect();
     println!("reference {reference_path}: {} vertices, {} lit", reference.len(), lit.len());
-    println!("| bundle | relative RMS DC | mean ratio | black of lit | error share of the worst 1% |");
-    println!("|---|---:|---:|---:|---:|");
+    println!("| bundle | relative RMS DC | mean ratio | black of lit | error share of the worst 1% | of the black |");
+    println!("|---|---:|---:|---:|---:|---:|");
     for path in others {
         let dc = dc_of(path);
         assert_eq!(dc.len(), reference.len(), "{path}: vertex count differs from the reference's");
-        let (mut error, mut norm, mut sum, mut reference_sum, mut black) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
+        let (mut error, mut norm, mut sum, mut reference_sum, mut black, mut black_error) =
+            (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize, 0.0f64);
         for &v in &lit {
             error += (dc[v] - reference[v]).powi(2);
             norm += reference[v].powi(2);
             sum += dc[v];
             reference_sum += reference[v];
-            black += usize::from(dc[v] == 0.0);
+            if dc[v] == 0.0 {
+                black += 1;
+                black_error += reference[v].powi(2);
+            }
         }
         let share = 100.0 * black as f64 / lit.len() as f64;
         let mut squared: Vec<f64> = lit.iter().map(|&v| (dc[v] - reference[v]).powi(2)).collect();
         squared.sort_by(|a, b| b.total_cmp(a));
         let worst: f64 = squared[..lit.len().div_ceil(100)].iter().sum();
         let concentration = 100.0 * worst / error.max(f64::MIN_POSITIVE);
-        println!("| {path} | {:.3} | {:.3} | {black} ({share:.1}%) | {concentration:.0}% |", (error / norm).sqrt(), sum / reference_sum);
+        let black_share = 100.0 * black_error / error.max(f64::MIN_POSITIVE);
+        println!(
+            "| {path} | {:.4} | {:.3} | {black} ({share:.1}%) | {concentration:.0}% | {black_share:.1}% |",
+            (error / norm).sqrt(),
+            sum / reference_sum
+        );
     }
 }
