@@ -107,4 +107,12 @@ fn quick_real_chart_scores_against_a_cached_two_seed_reference() {
     assert!(stderr.contains("seed 12") && !stderr.contains("seed 11"), "{stderr}");
     let third: serde_json::Value = serde_json::from_slice(&stale.stdout).unwrap();
     assert_eq!(third["scenes"][0]["reference"]["seed_difference_dc"], scene["reference"]["seed_difference_dc"]);
+
+    // A file the chart did not write is never replaced: refused, left as it was.
+    let foreign = b"not a bundle: a user's file that happens to have the name";
+    std::fs::write(&s12, foreign).unwrap();
+    let refused = prtbake(&args);
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("cabin-reference-s12.prtb: exists and is not a reference"));
+    assert_eq!(std::fs::read(&s12).unwrap(), foreign);
 }

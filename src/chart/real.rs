@@ -6,7 +6,8 @@
 //! (11 and 12) at many more points and rays than any swept bake, cached in
 //! the output folder as ordinary bundles (`<scene>-reference-s<seed>.prtb`;
 //! a bundle baked by `prtbake bake` with the same mesh and parameters is
-//! used as it is). Its convergence is reported, not assumed: the relative RMS
+//! used as it is; a stale one is re-baked only over a file this chart
+//! wrote, and any other file of that name is refused, never replaced). Its convergence is reported, not assumed: the relative RMS
 //! DC difference of the two seeds. The mean's own noise is about half of it,
 //! so errors near that floor are overstated by it.
 //!
@@ -105,7 +106,7 @@ pub fn scenes(data: &Path, size: Size, hit_cache_bytes: u64) -> anyhow::Result<V
             return Ok(None);
         }
         let loaded = crate::mesh::load_mesh(&path, &crate::mesh::LoadOptions::default())
-            .with_context(|| format!("cannot load {}", path.display()))?;
+            .with_context(|| format!("chart --real: cannot load the scene {relative}"))?;
         Ok(Some((loaded.mesh, path)))
     };
     if let Some((mesh, _)) = load("car-ferrari458/ferrari_nodraco.glb")? {
@@ -155,8 +156,25 @@ fn cached_transfer(path: &Path, mesh: &Mesh, params: &BakeParams) -> Option<Vec<
     (same_params && same_mesh).then(|| transfer.total())
 }
 
+/// Refuses to replace a file at `path` that is not a reference this chart
+/// wrote (a user's bundle of other parameters, or anything else): the
+/// cache must not cost anyone a bake.
+fn check_replaceable(path: &Path) -> anyhow::Result<()> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let ours = crate::bundle::read_bundle(path).is_ok_and(|b| b.meta.get("chart_reference").is_some());
+    anyhow::ensure!(
+        ours,
+        "{}: exists and is not a reference `chart --real` wrote, nor a bake of this mesh with the reference's parameters; move it, or choose another -o",
+        path.display()
+    );
+    Ok(())
+}
+
 /// Reads the scene's reference bakes from `cache_dir`, baking (and writing)
-/// those that are missing or stale. Progress on stderr.
+/// those that are missing or stale (only over files this chart wrote).
+/// Progress on stderr.
 pub fn reference(scene: &RealScene, cache_dir: &Path) -> anyhow::Result<RealReference> {
     let mut seeds = Vec::new();
     let mut baked_seconds = 0.0;
@@ -166,6 +184,7 @@ pub fn reference(scene: &RealScene, cache_dir: &Path) -> anyhow::Result<RealRefe
         let transfer = match cached_transfer(&path, &scene.mesh, &params) {
             Some(t) => t,
             None => {
+                check_replaceable(&path)?;
                 eprintln!(
                     "chart --real: baking the {} reference, seed {seed} ({} rays, --adaptive {}, {} bounces, hit cache up to {:.1} GiB: --hit-cache-mib) into {}",
                     scene.name,
@@ -178,7 +197,11 @@ pub fn reference(scene: &RealScene, cache_dir: &Path) -> anyhow::Result<RealRefe
                 let started = Instant::now();
                 let (result, _, _) = bake_mesh(&scene.mesh, &params, &scene.window_patterns)?;
                 baked_seconds += started.elapsed().as_secs_f64();
-                let meta = serde_json::json!({ "source": scene.name, "window_patterns": scene.window_patterns });
+                let meta = serde_json::json!({
+                    "source": scene.name,
+                    "window_patterns": scene.window_patterns,
+                    "chart_reference": format!("{} seed {seed}", scene.name),
+                });
                 crate::bundle::write_bundle(&path, &crate::bundle::make_bundle(&scene.mesh, &result, &params, meta))?;
                 result.total
             }
