@@ -636,7 +636,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         quiet: a.quiet || a.json,
         window_sampling: a.window_sampling,
         keep_outside_sides: a.keep_outside_sides,
-        hit_cache_bytes: a.hit_cache_mib.map_or_else(prtbake::bake::transfer::available_hit_cache_bytes, |mib| mib.saturating_mul(1 << 20)),
+        hit_cache_bytes: hit_cache_bytes(a.hit_cache_mib),
         ..BakeParams::default()
     };
     params.check()?;
@@ -1006,9 +1006,7 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
         Command::Chart { output, quick, real: true, data, hit_cache_mib, threads, json } => {
-            let hit_cache_bytes =
-                hit_cache_mib.map_or_else(prtbake::bake::transfer::available_hit_cache_bytes, |mib| mib.saturating_mul(1 << 20));
-            cli::chart_cmd::run_real(&output, &data, hit_cache_bytes, quick, threads, json)
+            cli::chart_cmd::run_real(&output, &data, hit_cache_bytes(hit_cache_mib), quick, threads, json)
         }
         Command::Chart { output, quick, real: false, threads, json, .. } => cli::chart_cmd::run(&output, quick, threads, json),
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
@@ -1051,6 +1049,11 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// `--hit-cache-mib` in bytes, or half the memory available now when not given.
+fn hit_cache_bytes(mib: Option<u64>) -> u64 {
+    mib.map_or_else(prtbake::bake::transfer::available_hit_cache_bytes, |mib| mib.saturating_mul(1 << 20))
 }
 
 /// The error and its causes, joined with ": ". Library errors already put

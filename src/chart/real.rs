@@ -235,7 +235,11 @@ pub struct Score {
 /// Scores a one-channel transfer of the reference's order and vertex count.
 pub fn score(transfer: &[f32], reference: &RealReference, lightings: &[Lighting]) -> Score {
     let n = sh::coeff_count(reference.order);
-    let pick = |t: &[f32]| reference.lit.iter().flat_map(|&v| t[v * n..][..n].to_vec()).collect::<Vec<f32>>();
+    let pick = |t: &[f32]| {
+        let mut out = Vec::with_capacity(reference.lit.len() * n);
+        reference.lit.iter().for_each(|&v| out.extend_from_slice(&t[v * n..][..n]));
+        out
+    };
     let (baked, exact) = (pick(transfer), pick(&reference.transfer));
     let dc = |t: &[f32]| t.iter().step_by(n).map(|&x| x as f64).collect::<Vec<f64>>();
     let (baked_dc, exact_dc) = (dc(&baked), dc(&exact));

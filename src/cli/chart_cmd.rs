@@ -79,19 +79,22 @@ pub fn run_real(
     })??;
     let rows: Vec<real::RealRow> = sweeps.iter().flat_map(|s| s.rows.iter().cloned()).collect();
     // The SVG plots DC error (the targets' figure) against seconds, one curve per setting.
-    let plotted: Vec<chart::Row> = rows
+    let plotted: Vec<chart::Row> = sweeps
         .iter()
-        .map(|r| chart::Row {
-            scene: r.scene.clone(),
-            setting: r.setting.clone(),
-            pattern: "sobol".into(),
-            sampling: "interior".into(),
-            order: 3,
-            bounces: 3,
-            rays: r.rays,
-            seconds: r.seconds,
-            error: r.score.dc_error,
-            pareto: false,
+        .flat_map(|s| {
+            let params = &s.reference_params;
+            s.rows.iter().map(|r| chart::Row {
+                scene: r.scene.clone(),
+                setting: r.setting.clone(),
+                pattern: "sobol".into(),
+                sampling: "interior".into(),
+                order: params.order,
+                bounces: params.bounces,
+                rays: r.rays,
+                seconds: r.seconds,
+                error: r.score.dc_error,
+                pareto: false,
+            })
         })
         .collect();
     let scenes: Vec<serde_json::Value> = sweeps
