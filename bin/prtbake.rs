@@ -192,6 +192,11 @@ struct RefineArgs {
     /// [default: 2e-4 of the bounding-box diagonal].
     #[arg(long, value_name = "LENGTH")]
     min_edge: Option<f32>,
+    /// `bake` with --refine or --max-vertices: a difference between an edge's vertices counts only
+    /// past K standard errors of their estimates (bounce 0's own spread), so noise is not split;
+    /// 0 splits noise as light [default: 2].
+    #[arg(long, value_name = "K")]
+    refine_noise: Option<f64>,
 }
 
 impl RefineArgs {
@@ -207,13 +212,21 @@ impl RefineArgs {
                 anyhow::bail!("--min-edge {m}: expected a finite length ≥ 0");
             }
         }
+        if let Some(k) = self.refine_noise {
+            if !(k.is_finite() && k >= 0.0) {
+                anyhow::bail!("--refine-noise {k}: expected a finite number of standard errors ≥ 0 (e.g. 2)");
+            }
+        }
         if self.max_vertices == Some(0) {
             anyhow::bail!("--max-vertices 0: expected at least one vertex");
         }
         Ok(match (self.refine, self.max_vertices) {
             (None, None) if self.min_edge.is_some() => anyhow::bail!("--min-edge needs --refine or --max-vertices"),
+            (None, None) if self.refine_noise.is_some() => anyhow::bail!("--refine-noise needs --refine or --max-vertices"),
             (None, None) => None,
-            (error, max_vertices) => Some(cli::bake_cmd::RefineRequest { error, max_vertices, min_edge: self.min_edge }),
+            (error, max_vertices) => {
+                Some(cli::bake_cmd::RefineRequest { error, max_vertices, min_edge: self.min_edge, noise_sigmas: self.refine_noise })
+            }
         })
     }
 }
@@ -788,6 +801,9 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     }
     if a.sky_order > prtbake::sh::MAX_ORDER {
         bail!("--sky-order {}: expected 0..={}", a.sky_order, prtbake::sh::MAX_ORDER);
+    }
+    if a.refine.refine_noise.is_some() {
+        bail!("--refine-noise: sun masks have no noise to discount (each bit is a vote of its samples); it applies to `bake --refine`");
     }
     let params = prtbake::bake::SunParams {
         mode: if a.window_mode || !a.windows.is_empty() { Mode::Window } else { Mode::Open },

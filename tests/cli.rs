@@ -301,12 +301,27 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("sun.prtb") && err.contains("refine"), "{err}");
     assert!(!again.exists());
-    for bad in [&["--refine", "nan"][..], &["--refine", "-1"], &["--max-vertices", "0"], &["--min-edge", "0.1"]] {
+    let bad_requests = [
+        &["--refine", "nan"][..],
+        &["--refine", "-1"],
+        &["--max-vertices", "0"],
+        &["--min-edge", "0.1"],
+        &["--refine-noise", "2"],
+        &["--refine", "0.1", "--refine-noise", "-1"],
+        &["--refine", "0.1", "--refine-noise", "inf"],
+    ];
+    for bad in bad_requests {
         let out = dir.path("bad.prtb");
         let o = prtbake(&[&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
         assert_eq!(o.status.code(), Some(2), "{bad:?}");
         assert!(!out.exists());
     }
+    // Sun masks have no noise estimate to discount: asking for it is refused, not ignored.
+    let out = dir.path("bad.prtb");
+    let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--refine", "0.2", "--refine-noise", "1"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--refine-noise"));
+    assert!(!out.exists());
 }
 
 /// Issue 20 (cutting): `clean --cut-intersections` reports the segments and

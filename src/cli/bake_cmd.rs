@@ -44,12 +44,15 @@ pub struct RefineRequest {
     pub error: Option<f64>,
     pub max_vertices: Option<usize>,
     pub min_edge: Option<f32>,
+    /// Standard errors a transfer difference must exceed (`--refine-noise`).
+    pub noise_sigmas: Option<f64>,
 }
 
 impl RefineRequest {
     /// The refinement's parameters for `mesh`.
     pub fn params(&self, mesh: &Mesh) -> crate::refine::RefineParams {
-        crate::refine::RefineParams::for_mesh(mesh, self.error, self.max_vertices, self.min_edge)
+        let params = crate::refine::RefineParams::for_mesh(mesh, self.error, self.max_vertices, self.min_edge);
+        crate::refine::RefineParams { noise_sigmas: self.noise_sigmas.unwrap_or(params.noise_sigmas), ..params }
     }
 }
 

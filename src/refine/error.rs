@@ -45,7 +45,12 @@ impl MeanShading {
 
 /// Shaded luminance per vertex under `sky`.
 fn luminances(result: &TransferResult, sky: &[[f32; 3]]) -> Vec<f64> {
-    budget::shade(&result.total, result.order, result.channels, sky).iter().map(|rgb| (0..3).map(|c| LUMINANCE[c] * rgb[c]).sum()).collect()
+    layer_luminances(&result.total, result, sky)
+}
+
+/// Shaded luminance per vertex of `layer` (laid out as `result`'s) under `sky`.
+fn layer_luminances(layer: &[f32], result: &TransferResult, sky: &[[f32; 3]]) -> Vec<f64> {
+    budget::shade(layer, result.order, result.channels, sky).iter().map(|rgb| (0..3).map(|c| LUMINANCE[c] * rgb[c]).sum()).collect()
 }
 
 /// A third of the area of the triangles around each vertex.
@@ -75,25 +80,64 @@ fn edges(mesh: &Mesh) -> Vec<[u32; 2]> {
 }
 
 /// Each edge's transfer error: the largest luminance difference between its
-/// vertices over the skies, over the larger of the two vertices' mean and
-/// that sky's mean shading of the scene.
-pub fn transfer_edge_errors(mesh: &Mesh, result: &TransferResult, mean: &MeanShading) -> Vec<EdgeError> {
+/// vertices over the skies, less `noise_sigmas` standard errors of that
+/// difference ([`shading_noise`]; nothing less than zero), over the larger
+/// of the two vertices' mean and that sky's mean shading of the scene.
+pub fn transfer_edge_errors(mesh: &Mesh, result: &TransferResult, mean: &MeanShading, noise_sigmas: f64) -> Vec<EdgeError> {
     let shaded: Vec<Vec<f64>> = mean.skies.iter().map(|sky| luminances(result, sky)).collect();
+    let noise: Vec<Vec<f64>> = if noise_sigmas > 0.0 { shading_noise(result, &mean.skies) } else { Vec::new() };
     edges(mesh)
         .into_par_iter()
-        .map(|edge @ [a, b]| {
+        .map(|[a, b]| {
+            let (a, b) = (a as usize, b as usize);
             let error = shaded
                 .iter()
                 .zip(&mean.means)
-                .map(|(y, &m)| {
-                    let (ya, yb) = (y[a as usize], y[b as usize]);
+                .enumerate()
+                .map(|(sky, (y, &m))| {
+                    let (ya, yb) = (y[a], y[b]);
+                    let deep = match noise.get(sky) {
+                        Some(n) => noise_sigmas * n[a].hypot(n[b]),
+                        None => 0.0,
+                    };
                     // Relative where the edge is brighter than the scene's
                     // mean (as a tone-mapped view shows it), against the mean
                     // in the dark, so noise in the dark does not count as light.
-                    (ya - yb).abs() / m.max(0.5 * (ya + yb))
+                    ((ya - yb).abs() - deep).max(0.0) / m.max(0.5 * (ya + yb))
                 })
                 .fold(0.0, f64::max);
-            EdgeError { edge, error }
+            EdgeError { edge: [a as u32, b as u32], error }
+        })
+        .collect()
+}
+
+/// Per sky, each vertex's standard error of shaded luminance: bounce 0's
+/// DC standard error (`TransferResult::noise`) scaled by the vertex's
+/// bounce-0 shading per unit of DC, i.e. the same relative noise as its DC
+/// (most of a bake's noise is bounce 0's visibility; later bounces gather
+/// over many points and are smoother). Empty rows (zeros) when the bake
+/// measured no noise (vertex sampling) or kept no bounce-0 layer.
+fn shading_noise(result: &TransferResult, skies: &[Vec<[f32; 3]>]) -> Vec<Vec<f64>> {
+    let vertex_count = result.total.len() / (result.channels * crate::sh::coeff_count(result.order)).max(1);
+    let (Some(direct), true) = (result.bounces.first(), result.noise.len() == vertex_count) else {
+        return skies.iter().map(|_| vec![0.0; vertex_count]).collect();
+    };
+    let stride = result.channels * crate::sh::coeff_count(result.order);
+    skies
+        .iter()
+        .map(|sky| {
+            layer_luminances(direct, result, sky)
+                .iter()
+                .enumerate()
+                .map(|(v, &y)| {
+                    let dc = f64::from(direct[v * stride]);
+                    if dc > 0.0 {
+                        f64::from(result.noise[v]) * y.abs() / dc
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
         })
         .collect()
 }

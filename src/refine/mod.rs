@@ -58,6 +58,10 @@ pub struct RefineParams {
     pub min_edge: f32,
     /// At most this many split-and-re-bake rounds.
     pub max_rounds: u32,
+    /// Transfer: a luminance difference counts only past this many standard
+    /// errors of the two vertices' estimates (bounce 0's spread), so that
+    /// noise is not split; 0 counts noise as light.
+    pub noise_sigmas: f64,
 }
 
 /// The default `min_edge` as a fraction of the mesh's bounding-box diagonal.
@@ -66,6 +70,10 @@ pub const DEFAULT_MIN_EDGE_FRACTION: f32 = 2e-4;
 pub const DEFAULT_BUDGET_FACTOR: usize = 4;
 /// The default round limit.
 pub const DEFAULT_MAX_ROUNDS: u32 = 16;
+/// The default `noise_sigmas`: a difference two standard errors deep is
+/// noise one time in about twenty (the estimate overstates on stratified
+/// points, so fewer in practice).
+pub const DEFAULT_NOISE_SIGMAS: f64 = 2.0;
 /// A round splits at most `1 / ROUND_BUDGET_SHARE` of the vertex budget left.
 const ROUND_BUDGET_SHARE: usize = 4;
 
@@ -77,6 +85,7 @@ impl RefineParams {
             max_vertices: max_vertices.unwrap_or(mesh.vertex_count().saturating_mul(DEFAULT_BUDGET_FACTOR)),
             min_edge: min_edge.unwrap_or(DEFAULT_MIN_EDGE_FRACTION * mesh.referenced_diagonal()),
             max_rounds: DEFAULT_MAX_ROUNDS,
+            noise_sigmas: DEFAULT_NOISE_SIGMAS,
         }
     }
 
@@ -86,6 +95,9 @@ impl RefineParams {
             if !(e.is_finite() && e >= 0.0) {
                 return Err(BakeError::Params(format!("refine error {e} must be finite and >= 0")));
             }
+        }
+        if !(self.noise_sigmas.is_finite() && self.noise_sigmas >= 0.0) {
+            return Err(BakeError::Params(format!("refine noise sigmas {} must be finite and >= 0", self.noise_sigmas)));
         }
         if !(self.min_edge.is_finite() && self.min_edge >= 0.0) {
             return Err(BakeError::Params(format!("refine min edge {} must be finite and >= 0", self.min_edge)));
@@ -174,7 +186,7 @@ pub fn refine_transfer(
     let started = std::time::Instant::now();
     let mut totals = result.stats.clone();
     loop {
-        let errors = transfer_edge_errors(&mesh, &result, &mean);
+        let errors = transfer_edge_errors(&mesh, &result, &mean, refine.noise_sigmas);
         let step = next_split(&mesh, &errors, refine, &mut report, baked, &result.stats, transfer_priority);
         let Some(split) = step else { break };
         let vertices_before = mesh.vertex_count();
@@ -185,7 +197,14 @@ pub fn refine_transfer(
         surfaces = Surfaces::resolve(&mesh, window_patterns)?;
         let scene = Scene::build(&mesh, BuildQuality::Sah)?;
         let kept = bake::transfer::Kept { layers: &kept_layers, vertices: &rebake.kept_vertices };
+        let kept_noise = extend_rows(&result.noise, vertices_before, mesh.vertex_count());
         result = bake::transfer::bake_transfer_update(&mesh, &scene, &surfaces, &layered, &rebake.receivers, &kept)?;
+        // A kept vertex keeps its value, so it keeps its noise too.
+        if result.noise.len() == kept_noise.len() {
+            for (v, noise) in result.noise.iter_mut().enumerate().filter(|(v, _)| rebake.kept_vertices[*v]) {
+                *noise = kept_noise[v];
+            }
+        }
         baked = rebake.kept_vertices.iter().filter(|&&k| !k).count();
         totals.points += result.stats.points;
         totals.points_rejected += result.stats.points_rejected;

@@ -27,6 +27,20 @@ fn floor_under_blinds() -> Mesh {
     b.mesh
 }
 
+/// The same floor under a wide slatted roof 2 m up (0.1 m strips every
+/// 0.2 m, 12 m long, far past the floor's edges): seen from the floor the
+/// slats blur into a smooth half-shade, so the exact transfer varies slowly,
+/// while a bake with few rays is noisy from point to point.
+fn floor_under_slatted_roof() -> Mesh {
+    let mut b = MeshBuilder::new(vec![Material::opaque("grey", 0.5)]);
+    b.grid("floor", Vec3::new(-2.0, 0.0, -2.0), Vec3::Z * 4.0, Vec3::X * 4.0, 2, 2, |_, _| 0);
+    for i in 0..60 {
+        let x = -6.0 + 0.2 * i as f32;
+        b.grid(&format!("slat{i}"), Vec3::new(x, 2.0, -6.0), Vec3::X * 0.1, Vec3::Z * 12.0, 1, 1, |_, _| 0);
+    }
+    b.mesh
+}
+
 fn bake_params() -> BakeParams {
     BakeParams { order: 3, rays: 64, bounces: 0, sampling: Sampling::interior(), quiet: true, ..BakeParams::default() }
 }
@@ -46,8 +60,18 @@ fn shaded_at(mesh: &Mesh, result: &TransferResult, points: &[probe::SurfacePoint
 }
 
 fn refine_with(mesh: &Mesh, error: Option<f64>, budget: usize) -> (Mesh, TransferResult, RefineReport) {
-    let refine = RefineParams { error, max_vertices: budget, min_edge: 0.02, max_rounds: DEFAULT_MAX_ROUNDS };
-    let (m, r, _, report) = refine_transfer(mesh.clone(), &bake_params(), &[], &refine).expect("refine");
+    refine_noise(mesh, &bake_params(), error, budget, DEFAULT_NOISE_SIGMAS)
+}
+
+fn refine_noise(
+    mesh: &Mesh,
+    params: &BakeParams,
+    error: Option<f64>,
+    budget: usize,
+    noise_sigmas: f64,
+) -> (Mesh, TransferResult, RefineReport) {
+    let refine = RefineParams { error, max_vertices: budget, min_edge: 0.02, max_rounds: DEFAULT_MAX_ROUNDS, noise_sigmas };
+    let (m, r, _, report) = refine_transfer(mesh.clone(), params, &[], &refine).expect("refine");
     (m, r, report)
 }
 
@@ -91,6 +115,38 @@ fn uniform_split(mut mesh: Mesh, max_edge: f32) -> Mesh {
         }
         mesh = crate::clean::split_edges(&mesh, &long).mesh;
     }
+}
+
+#[test]
+fn noise_is_not_split_but_light_is() {
+    // Under the slatted roof the floor's light is smooth: differences between
+    // its vertices at 8 rays are noise. Noise-blind refinement splits the
+    // floor on them and draws the noise; noise-aware refinement leaves it
+    // nearly as it was (the budget goes to the strips' real light changes).
+    let mesh = floor_under_slatted_roof();
+    let floor = |t: usize| mesh.tri_group[t] == 0;
+    let points = surface_points(&mesh, 3000, 5, floor);
+    let reference_mesh = uniform_split(crate::clean::split_edges(&mesh, &[]).mesh, 0.5);
+    let (reference, _, _) = crate::bake::bake_mesh(&reference_mesh, &BakeParams { rays: 1024, ..bake_params() }, &[]).expect("reference");
+    let want = shaded_at(&reference_mesh, &reference, &points);
+    let noisy = BakeParams { rays: 8, ..bake_params() };
+    let floor_vertices = |m: &Mesh| (0..m.vertex_count()).filter(|&v| m.positions[v].y < 0.5).count();
+    let budget = mesh.vertex_count() + 3000;
+    let (blind, blind_result, blind_report) = refine_noise(&mesh, &noisy, Some(0.05), budget, 0.0);
+    let (aware, aware_result, aware_report) = refine_noise(&mesh, &noisy, Some(0.05), budget, DEFAULT_NOISE_SIGMAS);
+    let blind_error = crate::budget::relative_rms(&want, &shaded_at(&blind, &blind_result, &points));
+    let aware_error = crate::budget::relative_rms(&want, &shaded_at(&aware, &aware_result, &points));
+    eprintln!(
+        "noise-blind: {} floor vertices, error {blind_error:.4}, {}; noise-aware: {} floor vertices, error {aware_error:.4}, {}",
+        floor_vertices(&blind),
+        blind_report.summary(),
+        floor_vertices(&aware),
+        aware_report.summary()
+    );
+    let added = |m: &Mesh| floor_vertices(m) - floor_vertices(&mesh);
+    assert!(added(&blind) >= 40, "noise-blind refinement splits the noise: {} floor vertices added", added(&blind));
+    assert!(added(&aware) * 8 < added(&blind), "{} floor vertices added against {}", added(&aware), added(&blind));
+    assert!(aware_error < 0.6 * blind_error, "floor error: noise-aware {aware_error:.4} against noise-blind {blind_error:.4}");
 }
 
 #[test]
@@ -151,7 +207,13 @@ fn sun_refinement_draws_slat_shadows_4x_closer_to_the_per_point_reference() {
     let surfaces = Surfaces::resolve(&mesh, &[]).expect("surfaces");
     let coarse = crate::bake::bake_sun_masks(&mesh, &scene, &surfaces, &suns, &params).expect("sun");
     let before = disagreement(&mesh, &coarse);
-    let refine = RefineParams { error: Some(0.1), max_vertices: 20_000, min_edge: 0.01, max_rounds: DEFAULT_MAX_ROUNDS };
+    let refine = RefineParams {
+        error: Some(0.1),
+        max_vertices: 20_000,
+        min_edge: 0.01,
+        max_rounds: DEFAULT_MAX_ROUNDS,
+        noise_sigmas: DEFAULT_NOISE_SIGMAS,
+    };
     let (refined, masks, report) = refine_sun(mesh.clone(), &[], &suns, &params, &refine).expect("refine");
     let after = disagreement(&refined, &masks);
     assert!(before > 0.05, "the coarse floor misses the stripes: {before:.4}");
