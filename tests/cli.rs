@@ -294,12 +294,50 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
     assert!(sun_bundle.mesh.vertex_count() > input_vertices, "{}", sun_bundle.meta);
     assert_eq!(sun_bundle.sun.as_ref().unwrap().masks.len(), sun_bundle.mesh.vertex_count());
 
-    // A bundle's sections belong to its vertices: refining it is refused, by name.
+    // A bundle with a transfer: the sun refines its mesh and the transfer is
+    // baked again on it, as `export`, `bake` (same parameters), `sun` would.
+    let baked = dir.path("baked.prtb");
+    let bake_args = ["--rays", "16", "--bounces", "1", "--quantize", "f16", "--store-bounces", "--quiet"];
+    run(&[&["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap()][..], &bake_args].concat());
+    let both = dir.path("both.prtb");
+    let sun_args = ["--steps", "6", "--quiet"];
+    run(&[&["sun", baked.to_str().unwrap(), "-o", both.to_str().unwrap(), "--refine", "0.2", "--max-vertices", "600"][..], &sun_args]
+        .concat());
+    let both_bundle = prtbake::bundle::read_bundle(&both).unwrap();
+    assert!(both_bundle.mesh.vertex_count() > input_vertices && both_bundle.mesh.vertex_count() <= 600);
+    // Its transfer is a whole bake of the refined mesh with the bundle's own
+    // parameters, stored as the input was (f16): nothing stale, nothing partial.
+    let params: prtbake::bake::BakeParams = serde_json::from_value(both_bundle.meta["params"].clone()).unwrap();
+    let (result, _, _) = prtbake::bake::bake_mesh(&both_bundle.mesh, &params, &[]).unwrap();
+    let f16 = prtbake::budget::Storage { order: 3, channels: result.channels, quantization: prtbake::bundle::Quantization::F16 };
+    let lightings = prtbake::budget::reference_lightings(3);
+    let choice = prtbake::budget::choose(&result.total, 3, result.channels, &[f16], f64::INFINITY, &lightings);
+    let again = prtbake::bundle::make_bundle_stored(&both_bundle.mesh, &result, &params, serde_json::json!({}), Some(&choice));
+    // Through the codec, which rounds the layers to f16 as stored.
+    let again = prtbake::bundle::decode_bundle(&prtbake::bundle::encode_bundle(&again).unwrap()).unwrap();
+    assert!(again.transfer == both_bundle.transfer, "the transfer is not a bake of the refined mesh");
+    assert!(both_bundle.sun.as_ref().is_some_and(|s| s.masks.len() == both_bundle.mesh.vertex_count()));
+    let stored = both_bundle.transfer.as_ref().unwrap();
+    assert_eq!((stored.quantization, stored.layers.len()), (prtbake::bundle::Quantization::F16, 3), "stored as the input was");
+    assert_eq!(both_bundle.meta["params"]["rays"].as_u64(), Some(16));
+    assert!(both_bundle.meta["sun"]["refine"]["output_vertices"].as_u64().is_some());
+
+    // A bundle of sun masks alone refines further (no transfer to re-bake).
+    let sun_again = dir.path("sun-again.prtb");
+    run(&[&["sun", sun.to_str().unwrap(), "-o", sun_again.to_str().unwrap(), "--refine", "0.1", "--max-vertices", "800"][..], &sun_args]
+        .concat());
+    let sun_again = prtbake::bundle::read_bundle(&sun_again).unwrap();
+    assert!(sun_again.mesh.vertex_count() >= sun_bundle.mesh.vertex_count() && sun_again.transfer.is_none());
+    assert_eq!(sun_again.sun.as_ref().unwrap().masks.len(), sun_again.mesh.vertex_count());
+
+    // A culled bundle's mesh is only what its box sees: refining it is refused, by name.
+    let culled = dir.path("culled.prtb");
+    run(&["bake", obj.to_str().unwrap(), "-o", culled.to_str().unwrap(), "--rays", "16", "--view-box", "-1,0,-1,1,1,1", "--quiet"]);
     let again = dir.path("again.prtb");
-    let o = prtbake(&["sun", sun.to_str().unwrap(), "-o", again.to_str().unwrap(), "--refine", "0.2"]);
+    let o = prtbake(&["sun", culled.to_str().unwrap(), "-o", again.to_str().unwrap(), "--refine", "0.2"]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("sun.prtb") && err.contains("refine"), "{err}");
+    assert!(err.contains("culled.prtb") && err.contains("view box"), "{err}");
     assert!(!again.exists());
     let bad_requests = [
         &["--refine", "nan"][..],

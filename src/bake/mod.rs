@@ -29,7 +29,7 @@ pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 use crate::sh;
 
 /// Which light reaches a point.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// Under an open sky: rays that escape the scene bring light; one-sided cosine.
@@ -39,7 +39,7 @@ pub enum Mode {
 }
 
 /// Where rays are shot from.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase", tag = "kind")]
 pub enum Sampling {
     /// Stratified points inside each triangle, about `samples_per_vertex` × vertex count
@@ -58,7 +58,7 @@ impl Sampling {
 }
 
 /// How many colour channels the transfer keeps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Channels {
     /// One when every material is grey, three otherwise.
@@ -67,8 +67,11 @@ pub enum Channels {
     Three,
 }
 
-/// Parameters of a transfer bake.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+/// Parameters of a transfer bake. A bundle's META `params` reads back
+/// into them (`sun BUNDLE --refine` re-bakes the transfer it holds); the
+/// fields that are not part of the bake take their defaults.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct BakeParams {
     /// SH order n: bands l < n, n² coefficients.
     pub order: usize,
@@ -79,7 +82,7 @@ pub struct BakeParams {
     /// Seed of the sample positions inside triangles, when it should differ
     /// from `seed` (`None`: `seed`). A study can then vary the rays and keep
     /// the points (examples/ray_scaling.rs separates the two error sources).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub point_seed: Option<u32>,
     pub mode: Mode,
     pub sampling: Sampling,
@@ -91,7 +94,7 @@ pub struct BakeParams {
     /// Adaptive allocation (interior sampling): bounce 0 adds about this
     /// many times the base layout's points where its own points measure the
     /// most noise (`bake::adaptive`); 0 = off.
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "is_zero")]
     pub adaptive: f32,
     pub pattern: DirectionPattern,
     /// Window mode: bounce 0 also traces `rays` directions aimed at the glass
@@ -114,15 +117,23 @@ pub struct BakeParams {
     /// closer than this fraction of the scene diagonal.
     pub inside_distance: f32,
     /// No progress line on stderr (not part of the bake: never stored).
-    #[serde(skip)]
+    #[serde(skip, default = "quiet_by_default")]
     pub quiet: bool,
     /// Largest cache of bounce 0's hits (8 bytes a ray) kept for the later
     /// bounces to gather from; beyond it they re-trace the same rays (about
     /// 3–4× slower on the Ferrari) and gather through the same 16-bit
     /// barycentrics, so the bytes are the same either way (not part of the
     /// bake: never stored).
-    #[serde(skip)]
+    #[serde(skip, default = "default_hit_cache_bytes")]
     pub hit_cache_bytes: u64,
+}
+
+fn quiet_by_default() -> bool {
+    true
+}
+
+fn default_hit_cache_bytes() -> u64 {
+    transfer::HIT_CACHE_BUDGET_BYTES
 }
 
 impl Default for BakeParams {

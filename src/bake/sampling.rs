@@ -13,7 +13,7 @@ use glam::Vec3;
 pub const MAX_RAYS_PER_POINT: u32 = 1 << 16;
 
 /// How ray directions are generated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DirectionPattern {
     /// Owen-scrambled Sobol (0,2)-sequence per point.

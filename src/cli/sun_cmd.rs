@@ -3,7 +3,9 @@
 //!
 //! Given a bundle, its mesh is reused vertex for vertex and every other
 //! section (transfer included) is copied byte for byte; given a mesh file, a
-//! new bundle holds the mesh and the sun sections (no transfer).
+//! new bundle holds the mesh and the sun sections (no transfer). With
+//! `--refine` the mesh changes, so a bundle's transfer is baked again on the
+//! refined mesh as its META says (`sun_rebake`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -61,7 +63,8 @@ pub struct SunConfig {
     pub force: bool,
     /// Trace one shard's samples into a part instead of the bundle (`--shard`).
     pub shard: Option<crate::bake::shards::Shard>,
-    /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`; a mesh input only).
+    /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`); a bundle's
+    /// transfer is then baked again on the refined mesh (`sun_rebake`).
     pub refine: Option<super::bake_cmd::RefineRequest>,
 }
 
@@ -103,6 +106,8 @@ pub struct SunInput {
     pub mesh: crate::mesh::Mesh,
     /// The input bundle and its META, when the input was a bundle.
     pub original: Option<(Vec<u8>, serde_json::Value)>,
+    /// The input bundle holds a transfer section.
+    pub had_transfer: bool,
     pub frame: SkyFrame,
     /// The axes `--north` and `--directions` are read in.
     pub file_up: UpAxis,
@@ -141,12 +146,12 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     } else {
         UpAxis::Y
     };
-    let (mesh, original) = if input_was_bundle {
+    let (mesh, original, had_transfer) = if input_was_bundle {
         let bytes = read_limited(input, Limit::Bundle).with_context(|| format!("cannot read {}", input.display()))?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
-        (b.mesh, Some((bytes, b.meta)))
+        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some())
     } else {
-        (super::load_mesh(input, config.up, quiet, &outputs, config.force)?, None)
+        (super::load_mesh(input, config.up, quiet, &outputs, config.force)?, None, false)
     };
     let up = Vec3::Y;
     let north = match config.north {
@@ -161,7 +166,7 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
     let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
-    Ok(SunInput { mesh, original, frame, file_up, source_name })
+    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name })
 }
 
 /// The day: sun position, colour and sky per step.
@@ -226,12 +231,14 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
 /// Loads the input, computes the day, bakes the masks and writes the bundle.
 pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     let mut input = load_sun_input(config, BUNDLE_FORMAT, true)?;
-    if config.refine.is_some() && input.was_bundle() {
-        anyhow::bail!(
-            "{}: --refine/--max-vertices add vertices, and a bundle's sections belong to its vertices: refine from the mesh file (`sun MESH --refine`), or refine the transfer with `bake --refine` (docs/refinement.md)",
-            config.input.display()
-        );
-    }
+    // Refining a bundle's mesh re-bakes its transfer on the new vertices:
+    // read how before any work, so a bundle that cannot be re-baked stops here.
+    let recipe = match (&config.refine, &input.original) {
+        (Some(_), Some((_, meta))) if input.had_transfer => {
+            Some(super::sun_rebake::TransferRecipe::from_meta(&config.input, meta, config.params.quiet)?)
+        }
+        _ => None,
+    };
     let (steps, build_seconds, sky_seconds, masks, refined) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let sky_start = Instant::now();
         let steps = day_steps(config, &input)?;
@@ -266,7 +273,20 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         sun_meta["refine"] = r.meta();
     }
     let output = &config.output;
-    let encoded = encode_sun_output(&input, sun_meta, &series, output)?;
+    let encoded = match (&refine, &input.original) {
+        // The mesh changed: the bundle is made anew (the transfer re-baked on it, if it had one).
+        (Some(_), Some((_, meta))) => {
+            let in_input = || config.input.display().to_string();
+            let mut out = match &recipe {
+                Some(recipe) => super::with_threads(config.threads, || recipe.bake(&input.mesh))?.with_context(in_input)?,
+                None => Bundle { meta: meta.clone(), mesh: input.mesh.clone(), transfer: None, sun: None },
+            };
+            out.meta["sun"] = sun_meta;
+            out.sun = Some(series.clone());
+            bundle::encode_bundle(&out).with_context(|| format!("cannot encode {}", output.display()))?
+        }
+        _ => encode_sun_output(&input, sun_meta, &series, output)?,
+    };
     crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
     let bundle_bytes = encoded.len() as u64;
     Ok(SunReport {
