@@ -15,7 +15,8 @@
 //! - **Sun masks:** the interpolated bits against a per-point reference shadow
 //!   (a ray from each point toward each day step's sun in the reference
 //!   mesh: open mode, escapes and the face turned to the sun; window mode,
-//!   the first hit is glass), the mean absolute difference over points and
+//!   the first hit is glass, leaving from a side of the point that is not
+//!   outside the enclosure, the bake's rule), the mean absolute difference over points and
 //!   day steps: the fraction of the surface drawn wrong, on average over the day.
 //!
 //! With `BY_MATERIAL=1`, stderr also splits the sun-mask disagreement (and
@@ -24,7 +25,9 @@
 use glam::Vec3;
 use prtbake::bake::{BuildQuality, Scene, SunMasks, Surfaces};
 use prtbake::bundle::{read_bundle, Bundle};
-use prtbake::refine::probe::{interpolate, interpolate_masks, locate, Located, SurfacePoint};
+use prtbake::refine::probe::{
+    interpolate, interpolate_masks, locate, outside_sides, reference_sun, reference_sun_window, Located, SurfacePoint,
+};
 
 fn load(path: &str) -> Bundle {
     read_bundle(path.as_ref()).unwrap_or_else(|e| panic!("{path}: {e}"))
@@ -80,30 +83,20 @@ fn main() {
         let scene = Scene::build(&reference.mesh, BuildQuality::Sah).expect("scene");
         let window = window_mode(&reference);
         let suns: Vec<Vec3> = series.steps.iter().map(|s| if s.night { Vec3::ZERO } else { Vec3::from(s.direction) }).collect();
+        // Window mode draws light through glass only on a side of a point that
+        // is not outside the enclosure, as the bake does (unless it kept them).
+        let keep_outside_sides = reference.meta.pointer("/sun/params/keep_outside_sides").and_then(|v| v.as_bool()).unwrap_or(false);
+        let outside = if window { outside_sides(&scene, &surfaces, &points, keep_outside_sides) } else { Vec::new() };
         let lit: Vec<Vec<f32>> = suns
             .iter()
             .map(|&sun| {
-                points
-                    .iter()
-                    .map(|p| {
-                        if sun == Vec3::ZERO {
-                            return 0.0;
-                        }
-                        let origin = scene.offset_origin(p.position, p.normal, sun);
-                        let lit = if window {
-                            scene
-                                .closest_hit(origin, sun, f32::INFINITY)
-                                .is_some_and(|h| surfaces.window_transmittance[h.triangle as usize].is_some())
-                        } else {
-                            p.normal.dot(sun) > 0.0 && !scene.occluded(origin, sun, f32::INFINITY)
-                        };
-                        if lit {
-                            1.0
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect()
+                if sun == Vec3::ZERO {
+                    vec![0.0; points.len()]
+                } else if window {
+                    reference_sun_window(&scene, &surfaces, &points, &outside, sun)
+                } else {
+                    reference_sun(&scene, &points, sun)
+                }
             })
             .collect();
         (suns, lit)

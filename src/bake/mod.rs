@@ -5,7 +5,7 @@
 mod adaptive;
 pub mod bvh8;
 pub mod cull;
-mod enclosure;
+pub(crate) mod enclosure;
 mod gather;
 pub mod hugepages;
 pub mod leaf_blocks;

@@ -8,7 +8,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::bake::{Scene, SunMasks};
+use crate::bake::{Scene, SunMasks, Surfaces};
 use crate::mesh::Mesh;
 
 /// A point on a surface and its face normal.
@@ -111,6 +111,44 @@ pub fn reference_sun(scene: &Scene, points: &[SurfacePoint], sun: Vec3) -> Vec<f
             } else {
                 0.0
             }
+        })
+        .collect()
+}
+
+/// The per-point reference of window-mode sun masks: 1 where the first hit
+/// from the point toward `sun` is glass and, unless `keep_outside_sides`,
+/// the side of the point the ray leaves from is not outside the enclosure
+/// (`outside[p][side]`, from [`outside_sides`]): the rule the bake applies
+/// (docs/conventions.md), so the reference draws the same light.
+pub fn reference_sun_window(scene: &Scene, surfaces: &Surfaces, points: &[SurfacePoint], outside: &[[bool; 2]], sun: Vec3) -> Vec<f32> {
+    points
+        .par_iter()
+        .zip(outside.par_iter())
+        .map(|(p, outside)| {
+            let side = crate::bake::enclosure::Sides::of(p.normal, sun);
+            let through_glass = scene
+                .closest_hit(scene.offset_origin(p.position, p.normal, sun), sun, f32::INFINITY)
+                .is_some_and(|h| surfaces.window_transmittance[h.triangle as usize].is_some_and(|tau| tau > 0.0));
+            if through_glass && !outside[side] {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Each point's two sides (front, back of its face): outside the enclosure
+/// by the bake's own probe (`bake::enclosure::side_is_outside`); all
+/// `false` when `keep_outside_sides`.
+pub fn outside_sides(scene: &Scene, surfaces: &Surfaces, points: &[SurfacePoint], keep_outside_sides: bool) -> Vec<[bool; 2]> {
+    points
+        .par_iter()
+        .map(|p| {
+            if keep_outside_sides {
+                return [false; 2];
+            }
+            [0, 1].map(|side| crate::bake::enclosure::side_is_outside(scene, surfaces, p.position, p.normal, side))
         })
         .collect()
 }
