@@ -118,7 +118,7 @@ pub fn run_real(
                 "lit_vertices": s.reference.lit.len(),
                 "reference": {
                     "params": s.reference_params,
-                    "seeds": real::REFERENCE_SEEDS,
+                    "seeds": s.reference.seeds,
                     "seed_difference_dc": s.reference.seed_difference,
                     "baked_seconds": s.reference.baked_seconds,
                 },
@@ -134,7 +134,7 @@ pub fn run_real(
     } else {
         println!("{} bakes in {:.1}s: {}, {}", rows.len(), started.elapsed().as_secs_f64(), csv_path.display(), svg_path.display());
         for s in &sweeps {
-            println!("  {}: {} lit vertices; reference seeds differ by {:.4}", s.name, s.reference.lit.len(), s.reference.seed_difference);
+            println!("  {}: {} lit vertices; reference halves differ by {:.4}", s.name, s.reference.lit.len(), s.reference.seed_difference);
             for r in &s.rows {
                 println!(
                     "    {:<10} {:>4} rays {:>8.2}s  DC error {:.4}  shaded {:.4}  black lit {}",
