@@ -45,7 +45,7 @@ def main():
                                  capture_output=True, text=True, check=True).stdout
             raw = next(float(line.split()[6]) for line in out.splitlines() if line.startswith("closest_hit"))
             bake = [prtbake, "bake", a.mesh, "--order", str(a.order), "--rays", str(a.rays), "--bounces", str(a.bounces),
-                    "--threads", str(a.threads), "-o", os.path.join(tmp, "bake.prtb"), "--json"]
+                    "--adaptive", "0", "--threads", str(a.threads), "-o", os.path.join(tmp, "bake.prtb"), "--json"]
             if a.window:
                 bake += ["--window", a.window]
             stats = json.loads(subprocess.run(bake, capture_output=True, text=True, check=True).stdout)["stats"]

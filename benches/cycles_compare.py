@@ -305,12 +305,12 @@ def main():
         run([binary, "clean", room, "-o", obj_path, "--quiet"])
 
     if args.quick:
-        sweep = [("prtbake-r16", ["--rays", "16"]), ("prtbake-r64", ["--rays", "64"])]
+        sweep = [("prtbake-r16", ["--rays", "16", "--adaptive", "0"]), ("prtbake-r64", ["--rays", "64", "--adaptive", "0"])]
         adaptive = [("prtbake-a1-r32", ["--rays", "32", "--adaptive", "1"])]
-        references = [("prtbake-ref-s1", ["--rays", "128", "--seed", "1"]), ("prtbake-ref-s2", ["--rays", "128", "--seed", "2"])]
+        references = [("prtbake-ref-s1", ["--rays", "128", "--adaptive", "0", "--seed", "1"]), ("prtbake-ref-s2", ["--rays", "128", "--adaptive", "0", "--seed", "2"])]
         samples = [4, 16]
     else:
-        sweep = [(f"prtbake-r{r}", ["--rays", str(r)]) for r in (16, 32, 64, 128, 256)]
+        sweep = [(f"prtbake-r{r}", ["--rays", str(r), "--adaptive", "0"]) for r in (16, 32, 64, 128, 256)]
         adaptive = [(f"prtbake-a1-r{r}", ["--rays", str(r), "--adaptive", "1"]) for r in (16, 32, 64, 128)]
         references = [(f"prtbake-ref-s{s}", ["--rays", "256", "--adaptive", "3", "--seed", str(s)]) for s in (1, 2)]
         samples = [4, 16, 64, 128]

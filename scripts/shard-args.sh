@@ -14,6 +14,23 @@ bounces_of() {
     echo "$bounces"
 }
 
+# Exits with a message unless the bake args "$@" say --adaptive 0: bake's
+# default adaptive allocation needs every vertex's bounce 0 in one process, so
+# a sharded bake is uniform, and says so (its single-process twin must too).
+require_uniform() {
+    local prev= arg adaptive=
+    for arg in "$@"; do
+        case $prev in --adaptive) adaptive=$arg ;; esac
+        case $arg in --adaptive=*) adaptive=${arg#--adaptive=} ;; esac
+        prev=$arg
+    done
+    case $adaptive in
+        0 | 0.0 | 0.00) ;;
+        '') echo "$0: give the bake args --adaptive 0: adaptive allocation (bake's default) runs in one process, so a sharded bake is uniform; the single-process bake with the same args gives the same bytes (docs/scale.md)" >&2 && exit 2 ;;
+        *) echo "$0: --adaptive $adaptive: adaptive allocation runs in one process; a sharded bake needs --adaptive 0 (docs/scale.md)" >&2 && exit 2 ;;
+    esac
+}
+
 # Succeeds when the bake args "$@" give --threads.
 gives_threads() {
     local arg

@@ -25,6 +25,7 @@ shift 3
 bake_args=("$@")
 . "$(dirname "$0")/shard-args.sh"
 check_operands "$out" "$n"
+require_uniform "$@"
 bounces=$(bounces_of "$@")
 gives_threads "$@" || bake_args+=(--threads 1)
 

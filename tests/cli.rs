@@ -404,8 +404,10 @@ fn clean_and_bake_cut_intersections() {
 }
 
 /// Issue 17: `bake --adaptive F` adds points after bounce 0 and records the
-/// factor in META; a factor outside 0..=16, or one with `--shard` or
-/// `--sampling vertex`, is refused with exit 2 and nothing written.
+/// factor in META; it is on (1) by default, off with `--sampling vertex`; a
+/// factor outside 0..=16, or one with `--shard` or `--sampling vertex`, is
+/// refused with exit 2 and nothing written, and so is `--shard` without an
+/// explicit `--adaptive 0` (its single-process twin would be adaptive).
 #[test]
 fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     let dir = Scratch::new("adaptive");
@@ -415,7 +417,7 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     let adaptive_out = dir.path("adaptive.prtb");
     let base = ["bake", obj.to_str().unwrap(), "--rays", "32", "--bounces", "1", "--quiet", "--json"];
     let mut points = Vec::new();
-    for (out, extra) in [(&base_out, &[][..]), (&adaptive_out, &["--adaptive", "1"][..])] {
+    for (out, extra) in [(&base_out, &["--adaptive", "0"][..]), (&adaptive_out, &["--adaptive", "1"][..])] {
         let o = prtbake(&[&base[..], &["-o", out.to_str().unwrap()], extra].concat());
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -427,6 +429,22 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     assert_eq!(added, Some(points[1] - points[0]), "META counts the added points");
     assert_eq!(meta(&adaptive_out)["params"]["adaptive"].as_f64(), Some(1.0));
     assert!(meta(&base_out)["params"].get("adaptive").is_none(), "a bake without it records nothing new");
+    // The default is adaptive: the same bytes as `--adaptive 1`.
+    let default_out = dir.path("default.prtb");
+    let o = prtbake(&[&base[..], &["-o", default_out.to_str().unwrap()]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(&default_out).unwrap() == std::fs::read(&adaptive_out).unwrap(), "the default is --adaptive 1");
+    // ... but not with vertex sampling, which adaptive allocation cannot serve.
+    let vertex_out = dir.path("vertex.prtb");
+    let o = prtbake(&[&base[..], &["-o", vertex_out.to_str().unwrap(), "--sampling", "vertex"]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(meta(&vertex_out)["params"].get("adaptive").is_none());
+    // A shard must say --adaptive 0: its single-process twin must say it too.
+    let part = dir.path("part.prtp");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", part.to_str().unwrap(), "--shard", "0/2"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--adaptive 0"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!part.exists());
     for bad in [
         &["--adaptive", "-1"][..],
         &["--adaptive", "nan"],

@@ -12,7 +12,8 @@ use crate::shards::write_cabin;
 use crate::util::{prtbake, Scratch};
 
 const REPO: &str = env!("CARGO_MANIFEST_DIR");
-const BAKE_ARGS: &[&str] = &["--window", "glass", "--bounces", "2", "--rays", "8", "--seed", "5", "--store-bounces", "--clean"];
+const BAKE_ARGS: &[&str] =
+    &["--window", "glass", "--bounces", "2", "--rays", "8", "--seed", "5", "--adaptive", "0", "--store-bounces", "--clean"];
 const SUN_ARGS: &[&str] = &["--window", "glass", "--steps", "24", "--seed", "3"];
 
 /// `sbatch` for the test: numbers jobs from 100, appends "id dependency array"
@@ -117,6 +118,12 @@ fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     assert!(code == Some(2) && e.contains("give CPUS=T, not --threads"), "{e}");
     let (code, _, e) = script(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&bundle), "three"], &[]);
     assert!(code == Some(2) && e.contains("N must be a positive integer, not 'three'"), "{e}");
+    // A sharded bake is uniform and must say so (bake's default is adaptive), before any job is queued.
+    for adaptive in [&[][..], &["--adaptive", "1"]] {
+        let (code, _, e) =
+            script(&dir, "scripts/slurm/submit.sh", &[&[s(&mesh), s(&bundle), "3", "--bounces", "1"][..], adaptive].concat(), &[]);
+        assert!(code == Some(2) && e.contains("--adaptive 0"), "{adaptive:?}: {e}");
+    }
 }
 
 /// Python 3 with PyYAML, or a skip notice.

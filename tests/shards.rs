@@ -19,7 +19,8 @@ pub fn write_cabin(dir: &Scratch) -> PathBuf {
 
 /// Window light, three bounces, colour, each bounce stored, cleaned inline:
 /// every piece of a bake's bundle that a merge has to reproduce.
-const BAKE_ARGS: &[&str] = &["--window", "glass", "--bounces", "3", "--rays", "12", "--seed", "5", "--store-bounces", "--clean", "--quiet"];
+const BAKE_ARGS: &[&str] =
+    &["--window", "glass", "--bounces", "3", "--rays", "12", "--seed", "5", "--adaptive", "0", "--store-bounces", "--clean", "--quiet"];
 
 fn run(args: &[&str]) -> String {
     let out = prtbake(args);
@@ -154,7 +155,7 @@ fn sharded_sun_merges_into_the_single_process_bundle() {
 fn shards_are_idempotent_and_merges_name_bad_parts() {
     let dir = Scratch::new("shards-errors");
     let mesh = write_cabin(&dir);
-    let args = ["--window", "glass", "--bounces", "1", "--rays", "8", "--quiet"];
+    let args = ["--window", "glass", "--bounces", "1", "--rays", "8", "--adaptive", "0", "--quiet"];
     let bake = |shard: &str, round: &str, out: &Path, extra: &[&str]| {
         let mut a = vec!["bake", s(&mesh), "-o", s(out), "--shard", shard, "--round", round];
         a.extend(args);
@@ -191,12 +192,28 @@ fn shards_are_idempotent_and_merges_name_bad_parts() {
     // Round 1 needs the layer its parts gathered from, and refuses another bake's hit records.
     run(&merge(&[&parts[2], &parts[0], &parts[1]], &layer));
     let r1 = dir.path("r1-0.prtp");
-    let e =
-        refused(&["bake", s(&mesh), "-o", s(&r1), "--shard", "0/3", "--round", "1", "--window", "glass", "--bounces", "1", "--rays", "8"]);
+    let e = refused(&[
+        "bake",
+        s(&mesh),
+        "-o",
+        s(&r1),
+        "--shard",
+        "0/3",
+        "--round",
+        "1",
+        "--window",
+        "glass",
+        "--bounces",
+        "1",
+        "--rays",
+        "8",
+        "--adaptive",
+        "0",
+    ]);
     assert!(e.contains("--round 1 needs --layer"), "{e}");
     let mut a = vec!["bake", s(&mesh), "-o", s(&r1), "--shard", "1/3", "--round", "1", "--layer", s(&layer), "--shard-dir"];
     a.push(s(&dir.0));
-    a.extend(["--window", "glass", "--bounces", "1", "--rays", "16", "--quiet"]);
+    a.extend(["--window", "glass", "--bounces", "1", "--rays", "16", "--adaptive", "0", "--quiet"]);
     let e = refused(&a);
     assert!(e.contains("hits-1-of-3.prth: rays 8 here, 16 in this bake's"), "{e}");
     let x = dir.path("x.prtb");

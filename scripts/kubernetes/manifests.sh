@@ -31,6 +31,7 @@ bake_args=("$@")
 . "$(dirname "$0")/../shard-args.sh"
 check_operands "$out" "$n"
 ! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each pod's threads are its cores)" >&2 && exit 2; }
+require_uniform "$@"
 bounces=$(bounces_of "$@")
 base=$(basename "${out%.prtb}" | tr 'A-Z_.' 'a-z--' | tr -cd 'a-z0-9-')
 name=${NAME:-${base:-bake}}

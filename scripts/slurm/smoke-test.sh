@@ -101,7 +101,7 @@ echo "slurm: $(sinfo -h -o '%P %D %c %m %T') (SLURM_CONF=$SLURM_CONF)" >&2
 # clean the 333k-triangle cabin again (docs/scale.md, Limits).
 "$prtbake" generate cabin -o "$smoke/cabin-raw.glb"
 "$prtbake" clean "$smoke/cabin-raw.glb" -o "$smoke/cabin.glb" >/dev/null
-args=(--window glass --rays "$rays" --bounces 3)
+args=(--window glass --rays "$rays" --bounces 3 --adaptive 0)
 t2=$(clock)
 last=$(WORK=$smoke/shards PRTBAKE=$prtbake scripts/slurm/submit.sh "$smoke/cabin.glb" "$smoke/slurm.prtb" "$n" "${args[@]}")
 while squeue -h -j "$last" 2>/dev/null | grep -q .; do

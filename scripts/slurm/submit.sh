@@ -19,6 +19,7 @@ bake_args=("$@")
 . "$(dirname "$0")/submit-lib.sh"
 check_operands "$out" "$n"
 ! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each job's threads are its cores)" >&2 && exit 2; }
+require_uniform "$@"
 [ -f "$mesh" ] || { echo "$0: no mesh at $mesh" >&2 && exit 2; }
 bounces=$(bounces_of "$@")
 work=$(work_dir "$out")
