@@ -258,10 +258,19 @@ pub struct Score {
     pub dc_error: f64,
     pub shaded_error: f64,
     pub black_lit: usize,
+    /// The brightest black lit vertex's reference DC over the lit vertices'
+    /// mean reference DC (0 with none black): how much light the black ones miss.
+    pub brightest_black: f64,
+    /// The bake's own estimate of its DC noise, `sqrt(Σ σ² / Σ r²)` over the
+    /// lit vertices (σ: `TransferResult::noise`, bounce 0's standard error;
+    /// NaN when the bake measured none), beside `dc_error` to show how far
+    /// the estimate can be trusted.
+    pub noise_estimate: f64,
 }
 
-/// Scores a one-channel transfer of the reference's order and vertex count.
-pub fn score(transfer: &[f32], reference: &RealReference, lightings: &[Lighting]) -> Score {
+/// Scores a one-channel transfer of the reference's order and vertex count,
+/// with its per-vertex DC standard errors `noise` (empty when not measured).
+pub fn score(transfer: &[f32], noise: &[f32], reference: &RealReference, lightings: &[Lighting]) -> Score {
     let n = sh::coeff_count(reference.order);
     let pick = |t: &[f32]| {
         let mut out = Vec::with_capacity(reference.lit.len() * n);
@@ -275,7 +284,21 @@ pub fn score(transfer: &[f32], reference: &RealReference, lightings: &[Lighting]
         .iter()
         .map(|l| budget::relative_rms(&budget::shade(&exact, reference.order, 1, &l.sh), &budget::shade(&baked, reference.order, 1, &l.sh)))
         .fold(0.0, f64::max);
-    Score { dc_error: relative_rms(&exact_dc, &baked_dc), shaded_error, black_lit: baked_dc.iter().filter(|&&d| d == 0.0).count() }
+    let lit_mean = exact_dc.iter().sum::<f64>() / exact_dc.len().max(1) as f64;
+    let brightest_black = baked_dc.iter().zip(&exact_dc).filter(|(&b, _)| b == 0.0).map(|(_, &r)| r).fold(0.0, f64::max) / lit_mean;
+    let noise_estimate = if noise.len() * n == transfer.len() {
+        let spread: f64 = reference.lit.iter().map(|&v| f64::from(noise[v]).powi(2)).sum();
+        (spread / exact_dc.iter().map(|r| r * r).sum::<f64>()).sqrt()
+    } else {
+        f64::NAN
+    };
+    Score {
+        dc_error: relative_rms(&exact_dc, &baked_dc),
+        shaded_error,
+        black_lit: baked_dc.iter().filter(|&&d| d == 0.0).count(),
+        brightest_black,
+        noise_estimate,
+    }
 }
 
 /// One swept bake of a real scene.
@@ -293,14 +316,15 @@ pub struct RealRow {
 }
 
 /// The CSV header, in column order.
-pub const CSV_HEADER: &str = "scene,setting,rays,adaptive,seconds,points,rays_traced,dc_error,shaded_error,black_lit";
+pub const CSV_HEADER: &str =
+    "scene,setting,rays,adaptive,seconds,points,rays_traced,dc_error,shaded_error,black_lit,brightest_black,noise_estimate";
 
 pub fn to_csv(rows: &[RealRow]) -> String {
     let mut s = String::from(CSV_HEADER);
     s.push('\n');
     for r in rows {
         s += &format!(
-            "{},{},{},{},{:.3},{},{},{:.6},{:.6},{}\n",
+            "{},{},{},{},{:.3},{},{},{:.6},{:.6},{},{:.6},{:.6}\n",
             r.scene,
             r.setting,
             r.rays,
@@ -310,7 +334,9 @@ pub fn to_csv(rows: &[RealRow]) -> String {
             r.rays_traced,
             r.score.dc_error,
             r.score.shaded_error,
-            r.score.black_lit
+            r.score.black_lit,
+            r.score.brightest_black,
+            r.score.noise_estimate
         );
     }
     s
@@ -346,10 +372,18 @@ pub fn sweep(scenes: &[RealScene], size: Size, cache_dir: &Path) -> anyhow::Resu
             let started = Instant::now();
             let (result, _, _) = bake_mesh(&scene.mesh, &params, &scene.window_patterns)?;
             let seconds = started.elapsed().as_secs_f64();
-            let score = score(&result.total, &reference, &lightings);
+            let score = score(&result.total, &result.noise, &reference, &lightings);
             eprintln!(
-                "chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  DC error {:.4}  shaded {:.4}  black lit {}",
-                scene.name, setting, rays, seconds, score.dc_error, score.shaded_error, score.black_lit
+                "chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  DC error {:.4} (noise estimate {:.4})  shaded {:.4}  black lit {} (brightest {:.3} of the mean)",
+                scene.name,
+                setting,
+                rays,
+                seconds,
+                score.dc_error,
+                score.noise_estimate,
+                score.shaded_error,
+                score.black_lit,
+                score.brightest_black
             );
             rows.push(RealRow {
                 scene: scene.name.into(),
@@ -429,13 +463,19 @@ mod tests {
         let reference =
             RealReference { transfer: transfer.clone(), order: 2, lit, seed_difference: 0.0, seeds: vec![11, 12], baked_seconds: 0.0 };
         let lightings = budget::reference_lightings(2);
-        let exact = score(&transfer, &reference, &lightings);
-        assert_eq!(exact, Score { dc_error: 0.0, shaded_error: 0.0, black_lit: 0 });
+        let exact = score(&transfer, &[0.01, 0.0, 0.02], &reference, &lightings);
+        assert_eq!(exact.dc_error, 0.0);
+        assert_eq!((exact.shaded_error, exact.black_lit, exact.brightest_black), (0.0, 0, 0.0));
+        // Noise estimate: sqrt((0.01² + 0.02²) / (0.3² + 0.2²)); the unlit vertex's noise is not counted.
+        assert!((exact.noise_estimate - (0.0005f64 / 0.13).sqrt()).abs() < 1e-6, "{}", exact.noise_estimate);
+        assert!(score(&transfer, &[], &reference, &lightings).noise_estimate.is_nan());
         let mut off = transfer.clone();
         off[4] = 7.0; // the unlit vertex: not scored
         off[2 * n] = 0.0; // a lit vertex turned black
-        let s = score(&off, &reference, &lightings);
+        let s = score(&off, &[], &reference, &lightings);
         assert_eq!(s.black_lit, 1);
+        // The black vertex's reference DC 0.2 over the lit mean 0.25.
+        assert!((s.brightest_black - 0.8).abs() < 1e-6, "{}", s.brightest_black);
         // DC error: sqrt(0.2² / (0.3² + 0.2²)).
         assert!((s.dc_error - (0.04f64 / 0.13).sqrt()).abs() < 1e-6, "{}", s.dc_error);
         assert!(s.shaded_error > 0.0);
