@@ -145,18 +145,69 @@ pub struct Candidate {
     pub shaded_error: f64,
     /// Largest |coefficient change| from quantization alone (after reduction).
     pub quantization_max_abs: f64,
+    /// Worst over the lightings of the estimated total error, the bake's own
+    /// noise and this storage's error added in quadrature
+    /// (`sqrt(noise² + storage²)` per lighting); `None` when the bake's
+    /// noise was not measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub total_error: Option<f64>,
 }
 
-/// Measures `storage` against the baked transfer `(order, channels)`.
-pub fn measure(transfer: &[f32], order: usize, channels: usize, storage: &Storage, lightings: &[Lighting]) -> Candidate {
+/// Measures `storage` against the baked transfer `(order, channels)`;
+/// with `noise` (per lighting, [`noise_errors`]) also the total error.
+pub fn measure(
+    transfer: &[f32],
+    order: usize,
+    channels: usize,
+    storage: &Storage,
+    lightings: &[Lighting],
+    noise: Option<&[f64]>,
+) -> Candidate {
     let reduced = reduce(transfer, order, channels, storage);
     let stored = round_trip(&reduced, storage);
     let quantization_max_abs = reduced.iter().zip(&stored).map(|(a, b)| (*a as f64 - *b as f64).abs()).fold(0.0, f64::max);
-    let shaded_error = lightings
+    let per_lighting: Vec<f64> = lightings
         .iter()
         .map(|l| relative_rms(&shade(transfer, order, channels, &l.sh), &shade(&stored, storage.order, storage.channels, &l.sh)))
-        .fold(0.0, f64::max);
-    Candidate { storage: *storage, bytes_per_vertex: bytes_per_vertex(storage), shaded_error, quantization_max_abs }
+        .collect();
+    let shaded_error = per_lighting.iter().copied().fold(0.0, f64::max);
+    let total_error = noise.map(|n| per_lighting.iter().zip(n).map(|(s, n)| s.hypot(*n)).fold(0.0, f64::max));
+    Candidate { storage: *storage, bytes_per_vertex: bytes_per_vertex(storage), shaded_error, quantization_max_abs, total_error }
+}
+
+/// Per lighting, the relative RMS of shaded radiance (as [`relative_rms`]
+/// counts it) that the bake's own noise amounts to: a vertex's bounce-0 DC
+/// standard error `noise[v]` (`TransferResult::noise`) is its DC's absolute
+/// noise in every channel (later bounces gather over many points and add
+/// little), scaled to each lighting as the vertex's shading per unit of its
+/// DC. `None` unless `noise` has one value per vertex.
+pub fn noise_errors(transfer: &[f32], order: usize, channels: usize, noise: &[f32], lightings: &[Lighting]) -> Option<Vec<f64>> {
+    let n = sh::coeff_count(order);
+    let stride = (channels * n).max(1);
+    if noise.is_empty() || noise.len() * stride != transfer.len() {
+        return None;
+    }
+    let errors = lightings
+        .iter()
+        .map(|l| {
+            let (mut spread, mut norm) = (0.0f64, 0.0f64);
+            for (v, rgb) in shade(transfer, order, channels, &l.sh).iter().enumerate() {
+                for (c, &r) in rgb.iter().enumerate() {
+                    let dc = f64::from(transfer[v * stride + if channels == 1 { 0 } else { c * n }]);
+                    if dc > 0.0 {
+                        spread += (f64::from(noise[v]) * r / dc).powi(2);
+                    }
+                    norm += r * r;
+                }
+            }
+            if norm > 0.0 {
+                (spread / norm).sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Some(errors)
 }
 
 /// Every storage at most as rich as the bake: orders 1..=order, channels
@@ -188,22 +239,53 @@ pub struct Choice {
     pub budget: Option<f64>,
     /// Every option measured, in the order tried.
     pub measured: Vec<Candidate>,
+    /// Worst over the lightings of the bake's own estimated noise
+    /// ([`noise_errors`]), when measured: the part of the budget storage
+    /// cannot spend.
+    pub noise_error: Option<f64>,
+}
+
+impl Choice {
+    /// Whether the chosen storage keeps the error the budget counts (the
+    /// total when the noise is known, else storage alone) within it.
+    pub fn within_budget(&self) -> bool {
+        self.budget.is_none_or(|b| self.chosen.total_error.unwrap_or(self.chosen.shaded_error) <= b)
+    }
 }
 
 /// The smallest storage (bytes per vertex; ties: smaller error) whose shaded
 /// error is within `budget`, among `storages`. Falls back to the bake as is
 /// (f32) when none fits. Non-finite errors never fit.
 pub fn choose(transfer: &[f32], order: usize, channels: usize, storages: &[Storage], budget: f64, lightings: &[Lighting]) -> Choice {
-    let measured: Vec<Candidate> = storages.iter().map(|s| measure(transfer, order, channels, s, lightings)).collect();
+    choose_within_total(transfer, order, channels, storages, budget, lightings, None)
+}
+
+/// [`choose`], the budget counting the total error when `noise` (per
+/// lighting, [`noise_errors`]) is known: the bake's own noise and the
+/// storage's error in quadrature, `sqrt(noise² + storage²)`, the worst over
+/// the lightings. When not even f32 fits (the noise alone is over the
+/// budget), the bake is stored as it is and [`Choice::within_budget`] says so.
+pub fn choose_within_total(
+    transfer: &[f32],
+    order: usize,
+    channels: usize,
+    storages: &[Storage],
+    budget: f64,
+    lightings: &[Lighting],
+    noise: Option<&[f64]>,
+) -> Choice {
+    let measured: Vec<Candidate> = storages.iter().map(|s| measure(transfer, order, channels, s, lightings, noise)).collect();
+    let counted = |c: &Candidate| c.total_error.unwrap_or(c.shaded_error);
     let fitting = measured
         .iter()
-        .filter(|c| c.shaded_error <= budget)
+        .filter(|c| counted(c) <= budget)
         .min_by(|a, b| a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error)));
     let chosen = match fitting {
         Some(c) => c.clone(),
-        None => measure(transfer, order, channels, &Storage { order, channels, quantization: Quantization::F32 }, lightings),
+        None => measure(transfer, order, channels, &Storage { order, channels, quantization: Quantization::F32 }, lightings, noise),
     };
-    Choice { chosen, budget: Some(budget), measured }
+    let noise_error = noise.map(|n| n.iter().copied().fold(0.0, f64::max));
+    Choice { chosen, budget: Some(budget), measured, noise_error }
 }
 
 #[cfg(test)]
@@ -230,6 +312,27 @@ mod tests {
     }
 
     #[test]
+    fn noise_errors_are_the_dc_noise_relative_to_the_shading() {
+        // DC-only transfer under a constant sky: each vertex's shading is
+        // L0·t0, so the shaded noise relative RMS is sqrt(Σ σ²) / sqrt(Σ t0²).
+        let order = 2;
+        let n = sh::coeff_count(order);
+        let dc = [0.5f32, 0.25, 0.0, 1.0];
+        let noise = [0.05f32, 0.0, 0.3, 0.1];
+        let mut t = vec![0.0f32; dc.len() * n];
+        dc.iter().enumerate().for_each(|(v, &d)| t[v * n] = d);
+        let mut sky = vec![[0.0f32; 3]; n];
+        sky[0] = [2.0, 1.0, 0.5];
+        let lights = [Lighting { name: "constant".into(), sh: sky }];
+        let got = noise_errors(&t, order, 1, &noise, &lights).unwrap()[0];
+        // The black vertex's noise has nothing to scale (its shading is 0).
+        let want = ((0.05f64.powi(2) + 0.1f64.powi(2)) / (0.25 + 0.0625 + 1.0)).sqrt();
+        assert!((got - want).abs() < 1e-6, "{got} vs {want}");
+        assert!(noise_errors(&t, order, 1, &[], &lights).is_none());
+        assert!(noise_errors(&t, order, 1, &noise[..3], &lights).is_none());
+    }
+
+    #[test]
     fn reduce_keeps_low_bands_and_averages_channels() {
         let t: Vec<f32> = (0..2 * 3 * 9).map(|x| x as f32).collect();
         let r = reduce(&t, 3, 3, &Storage { order: 2, channels: 3, quantization: Quantization::F32 });
@@ -244,7 +347,7 @@ mod tests {
     fn identity_storage_has_zero_error() {
         let t = smooth_transfer(50, 3, 3);
         let lights = reference_lightings(3);
-        let c = measure(&t, 3, 3, &Storage { order: 3, channels: 3, quantization: Quantization::F32 }, &lights);
+        let c = measure(&t, 3, 3, &Storage { order: 3, channels: 3, quantization: Quantization::F32 }, &lights, None);
         assert_eq!(c.shaded_error, 0.0);
         assert_eq!(c.bytes_per_vertex, 108);
     }
@@ -259,7 +362,7 @@ mod tests {
         let loose = choose(&t, 3, 3, &all, 0.5, &lights);
         assert!(loose.chosen.storage.order < 3 && loose.chosen.shaded_error <= 0.5, "{:?}", loose.chosen);
         // f16 at full order is far below 1%.
-        let f16 = measure(&t, 3, 3, &Storage { order: 3, channels: 3, quantization: Quantization::F16 }, &lights);
+        let f16 = measure(&t, 3, 3, &Storage { order: 3, channels: 3, quantization: Quantization::F16 }, &lights, None);
         assert!(f16.shaded_error < 1e-3, "{}", f16.shaded_error);
     }
 }

@@ -106,6 +106,19 @@ fn sharded_transfer_merges_into_the_single_process_bundle() {
         let merged = sharded_bake(&work, &mesh, BAKE_ARGS, 3, n);
         assert!(std::fs::read(&merged).unwrap() == expected, "{n} shards: the merged bundle differs from the single-process bake");
     }
+    // --max-error budgets the total error, the bake's noise included: the
+    // parts carry the noise's moments, so the merge chooses the same storage.
+    let budgeted: Vec<&str> = BAKE_ARGS.iter().copied().chain(["--max-error", "0.3"]).collect();
+    let single = dir.path("single-budget.prtb");
+    let mut a = vec!["bake", s(&mesh), "-o", s(&single), "--threads", "2"];
+    a.extend(&budgeted);
+    run(&a);
+    let storage = prtbake::bundle::read_bundle(&single).unwrap().meta["storage"].clone();
+    assert!(storage["noise_error"].as_f64().is_some_and(|n| n > 0.0), "{storage}");
+    let work = dir.path("budget");
+    std::fs::create_dir(&work).unwrap();
+    let merged = sharded_bake(&work, &mesh, &budgeted, 3, 3);
+    assert!(std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(), "3 shards with --max-error: the merged bundle differs");
 }
 
 #[test]

@@ -77,6 +77,42 @@ fn max_error_picks_lower_order_when_the_budget_allows() {
     assert_eq!(o.status.code(), Some(2));
 }
 
+/// `--max-error` budgets the total error: the bake's own estimated noise and
+/// the storage's error in quadrature. Over the noise the budget leaves
+/// storage only the rest; under it no storage fits, the bake is stored as
+/// baked, META says so and stderr warns. A bake that measures no noise
+/// (vertex sampling) budgets storage alone.
+#[test]
+fn max_error_counts_the_bakes_own_noise() {
+    let dir = Scratch::new("budget-total");
+    let (path, _) = bake(&dir, "noisy.prtb", &["--order", "3", "--max-error", "0.2"]);
+    let s = read_bundle(&path).unwrap().meta["storage"].clone();
+    let (noise, storage, total) =
+        (s["noise_error"].as_f64().unwrap(), s["shaded_error"].as_f64().unwrap(), s["total_error"].as_f64().unwrap());
+    eprintln!("64 rays, --max-error 0.2: noise {noise:.4}, storage {storage:.4}, total {total:.4}");
+    assert!(noise > 0.02 && noise < 0.2, "a 64-ray bake of the fixture is noisy, but under 20%: {noise}");
+    assert!(total <= 0.2 && total >= noise && total >= storage && s["within_budget"] == true, "{s}");
+    assert!(total <= noise.hypot(storage) * (1.0 + 1e-9) + 1e-12, "the worst sky's total is at most the two worsts in quadrature: {s}");
+
+    // Under the noise: nothing fits; stored as baked, with a warning.
+    let obj = dir.path("scene.obj");
+    let tight = dir.path("tight.prtb");
+    let budget = format!("{}", noise / 2.0);
+    let o =
+        prtbake(&["bake", obj.to_str().unwrap(), "-o", tight.to_str().unwrap(), "--rays", "64", "--bounces", "1", "--max-error", &budget]);
+    assert!(o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("estimated noise") && stderr.contains("tight.prtb"), "{stderr}");
+    let b = read_bundle(&tight).unwrap();
+    assert_eq!(b.transfer.as_ref().unwrap().quantization.name(), "f32");
+    assert_eq!(b.meta["storage"]["within_budget"], false);
+
+    // Vertex sampling measures no noise: the budget is the storage's alone.
+    let (vertex, _) = bake(&dir, "vertex.prtb", &["--order", "3", "--sampling", "vertex", "--max-error", "0.2"]);
+    let s = read_bundle(&vertex).unwrap().meta["storage"].clone();
+    assert!(s.get("noise_error").is_none() && s["shaded_error"].as_f64().unwrap() <= 0.2, "{s}");
+}
+
 /// A box room with an object sealed in a crate: a view-box bake drops the
 /// sealed object and leaves the transfer of every kept vertex as in a full bake.
 #[test]

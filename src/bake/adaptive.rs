@@ -46,6 +46,15 @@ impl Moments {
         self.w2x2 += other.w2x2;
     }
 
+    /// `[Σ w², Σ w²x, Σ w²x²]`, as shard files store them.
+    pub(crate) fn to_array(self) -> [f64; 3] {
+        [self.w2, self.w2x, self.w2x2]
+    }
+
+    pub(crate) fn from_array([w2, w2x, w2x2]: [f64; 3]) -> Moments {
+        Moments { w2, w2x, w2x2 }
+    }
+
     /// The moments had every weight been multiplied by `k`.
     pub(crate) fn scaled(&self, k: f64) -> Moments {
         let k2 = k * k;

@@ -2,7 +2,7 @@
 //! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
 //! arrays and statistics.
 
-mod adaptive;
+pub(crate) mod adaptive;
 pub mod bvh8;
 pub mod cull;
 pub(crate) mod enclosure;

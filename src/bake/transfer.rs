@@ -350,6 +350,8 @@ pub(crate) struct LateSums {
     pub(crate) rows: Vec<f32>,
     /// One weight per entry (bounce 0), else empty.
     pub(crate) weights: Vec<f32>,
+    /// One [`Moments`] per entry when the pass tracks noise, else empty.
+    pub(crate) moments: Vec<Moments>,
 }
 
 /// One bounce's sums over a range of items (a whole bake is one range).
@@ -480,6 +482,9 @@ impl RangeSums {
                     self.late.rows.extend_from_slice(sums);
                     if with_weights {
                         self.late.weights.push(weight);
+                    }
+                    if let (false, Some(moments)) = (self.moments.is_empty(), task.moments.get(local * corners + corner)) {
+                        self.late.moments.push(*moments);
                     }
                     continue;
                 }

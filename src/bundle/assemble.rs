@@ -87,7 +87,7 @@ pub fn make_bundle_stored(
 /// META `storage`: what was kept, what it measured, against what.
 pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::Value {
     let baked = budget::Storage { order: result.order, channels: result.channels, quantization: Quantization::F32 };
-    json!({
+    let mut meta = json!({
         "order": c.chosen.storage.order,
         "channels": c.chosen.storage.channels,
         "quantization": c.chosen.storage.quantization.name(),
@@ -100,5 +100,16 @@ pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::
         "quantization_max_abs": c.chosen.quantization_max_abs,
         "error_metric": "worst relative RMS of shaded radiance per unit albedo (sum_i L_i t_i) over vertices and RGB, \
                          against the baked f32 transfer, under 12 clear Preetham skies (elevations 10/35/65 deg, 4 azimuths)",
-    })
+    });
+    // With the bake's noise measured, max_error budgets the total: noise and storage in quadrature.
+    if let (Some(noise), Some(total)) = (c.noise_error, c.chosen.total_error) {
+        meta["noise_error"] = json!(noise);
+        meta["total_error"] = json!(total);
+        meta["within_budget"] = json!(c.within_budget());
+        meta["total_error_metric"] = json!(
+            "per sky sqrt(noise^2 + storage^2), worst over the skies; noise: each vertex's bounce-0 DC standard error \
+             from its points' spread, scaled to the sky's shading as a relative error (bias from truncated bounces not counted)"
+        );
+    }
+    meta
 }

@@ -100,7 +100,14 @@ impl StorageRequest {
             (None, Some(_)) => f64::INFINITY,
         };
         let lightings = budget::reference_lightings(order);
-        let mut choice = budget::choose(&result.total, order, channels, &storages, limit, &lightings);
+        // --max-error counts the total error, the bake's own noise included
+        // (the definition `chart --real` measures); `--quantize auto` alone
+        // bounds what quantization loses.
+        let noise = match self.max_error {
+            Some(_) => budget::noise_errors(&result.total, order, channels, &result.noise, &lightings),
+            None => None,
+        };
+        let mut choice = budget::choose_within_total(&result.total, order, channels, &storages, limit, &lightings, noise.as_deref());
         if limit.is_infinite() {
             choice.budget = None;
         }
@@ -192,6 +199,20 @@ pub fn encode_transfer_bundle(
     Ok((encoded, choice))
 }
 
+/// Says on stderr when `--max-error` cannot be met by any storage: the
+/// bake's own estimated noise is over the budget (it is stored as baked).
+pub fn warn_over_budget(choice: Option<&budget::Choice>, output: &std::path::Path) {
+    let Some(c) = choice else { return };
+    if let (false, Some(budget), Some(noise)) = (c.within_budget(), c.budget, c.noise_error) {
+        eprintln!(
+            "warning: {}: the bake's own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: stored as baked (f32); more rays or --adaptive lower the noise",
+            output.display(),
+            100.0 * noise,
+            100.0 * budget
+        );
+    }
+}
+
 /// What a bake reports on stdout.
 pub struct BakeReport {
     pub output: PathBuf,
@@ -263,6 +284,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
     };
     let stored_mesh = bake::Surfaces::with_window_roles(&stored_mesh, &config.window_patterns)?;
     let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage, &config.output)?;
+    warn_over_budget(choice.as_ref(), &config.output);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
     let bundle_bytes = encoded.len() as u64;
     Ok(BakeReport {

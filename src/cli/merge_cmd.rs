@@ -121,6 +121,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
             let (encoded, choice) =
                 super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage, output))??;
+            super::bake_cmd::warn_over_budget(choice.as_ref(), output);
             staged.stage_bytes(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
             let s = &result.stats;
             json!({

@@ -58,13 +58,31 @@ impl Identity {
 }
 
 /// Per-vertex rows: `stride` floats for each vertex of `vertices`, and in
-/// round 0 its barycentric weight.
+/// round 0 its barycentric weight and (interior sampling) the moments of its
+/// points' DC that the noise estimate needs.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct VertexRows {
     pub vertices: Vec<u32>,
     pub rows: Vec<f32>,
     /// One per vertex in round 0, else empty.
     pub weights: Vec<f32>,
+    /// One `[Σ w², Σ w²x, Σ w²x²]` per vertex in round 0 of a bake that
+    /// tracks noise (`bake::adaptive::Moments`), else empty.
+    pub moments: Vec<[f64; 3]>,
+}
+
+fn write_moments<W: Write>(w: &mut Writer<W>, moments: &[[f64; 3]]) -> std::io::Result<()> {
+    let bits: Vec<u64> = moments.iter().flat_map(|m| m.map(f64::to_bits)).collect();
+    w.u64s(&bits)
+}
+
+fn read_moments(r: &mut Reader, count: u64, what: &str) -> Result<Vec<[f64; 3]>, String> {
+    let bits = r.u64s(count.saturating_mul(3), what)?;
+    let moments: Vec<[f64; 3]> = bits.chunks_exact(3).map(|m| [0, 1, 2].map(|k| f64::from_bits(m[k]))).collect();
+    if moments.iter().any(|m| !m.iter().all(|x| x.is_finite()) || m[0] < 0.0 || m[2] < 0.0) {
+        return Err(format!("{what}: a moment is negative or not finite"));
+    }
+    Ok(moments)
 }
 
 impl VertexRows {
@@ -79,10 +97,18 @@ impl VertexRows {
         w.u64(self.vertices.len() as u64)?;
         w.u32s(&self.vertices)?;
         w.f32s(&self.rows)?;
-        w.f32s(&self.weights)
+        w.f32s(&self.weights)?;
+        write_moments(w, &self.moments)
     }
 
-    fn read(r: &mut Reader, what: &str, stride: u64, with_weights: bool, vertex_count: u64) -> Result<VertexRows, String> {
+    fn read(
+        r: &mut Reader,
+        what: &str,
+        stride: u64,
+        with_weights: bool,
+        with_moments: bool,
+        vertex_count: u64,
+    ) -> Result<VertexRows, String> {
         let count = r.u64(what)?;
         let vertices = r.u32s(count, what)?;
         if let Some(&v) = vertices.iter().find(|&&v| v as u64 >= vertex_count) {
@@ -90,7 +116,8 @@ impl VertexRows {
         }
         let rows = r.f32s(count.saturating_mul(stride), what)?;
         let weights = if with_weights { r.f32s(count, what)? } else { Vec::new() };
-        Ok(VertexRows { vertices, rows, weights })
+        let moments = if with_moments { read_moments(r, count, what)? } else { Vec::new() };
+        Ok(VertexRows { vertices, rows, weights, moments })
     }
 }
 
@@ -145,6 +172,8 @@ pub struct TransferPart {
     pub rays: u64,
     pub traced: u64,
     pub rejected: u64,
+    /// Round 0 of interior sampling: the rows carry their points' DC moments.
+    pub tracks_noise: bool,
     /// Sums of the vertices whose first item is this shard's.
     pub opened: VertexRows,
     /// Contributions to vertices an earlier shard opened, in item and corner order.
@@ -174,6 +203,7 @@ impl TransferPart {
         for v in [self.rays, self.traced, self.rejected] {
             w.u64(v)?;
         }
+        w.u32(self.tracks_noise as u32)?;
         self.opened.write(&mut w)?;
         self.late.write(&mut w)?;
         w.blob(&self.frame)?;
@@ -214,10 +244,15 @@ impl TransferPart {
             return Err(format!("round {round} with {pass_channels} of {channels} channels"));
         }
         let (rays, traced, rejected) = (r.u64("rays")?, r.u64("rays traced")?, r.u64("points rejected")?);
+        let tracks_noise = match r.u32("noise flag")? {
+            0 => false,
+            1 if round == 0 => true,
+            f => return Err(format!("noise flag {f} in round {round}: only round 0 may carry moments (flag 1)")),
+        };
         let stride = (pass_channels * coeffs) as u64;
         let vertex_count = identity.mesh.vertices;
-        let opened = VertexRows::read(&mut r, "opened vertices", stride, round == 0, vertex_count)?;
-        let late = VertexRows::read(&mut r, "late contributions", stride, round == 0, vertex_count)?;
+        let opened = VertexRows::read(&mut r, "opened vertices", stride, round == 0, tracks_noise, vertex_count)?;
+        let late = VertexRows::read(&mut r, "late contributions", stride, round == 0, tracks_noise, vertex_count)?;
         let frame = r.blob("bundle frame")?.to_vec();
         r.finish()?;
         Ok(TransferPart {
@@ -236,6 +271,7 @@ impl TransferPart {
             rays,
             traced,
             rejected,
+            tracks_noise,
             opened,
             late,
             frame,
@@ -317,6 +353,9 @@ pub struct LayerFile {
     pub rays_per_bounce: Vec<u64>,
     /// Per vertex: barycentric weight (from round 0).
     pub weights: Vec<f32>,
+    /// Per vertex: bounce 0's DC standard error (`TransferResult::noise`),
+    /// from round 0's moments; empty when not tracked.
+    pub noise: Vec<f32>,
     /// Per vertex `[source channel][coeff]`: this bounce normalised, what the next round gathers.
     pub source: Vec<f32>,
     /// Per vertex `[channel][coeff]`: bounces 0..=round summed in order.
@@ -338,6 +377,8 @@ impl LayerFile {
         w.u32(self.rays_per_bounce.len() as u32)?;
         w.u64s(&self.rays_per_bounce)?;
         w.f32s(&self.weights)?;
+        w.u32(!self.noise.is_empty() as u32)?;
+        w.f32s(&self.noise)?;
         w.f32s(&self.source)?;
         w.f32s(&self.total)?;
         w.u32(self.layers.len() as u32)?;
@@ -366,6 +407,14 @@ impl LayerFile {
         let rays_per_bounce = r.u64s(bounces as u64, "rays per bounce")?;
         let v = identity.mesh.vertices;
         let weights = r.f32s(v, "weights")?;
+        let noise = match r.u32("noise flag")? {
+            0 => Vec::new(),
+            1 => r.f32s(v, "noise")?,
+            f => return Err(format!("noise flag {f} is not 0 or 1")),
+        };
+        if noise.iter().any(|n| !(n.is_finite() && *n >= 0.0)) {
+            return Err("a vertex's noise is negative or not finite".into());
+        }
         let source = r.f32s(v.saturating_mul((source_channels * coeffs) as u64), "source rows")?;
         let layer_len = v.saturating_mul((channels * coeffs) as u64);
         let total = r.f32s(layer_len, "total")?;
@@ -387,6 +436,7 @@ impl LayerFile {
             rays_traced,
             rays_per_bounce,
             weights,
+            noise,
             source,
             total,
             layers,
@@ -488,8 +538,19 @@ mod tests {
             rays: 96,
             traced: 96,
             rejected: 1,
-            opened: VertexRows { vertices: vec![3], rows: vec![0.5, -0.25, 0.0, 1.0], weights: vec![0.75] },
-            late: VertexRows { vertices: vec![0, 2], rows: vec![1.0; 8], weights: vec![0.5, 0.25] },
+            tracks_noise: true,
+            opened: VertexRows {
+                vertices: vec![3],
+                rows: vec![0.5, -0.25, 0.0, 1.0],
+                weights: vec![0.75],
+                moments: vec![[0.5, 0.25, 0.125]],
+            },
+            late: VertexRows {
+                vertices: vec![0, 2],
+                rows: vec![1.0; 8],
+                weights: vec![0.5, 0.25],
+                moments: vec![[0.25, 0.0, 0.0], [0.0625, -0.5, 4.0]],
+            },
             frame: b"frame".to_vec(),
         }
     }
@@ -519,6 +580,7 @@ mod tests {
             rays_traced: 300,
             rays_per_bounce: vec![288, 256],
             weights: vec![1.0; 5],
+            noise: vec![0.0, 0.5, 0.25, 0.0, 1.0],
             source: vec![0.25; 15],
             total: vec![0.5; 15],
             layers: vec![vec![0.25; 15], vec![0.25; 15]],

@@ -9,6 +9,7 @@ use super::codec::FileKind;
 use super::files::{Identity, LayerFile, SunPart, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
+use crate::bake::adaptive::{Moments, VertexDc};
 use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
 use crate::bake::{BakeStats, TransferResult};
 
@@ -215,6 +216,12 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         Some(layer) => layer.weights.clone(),
         None => zeroed(vertex_count, first_path)?,
     };
+    // Round 0 of interior sampling: each vertex's DC moments, added as the sums are.
+    let tracks_noise = round == 0 && reference.tracks_noise;
+    if let Some((path, _)) = parts.iter().find(|(_, p)| p.tracks_noise != reference.tracks_noise) {
+        return Err(ShardError::mismatch(path, format!("carries noise moments, and {} does not (or the reverse)", first_path.display())));
+    }
+    let mut moments = vec![Moments::default(); if tracks_noise { vertex_count } else { 0 }];
     let mut opened = vec![false; vertex_count];
     for &i in &order {
         let (path, part) = &parts[i];
@@ -227,6 +234,9 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             if round == 0 {
                 weights[v] = part.opened.weights[j];
             }
+            if tracks_noise {
+                moments[v] = Moments::from_array(part.opened.moments[j]);
+            }
         }
         for (j, &v) in part.late.vertices.iter().enumerate() {
             let v = v as usize;
@@ -237,8 +247,17 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             if round == 0 {
                 weights[v] += part.late.weights[j];
             }
+            if tracks_noise {
+                moments[v].merge(&Moments::from_array(part.late.moments[j]));
+            }
         }
     }
+    // As a whole bake computes it after bounce 0; later rounds carry it on.
+    let noise = match &previous {
+        Some(layer) => layer.noise.clone(),
+        None if tracks_noise => VertexDc::new(&weights, &sums, coeffs, &moments).standard_errors(),
+        None => Vec::new(),
+    };
 
     let layer = normalised_layer(&sums, &weights, pass_channels, channels, coeffs);
     let (mut total, mut layers, mut rays_per_bounce, points_rejected, rays_traced) = match previous {
@@ -266,6 +285,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             rays_traced,
             rays_per_bounce,
             weights,
+            noise,
             source,
             total,
             layers,
@@ -289,7 +309,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         rays_traced,
         ..BakeStats::default()
     };
-    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise: Vec::new(), stats };
+    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, stats };
     Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key })
 }
 

@@ -261,7 +261,7 @@ mod tests {
         unreachable!("the last round's merge is final")
     }
 
-    /// Merged shards give a whole bake's bits: interior and vertex sampling,
+    /// Merged shards give a whole bake's bits (noise estimate included): interior and vertex sampling,
     /// window mode in colour (with and without window sampling) and open
     /// mode in grey, at several shard counts.
     #[test]
@@ -292,6 +292,9 @@ mod tests {
                 for (a, b) in merged.bounces.iter().zip(&whole.bounces) {
                     assert_eq!(bits(a), bits(b), "{what}: a bounce");
                 }
+                // The noise estimate too (what `--max-error` budgets with), measured with interior sampling.
+                assert_eq!(bits(&merged.noise), bits(&whole.noise), "{what}: noise");
+                assert_eq!(merged.noise.is_empty(), sampling == Sampling::Vertex, "{what}: noise measured");
                 let (m, w) = (&merged.stats, &whole.stats);
                 assert_eq!(
                     (

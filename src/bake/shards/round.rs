@@ -99,6 +99,7 @@ pub fn bake_transfer_shard(
     drop(pass);
 
     let stride = plan.pass_channels(round) * plan.coeffs;
+    let tracks_noise = !sums.moments.is_empty();
     let mut opened = VertexRows::default();
     for (v, &first) in first_items.iter().enumerate() {
         if range.contains(&(first as usize)) {
@@ -106,6 +107,9 @@ pub fn bake_transfer_shard(
             opened.rows.extend_from_slice(&sums.sums[v * stride..(v + 1) * stride]);
             if round == 0 {
                 opened.weights.push(sums.weights[v]);
+            }
+            if tracks_noise {
+                opened.moments.push(sums.moments[v].to_array());
             }
         }
     }
@@ -144,7 +148,13 @@ pub fn bake_transfer_shard(
         traced: sums.traced,
         rejected: sums.rejected.len() as u64,
         opened,
-        late: VertexRows { vertices: sums.late.vertices, rows: sums.late.rows, weights: sums.late.weights },
+        tracks_noise,
+        late: VertexRows {
+            vertices: sums.late.vertices,
+            rows: sums.late.rows,
+            weights: sums.late.weights,
+            moments: sums.late.moments.iter().map(|m| m.to_array()).collect(),
+        },
         frame: Vec::new(),
     };
     Ok(RoundOutput { part, hits, seconds: started.elapsed().as_secs_f64() })
