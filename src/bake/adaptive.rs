@@ -194,32 +194,6 @@ pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &VertexDc, budget:
     extra(low)
 }
 
-/// The items of a bake with `extra` samples added to the base `items`: the
-/// base items, now weighted by their triangle's new count, then one item
-/// per triangle that gained samples, holding them (after all base points,
-/// so the base points keep their indices).
-pub(crate) fn with_extra(items: &Items, extra: &[u32]) -> Items {
-    let Items::Interior { triangles, counts, first_sample, .. } = items else {
-        unreachable!("adaptive allocation needs interior sampling")
-    };
-    let mut all_triangles = triangles.clone();
-    let mut all_counts = counts.clone();
-    let mut all_first_sample = first_sample.clone();
-    let mut first_index = vec![0u32; triangles.len()];
-    let mut weight_count: Vec<u32> = counts.iter().zip(extra).map(|(&n, &e)| n + e).collect();
-    let mut next = counts.iter().map(|&c| c as u64).sum::<u64>();
-    for (k, &e) in extra.iter().enumerate().filter(|&(_, &e)| e > 0) {
-        all_triangles.push(triangles[k]);
-        all_counts.push(e);
-        // Saturates past u32: `check_point_count` refuses such a bake.
-        all_first_sample.push(next.min(u32::MAX as u64) as u32);
-        first_index.push(counts[k]);
-        weight_count.push(counts[k] + e);
-        next += u64::from(e);
-    }
-    Items::Interior { triangles: all_triangles, counts: all_counts, first_sample: all_first_sample, first_index, weight_count }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -331,23 +305,29 @@ mod tests {
         assert!(around.iter().min() >= elsewhere.iter().max(), "around {around:?}, elsewhere {elsewhere:?}");
     }
 
-    /// The extra samples follow every base point, continue their triangle's
-    /// sample indices, and all of a triangle's samples share one weight count.
+    /// The unified layout gives each triangle one item of n + e points in
+    /// item order; the extra items hold samples n..n + e of n + e at their
+    /// unified places, and only for the items of the range that gained any.
     #[test]
-    fn extra_items_continue_the_triangles_samples_after_all_base_points() {
+    fn unified_and_extra_items_continue_the_triangles_samples_in_place() {
         let (_, items, ..) = grid_pilot(0);
         let mut extra = vec![0u32; items.len()];
         extra[3] = 9;
         extra[7] = 3;
-        let all = with_extra(&items, &extra);
-        let Items::Interior { triangles, counts, first_sample, first_index, weight_count } = &all else { unreachable!() };
-        let base = items.len();
-        assert_eq!(triangles.len(), base + 2);
-        assert_eq!((triangles[base], counts[base], first_index[base], weight_count[base]), (3, 9, 6, 15));
-        assert_eq!((triangles[base + 1], counts[base + 1], first_index[base + 1], weight_count[base + 1]), (7, 3, 6, 9));
-        assert_eq!((weight_count[3], weight_count[7], weight_count[0]), (15, 9, 6));
-        assert_eq!(first_sample[base], 6 * base as u32);
-        assert_eq!(first_sample[base + 1], 6 * base as u32 + 9);
-        assert_eq!(all.point_count(), items.point_count() + 12);
+        let unified = Items::unified(&items, &extra);
+        let Items::Interior { triangles, counts, first_sample, first_index, weight_count } = &unified else { unreachable!() };
+        assert_eq!(triangles.len(), items.len());
+        assert!(first_index.is_empty() && weight_count.is_empty());
+        assert_eq!((counts[2], counts[3], counts[7]), (6, 15, 9));
+        assert_eq!((first_sample[3], first_sample[4], first_sample[8]), (18, 33, 6 * 8 + 12));
+        assert_eq!(unified.point_count(), items.point_count() + 12);
+        let extras = Items::extras(&items, &extra, &unified, 0..items.len());
+        let Items::Interior { triangles, counts, first_sample, first_index, weight_count } = &extras else { unreachable!() };
+        assert_eq!(triangles, &vec![3, 7]);
+        assert_eq!((counts.clone(), first_index.clone(), weight_count.clone()), (vec![9, 3], vec![6, 6], vec![15, 9]));
+        // Right after each triangle's base points in the unified layout.
+        assert_eq!(first_sample, &vec![18 + 6, 6 * 7 + 9 + 6]);
+        let later = Items::extras(&items, &extra, &unified, 4..items.len());
+        assert_eq!(later.len(), 1);
     }
 }

@@ -125,6 +125,40 @@ pub(crate) enum Items {
 }
 
 impl Items {
+    /// Adaptive allocation's layout: the interior `base` items with `extra[k]`
+    /// more samples each, one item of `n + e` points per triangle (samples
+    /// 0..n + e of its Sobol sequence, each weighing area / (n + e)), point
+    /// indices in item order.
+    pub(crate) fn unified(base: &Items, extra: &[u32]) -> Items {
+        let Items::Interior { triangles, counts, .. } = base else { unreachable!("adaptive allocation needs interior sampling") };
+        let counts: Vec<u32> = counts.iter().zip(extra).map(|(&n, &e)| n + e).collect();
+        let mut first_sample = Vec::with_capacity(counts.len());
+        let mut next = 0u32;
+        for &c in &counts {
+            first_sample.push(next);
+            // Saturates past u32: `check_point_count` refuses such a bake.
+            next = next.saturating_add(c);
+        }
+        Items::Interior { triangles: triangles.clone(), counts, first_sample, first_index: Vec::new(), weight_count: Vec::new() }
+    }
+
+    /// The extra points of the `base` items in `range` as items of their own,
+    /// one per item with `extra[k] > 0`: samples `n..n + e` of `n + e`, at
+    /// their places in the `unified` layout.
+    pub(crate) fn extras(base: &Items, extra: &[u32], unified: &Items, range: std::ops::Range<usize>) -> Items {
+        let (Items::Interior { triangles, counts, .. }, Items::Interior { first_sample: unified_first, .. }) = (base, unified) else {
+            unreachable!("adaptive allocation needs interior sampling")
+        };
+        let with_extra: Vec<usize> = range.filter(|&k| extra[k] > 0).collect();
+        Items::Interior {
+            triangles: with_extra.iter().map(|&k| triangles[k]).collect(),
+            counts: with_extra.iter().map(|&k| extra[k]).collect(),
+            first_sample: with_extra.iter().map(|&k| unified_first[k] + counts[k]).collect(),
+            first_index: with_extra.iter().map(|&k| counts[k]).collect(),
+            weight_count: with_extra.iter().map(|&k| counts[k] + extra[k]).collect(),
+        }
+    }
+
     pub(crate) fn len(&self) -> usize {
         match self {
             Items::Interior { triangles, .. } => triangles.len(),
@@ -208,7 +242,7 @@ pub(crate) struct Pass<'a> {
 }
 
 /// What one task returns: per item and corner, weighted coefficient sums and weights.
-struct TaskOutput {
+pub(crate) struct TaskOutput {
     sums: Vec<f32>,
     weights: Vec<f32>,
     /// Global indices of the points found inside geometry.
@@ -712,12 +746,12 @@ fn bake_layers(
 
 /// Bounce 0 with adaptive allocation (`bake::adaptive`): the base points
 /// first, whose moments place about `params.adaptive` × as many extra
-/// points, then those; `plan.items` becomes all of them (base points
-/// first, so their indices stay). The base points' sums are re-weighted
-/// by their triangle's new count before the sums meet in item order.
+/// points; `plan.items` then becomes the unified layout (each triangle one
+/// item of `n + e` points, [`Items::unified`]) and [`adaptive_range`]
+/// traces the extras and combines them with the base points item by item.
 fn adaptive_first_bounce(plan: &mut Plan, source: &SourceRows, record_hits: bool, progress: &Progress) -> Result<RangeSums, BakeError> {
     let base_len = plan.items.len();
-    let (mut base_tasks, base_hits, extra) = {
+    let (base_tasks, base_hits, extra) = {
         let pass = plan.pass(0, source, &[], None, record_hits);
         let mut hits = HitSlots::new(&pass, 0..base_len);
         let tasks = trace_tasks(&pass, 0..base_len, &mut hits, progress);
@@ -726,48 +760,173 @@ fn adaptive_first_bounce(plan: &mut Plan, source: &SourceRows, record_hits: bool
             base.add_task(&pass, *start, task, None);
         }
         let pilot = VertexDc::new(&base.weights, &base.sums, plan.coeffs, &base.moments);
-        let budget = (plan.items.point_count() as f64 * f64::from(plan.params.adaptive)) as u64;
-        let max_per_triangle = match plan.params.sampling {
+        (tasks, hits.records, plan.extra_counts(&pilot))
+    };
+    let base_items = plan.unify(&extra)?;
+    Ok(adaptive_range(plan, &base_items, &extra, 0..base_len, base_tasks, base_hits, None, source, record_hits, progress))
+}
+
+impl Plan<'_> {
+    /// The extra points per base item that the pilot `pilot` (bounce 0's
+    /// base points, every vertex) asks for: about `params.adaptive` × the
+    /// base points, in whole rotation triples (`bake::adaptive`).
+    pub(crate) fn extra_counts(&self, pilot: &VertexDc) -> Vec<u32> {
+        let budget = (self.items.point_count() as f64 * f64::from(self.params.adaptive)) as u64;
+        let max_per_triangle = match self.params.sampling {
             Sampling::Interior { max_per_triangle, .. } => max_per_triangle,
             Sampling::Vertex => 0,
         };
-        let extra = super::adaptive::extra_counts(plan.mesh, &plan.items, &pilot, budget, max_per_triangle);
-        (tasks, hits.records, extra)
+        super::adaptive::extra_counts(self.mesh, &self.items, pilot, budget, max_per_triangle)
+    }
+
+    /// Makes the items the unified layout of `extra` and returns the base
+    /// layout they replace.
+    pub(crate) fn unify(&mut self, extra: &[u32]) -> Result<Items, BakeError> {
+        let unified = Items::unified(&self.items, extra);
+        check_point_count(unified.point_count())?;
+        Ok(std::mem::replace(&mut self.items, unified))
+    }
+}
+
+/// Bounce 0 of adaptive allocation over the items `range`, `plan.items`
+/// being the unified layout: `base_tasks` are the range's base points
+/// traced in the `base` layout (weights of `n` points each, hit records
+/// `base_hits` in base point order); their sums, weights and moments are
+/// scaled to `n + e` points, the extra points are traced (continuing each
+/// triangle's Sobol sequence, weights of `n + e`), and each item's two
+/// outputs meet before they are added to the vertices in item order
+/// (`first_items`: as [`run_range`]). The hit records come back in unified
+/// point order, the base ones moved within one buffer grown once. A whole
+/// bake and a shard (which traces its base points again) run this alike,
+/// so their sums meet in the same order.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn adaptive_range(
+    plan: &Plan,
+    base: &Items,
+    extra: &[u32],
+    range: std::ops::Range<usize>,
+    mut base_tasks: Vec<(usize, TaskOutput)>,
+    base_hits: Vec<u64>,
+    first_items: Option<&[u32]>,
+    source: &SourceRows,
+    record_hits: bool,
+    progress: &Progress,
+) -> RangeSums {
+    let Items::Interior { counts, first_sample: base_first, .. } = base else {
+        unreachable!("adaptive allocation runs on interior samples")
     };
-    let Items::Interior { counts, .. } = &plan.items else { unreachable!("adaptive allocation runs on interior samples") };
+    let Items::Interior { first_sample: unified_first, .. } = &plan.items else { unreachable!("the unified layout is interior") };
+    let pass = plan.pass(0, source, &[], None, record_hits);
+    let rays = if pass.record_hits { plan.params.rays as usize } else { 0 };
     let stride = plan.coeffs;
+    // Base records to their unified places, last item first: every block
+    // moves toward the end, past no block not yet moved.
+    let (base_start, unified_start) = (base_first[range.start] as usize, unified_first[range.start] as usize);
+    let mut records = base_hits;
+    records.resize((plan.items.first_point(range.end) - unified_start) * rays, 0);
+    for k in range.clone().rev() {
+        let from = (base_first[k] as usize - base_start) * rays;
+        let to = (unified_first[k] as usize - unified_start) * rays;
+        records.copy_within(from..from + counts[k] as usize * rays, to);
+    }
+    // The extra points, as items of their own (samples n..n + e), traced
+    // into their unified slots.
+    let extra_items = Items::extras(base, extra, &plan.items, range.clone());
+    let extra_tasks = {
+        let extra_pass = Pass { items: &extra_items, ..plan.pass(0, source, &[], None, record_hits) };
+        trace_tasks_scattered(&extra_pass, &mut records, unified_start, progress)
+    };
+    // Per item of the range, its extra item's task and place in the task
+    // (extra item j is the j-th item with e > 0; tasks hold ITEMS_PER_TASK).
+    let mut extra_at: Vec<Option<(usize, usize)>> = vec![None; range.len()];
+    for (j, k) in range.clone().filter(|&k| extra[k] > 0).enumerate() {
+        extra_at[k - range.start] = Some((j / ITEMS_PER_TASK, j % ITEMS_PER_TASK));
+    }
+    let mut out = RangeSums::empty(&pass);
     for (start, task) in &mut base_tasks {
         let items = task.weights.len() / 3;
+        // Base point indices to unified ones.
+        for global in task.rejected.iter_mut() {
+            let k = *start + base_first[*start..*start + items].partition_point(|&f| f <= *global) - 1;
+            *global = *global - base_first[k] + unified_first[k];
+        }
         for local in 0..items {
-            let (n, e) = (counts[*start + local], extra[*start + local]);
+            let k = *start + local;
+            let (n, e) = (counts[k], extra[k]);
             if e == 0 {
                 continue;
             }
-            let k = n as f32 / (n + e) as f32;
-            task.sums[local * 3 * stride..(local + 1) * 3 * stride].iter_mut().for_each(|s| *s *= k);
-            task.weights[local * 3..(local + 1) * 3].iter_mut().for_each(|w| *w *= k);
+            let scale = n as f32 / (n + e) as f32;
+            let sums = &mut task.sums[local * 3 * stride..(local + 1) * 3 * stride];
+            sums.iter_mut().for_each(|s| *s *= scale);
+            task.weights[local * 3..(local + 1) * 3].iter_mut().for_each(|w| *w *= scale);
             for m in task.moments[local * 3..(local + 1) * 3].iter_mut() {
-                *m = m.scaled(f64::from(k));
+                *m = m.scaled(f64::from(scale));
+            }
+            let Some((t, at)) = extra_at[k - range.start] else { unreachable!("an item with extra points has an extra item") };
+            let added = &extra_tasks[t].1;
+            add_row(sums, &added.sums[at * 3 * stride..(at + 1) * 3 * stride]);
+            for corner in 0..3 {
+                task.weights[local * 3 + corner] += added.weights[at * 3 + corner];
+                task.moments[local * 3 + corner].merge(&added.moments[at * 3 + corner]);
             }
         }
+        out.add_task(&pass, *start, task, first_items.map(|f| (f, range.start)));
     }
-    let all = super::adaptive::with_extra(&plan.items, &extra);
-    check_point_count(all.point_count())?;
-    plan.items = all;
-    let pass = plan.pass(0, source, &[], None, record_hits);
-    // The extra points' records go after the base points', in one buffer
-    // grown once (not a second buffer appended: that would hold both).
-    let filled = base_hits.len();
-    let mut records = base_hits;
-    records.resize(pass.record_count(plan.items.point_count() as usize), 0);
-    let mut hits = HitSlots { records, filled };
-    let extra_tasks = trace_tasks(&pass, base_len..plan.items.len(), &mut hits, progress);
-    let mut out = RangeSums::empty(&pass);
-    for (start, task) in base_tasks.iter().chain(&extra_tasks) {
-        out.add_task(&pass, *start, task, None);
+    for (_, task) in &extra_tasks {
+        out.rays += task.rays;
+        out.traced += task.traced;
+        out.rejected.extend_from_slice(&task.rejected);
     }
-    out.hits = hits.records;
-    Ok(out)
+    out.rejected.sort_unstable();
+    out.hits = records;
+    out
+}
+
+/// [`trace_tasks`] for items whose points are not contiguous in the
+/// unified layout (the extra items of [`adaptive_range`]): each item's hit
+/// records go to its own slot of `records` (which starts at unified point
+/// `records_start`).
+fn trace_tasks_scattered(pass: &Pass, records: &mut [u64], records_start: usize, progress: &Progress) -> Vec<(usize, TaskOutput)> {
+    let rays = pass.record_count(1);
+    let Items::Interior { counts, first_sample, .. } = pass.items else { unreachable!("extra items are interior") };
+    // Every item's slot, in item order (slots ascend, so one walk splits them off).
+    let mut rest = records;
+    let mut consumed = 0usize;
+    let mut slots: Vec<&mut [u64]> = Vec::with_capacity(counts.len());
+    for (&first, &count) in first_sample.iter().zip(counts) {
+        let at = (first as usize - records_start) * rays;
+        let (_, tail) = std::mem::take(&mut rest).split_at_mut(at - consumed);
+        let (slot, tail) = tail.split_at_mut(count as usize * rays);
+        slots.push(slot);
+        rest = tail;
+        consumed = at + count as usize * rays;
+    }
+    let mut tasks: Vec<(usize, Vec<&mut [u64]>)> = Vec::new();
+    for (item, slot) in slots.into_iter().enumerate() {
+        if item % ITEMS_PER_TASK == 0 {
+            tasks.push((item, Vec::new()));
+        }
+        if let Some(task) = tasks.last_mut() {
+            task.1.push(slot);
+        }
+    }
+    let len = counts.len();
+    tasks
+        .into_par_iter()
+        .map(|(task_start, task_slots)| {
+            let mut out = pass.run_task(task_start, (task_start + ITEMS_PER_TASK).min(len));
+            let mut hits = out.hits.as_slice();
+            for slot in task_slots {
+                let (mine, others) = hits.split_at(slot.len());
+                slot.copy_from_slice(mine);
+                hits = others;
+            }
+            out.hits = Vec::new();
+            progress.add(out.rays);
+            (task_start, out)
+        })
+        .collect()
 }
 
 /// Lists the work items: the `sampled` triangles (interior sampling), or
