@@ -12,6 +12,20 @@ use prtbake::clean::{CleanParams, Tolerance};
 use prtbake::cli::{self, Outcome};
 use prtbake::mesh::UpAxis;
 
+/// `bake --shard … --round`: a bounce, or adaptive allocation's pilot stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RoundArg {
+    Bounce(u32),
+    Pilot,
+}
+
+fn parse_round(text: &str) -> Result<RoundArg, String> {
+    match text {
+        "pilot" => Ok(RoundArg::Pilot),
+        _ => text.parse().map(RoundArg::Bounce).map_err(|_| format!("expected a bounce number (0, 1, …) or `pilot`, not {text:?}")),
+    }
+}
+
 /// `bake`'s adaptive allocation when `--adaptive` is not given (interior
 /// sampling, one process): with the default 64 rays, 2.2× less total error on
 /// the Ferrari and 2.4× on the grey-white room than 256 uniform rays, in
@@ -94,8 +108,7 @@ struct BakeArgs {
     /// Adaptive allocation: after bounce 0's points, add about FACTOR × as many
     /// where their spread shows the most noise (a vertex's effective points grow
     /// as its noise; docs/speed-accuracy.md). 0 = off. Interior sampling only
-    /// [default: 1; 0 with --sampling vertex]. A sharded bake runs in many processes
-    /// and cannot: --shard needs --adaptive 0, and so does its single-process twin.
+    /// [default: 1; 0 with --sampling vertex]. Sharded, it adds a pilot stage (--round pilot).
     #[arg(long, value_name = "FACTOR")]
     adaptive: Option<f32>,
     /// Colour channels: 1, 3, or auto (1 when every material is grey).
@@ -161,9 +174,15 @@ struct BakeArgs {
     /// that `prtbake merge` joins with the others, round by round (docs/scale.md).
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
-    /// With --shard: the round, i.e. the bounce baked (0..=--bounces) [default: 0].
-    #[arg(long, requires = "shard")]
-    round: Option<u32>,
+    /// With --shard: the round, i.e. the bounce baked (0..=--bounces), or `pilot`, adaptive
+    /// allocation's first stage (bounce 0 at the base points, merged into the pilot every round
+    /// reads with --pilot) [default: 0].
+    #[arg(long, value_name = "R|pilot", requires = "shard", value_parser = parse_round)]
+    round: Option<RoundArg>,
+    /// With --shard and adaptive allocation (the default): the merged pilot (.prta) of this
+    /// bake, which decides where the extra points go; every round 0..=--bounces reads it.
+    #[arg(long, value_name = "FILE.prta", requires = "shard")]
+    pilot: Option<PathBuf>,
     /// With --shard --round R ≥ 1: the merged layer of round R − 1 (.prtl) to gather from.
     #[arg(long, value_name = "FILE.prtl", requires = "shard")]
     layer: Option<PathBuf>,
@@ -637,16 +656,10 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         "3" => Channels::Three,
         _ => Channels::Auto,
     };
-    let adaptive = match (a.adaptive, &a.shard, a.sampling) {
-        (Some(f), Some(_), _) if f != 0.0 => {
-            anyhow::bail!("--adaptive {f} with --shard: where the extra points go depends on every vertex's bounce 0, so adaptive allocation runs in one process; shard with --adaptive 0")
-        }
-        (Some(f), _, _) => f,
-        (None, Some(_), _) => anyhow::bail!(
-            "--shard needs --adaptive 0: adaptive allocation (on by default) runs in one process; give the single-process twin --adaptive 0 too for the same bytes (docs/scale.md)"
-        ),
-        (None, None, SamplingArg::Vertex) => 0.0,
-        (None, None, SamplingArg::Interior) => DEFAULT_ADAPTIVE,
+    let adaptive = match (a.adaptive, a.sampling) {
+        (Some(f), _) => f,
+        (None, SamplingArg::Vertex) => 0.0,
+        (None, SamplingArg::Interior) => DEFAULT_ADAPTIVE,
     };
     let params = BakeParams {
         order: a.order,
@@ -689,7 +702,12 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     let shard = match &a.shard {
         Some(text) => Some(cli::shard_cmd::ShardRun {
             shard: prtbake::bake::shards::Shard::parse(text)?,
-            round: a.round.unwrap_or(0),
+            round: match a.round {
+                Some(RoundArg::Bounce(r)) => r,
+                _ => 0,
+            },
+            pilot_stage: a.round == Some(RoundArg::Pilot),
+            pilot: a.pilot,
             layer: a.layer,
             shard_dir: a.shard_dir,
         }),

@@ -14,20 +14,20 @@ bounces_of() {
     echo "$bounces"
 }
 
-# Exits with a message unless the bake args "$@" say --adaptive 0: bake's
-# default adaptive allocation needs every vertex's bounce 0 in one process, so
-# a sharded bake is uniform, and says so (its single-process twin must too).
-require_uniform() {
-    local prev= arg adaptive=
+# Succeeds when the bake args "$@" allocate adaptively: bake's default
+# (--adaptive 1) unless --adaptive 0 or, without --adaptive, --sampling
+# vertex. Such a bake has a pilot stage before round 0 (docs/scale.md).
+is_adaptive() {
+    local prev= arg adaptive= sampling=interior
     for arg in "$@"; do
-        case $prev in --adaptive) adaptive=$arg ;; esac
-        case $arg in --adaptive=*) adaptive=${arg#--adaptive=} ;; esac
+        case $prev in --adaptive) adaptive=$arg ;; --sampling) sampling=$arg ;; esac
+        case $arg in --adaptive=*) adaptive=${arg#--adaptive=} ;; --sampling=*) sampling=${arg#--sampling=} ;; esac
         prev=$arg
     done
     case $adaptive in
-        0 | 0.0 | 0.00) ;;
-        '') echo "$0: give the bake args --adaptive 0: adaptive allocation (bake's default) runs in one process, so a sharded bake is uniform; the single-process bake with the same args gives the same bytes (docs/scale.md)" >&2 && exit 2 ;;
-        *) echo "$0: --adaptive $adaptive: adaptive allocation runs in one process; a sharded bake needs --adaptive 0 (docs/scale.md)" >&2 && exit 2 ;;
+        '') [ "$sampling" != vertex ] ;;
+        0 | 0.0 | 0.00 | .0) return 1 ;;
+        *) return 0 ;;
     esac
 }
 

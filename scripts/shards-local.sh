@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # A sharded bake on this machine, run the way a scheduler runs it
 # (docs/scale.md "Sharded bakes"): each round's N shards as separate
-# processes, in parallel, then the merge; the bundle is byte-identical to
+# processes, in parallel, then the merge (with adaptive allocation, bake's
+# default, a pilot stage first); the bundle is byte-identical to
 # `prtbake bake MESH -o OUT [bake args…]` in one process.
 #
 #   scripts/shards-local.sh MESH OUT.prtb N [bake args…]
@@ -25,7 +26,6 @@ shift 3
 bake_args=("$@")
 . "$(dirname "$0")/shard-args.sh"
 check_operands "$out" "$n"
-require_uniform "$@"
 bounces=$(bounces_of "$@")
 gives_threads "$@" || bake_args+=(--threads 1)
 
@@ -44,6 +44,24 @@ run_all() {
     esac
 }
 
+pilot_args=()
+if is_adaptive "$@"; then
+    # Adaptive allocation's pilot: bounce 0 at the base points, merged into
+    # the pilot that decides, the same in every shard, where extra points go.
+    mkdir -p "$work/pilot"
+    parts=()
+    for ((k = 0; k < n; k++)); do
+        part="$work/pilot/part-$k.prtp"
+        parts+=("$part")
+        printf '%q ' "$prtbake" bake "$mesh" --shard "$k/$n" --round pilot -o "$part" --quiet "${bake_args[@]}"
+        echo
+    done >"$work/pilot/commands.sh"
+    echo "pilot: $n shards ($runner, $jobs at once)" >&2
+    run_all "$work/pilot/commands.sh"
+    "$prtbake" merge "${parts[@]}" -o "$work/pilot.prta"
+    pilot_args=(--pilot "$work/pilot.prta")
+fi
+
 for ((round = 0; round <= bounces; round++)); do
     layer_args=()
     if [ "$round" -gt 0 ]; then
@@ -56,7 +74,7 @@ for ((round = 0; round <= bounces; round++)); do
         part="$work/r$round/part-$k.prtp"
         parts+=("$part")
         printf '%q ' "$prtbake" bake "$mesh" --shard "$k/$n" --round "$round" ${layer_args[@]+"${layer_args[@]}"} \
-            --shard-dir "$work/hits" -o "$part" --quiet "${bake_args[@]}"
+            ${pilot_args[@]+"${pilot_args[@]}"} --shard-dir "$work/hits" -o "$part" --quiet "${bake_args[@]}"
         echo
     done >"$work/r$round/commands.sh"
     echo "round $round of $bounces: $n shards ($runner, $jobs at once)" >&2

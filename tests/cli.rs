@@ -405,9 +405,9 @@ fn clean_and_bake_cut_intersections() {
 
 /// Issue 17: `bake --adaptive F` adds points after bounce 0 and records the
 /// factor in META; it is on (1) by default, off with `--sampling vertex`; a
-/// factor outside 0..=16, or one with `--shard` or `--sampling vertex`, is
-/// refused with exit 2 and nothing written, and so is `--shard` without an
-/// explicit `--adaptive 0` (its single-process twin would be adaptive).
+/// factor outside 0..=16, or one with `--sampling vertex`, is refused with
+/// exit 2 and nothing written, and so is an adaptive shard's round without
+/// the merged pilot.
 #[test]
 fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     let dir = Scratch::new("adaptive");
@@ -439,11 +439,11 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     let o = prtbake(&[&base[..], &["-o", vertex_out.to_str().unwrap(), "--sampling", "vertex"]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(meta(&vertex_out)["params"].get("adaptive").is_none());
-    // A shard must say --adaptive 0: its single-process twin must say it too.
+    // A shard of an adaptive bake needs the pilot stage's merge (docs/scale.md).
     let part = dir.path("part.prtp");
     let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", part.to_str().unwrap(), "--shard", "0/2"]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--adaptive 0"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--pilot"), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(!part.exists());
     for bad in [
         &["--adaptive", "-1"][..],

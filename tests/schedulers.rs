@@ -12,8 +12,8 @@ use crate::shards::write_cabin;
 use crate::util::{prtbake, Scratch};
 
 const REPO: &str = env!("CARGO_MANIFEST_DIR");
-const BAKE_ARGS: &[&str] =
-    &["--window", "glass", "--bounces", "2", "--rays", "8", "--seed", "5", "--adaptive", "0", "--store-bounces", "--clean"];
+/// Adaptive allocation (bake's default): the launchers add the pilot stage.
+const BAKE_ARGS: &[&str] = &["--window", "glass", "--bounces", "2", "--rays", "8", "--seed", "5", "--store-bounces", "--clean"];
 const SUN_ARGS: &[&str] = &["--window", "glass", "--steps", "24", "--seed", "3"];
 
 /// `sbatch` for the test: numbers jobs from 100, appends "id dependency array"
@@ -97,20 +97,21 @@ fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     let last = script_ok(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&bundle), "3"], BAKE_ARGS, &[("CPUS", "2")]);
     assert!(std::fs::read(&bundle).unwrap() == expected, "3 Slurm shards: the merged bundle differs from the single-process bake");
 
-    // Three rounds, each an array of 3 after the previous merge, each merge after its array.
+    // The pilot stage, then three rounds: each an array of 3 after the previous merge, each merge after its array.
     let jobs = std::fs::read_to_string(dir.path("slurm/jobs")).unwrap();
-    let chain: Vec<String> = (100..106)
+    let chain: Vec<String> = (100..108)
         .map(|id| format!("{id} {} {}", if id == 100 { "none".into() } else { (id - 1).to_string() }, ["0-2", "none"][id as usize % 2]))
         .collect();
     assert_eq!(jobs.lines().collect::<Vec<_>>(), chain);
-    assert_eq!(last, "105");
+    assert_eq!(last, "107");
+    assert!(dir.path("slurm.shards/pilot.prta").exists(), "the pilot stage's merge");
 
     // Sun masks on the bundle, after the bake's last merge (AFTER).
     let single_sun = dir.path("single-sun.prtb");
     let expected = bake_alone(&[&["sun", s(&single), "-o", s(&single_sun), "--quiet"], SUN_ARGS].concat(), &single_sun);
     let sun = dir.path("slurm-sun.prtb");
-    let last = script_ok(&dir, "scripts/slurm/submit-sun.sh", &[s(&bundle), s(&sun), "4"], SUN_ARGS, &[("AFTER", "105")]);
-    assert_eq!(last, "107");
+    let last = script_ok(&dir, "scripts/slurm/submit-sun.sh", &[s(&bundle), s(&sun), "4"], SUN_ARGS, &[("AFTER", "107")]);
+    assert_eq!(last, "109");
     assert!(std::fs::read(&sun).unwrap() == expected, "4 Slurm sun shards: the merged bundle differs from the single-process one");
 
     // Threads are the jobs' cores (CPUS), not a bake argument; N must be a count.
@@ -118,12 +119,6 @@ fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     assert!(code == Some(2) && e.contains("give CPUS=T, not --threads"), "{e}");
     let (code, _, e) = script(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&bundle), "three"], &[]);
     assert!(code == Some(2) && e.contains("N must be a positive integer, not 'three'"), "{e}");
-    // A sharded bake is uniform and must say so (bake's default is adaptive), before any job is queued.
-    for adaptive in [&[][..], &["--adaptive", "1"]] {
-        let (code, _, e) =
-            script(&dir, "scripts/slurm/submit.sh", &[&[s(&mesh), s(&bundle), "3", "--bounces", "1"][..], adaptive].concat(), &[]);
-        assert!(code == Some(2) && e.contains("--adaptive 0"), "{adaptive:?}: {e}");
-    }
 }
 
 /// Python 3 with PyYAML, or a skip notice.
@@ -150,14 +145,14 @@ fn kubernetes_manifests_run_in_order_into_the_single_process_bundle() {
     let env = [("DIR", s(&manifests)), ("MOUNT", s(&dir.0)), ("PRTBAKE", env!("CARGO_BIN_EXE_prtbake"))];
     script_ok(&dir, "scripts/kubernetes/manifests.sh", &[s(&mesh), s(&bundle), "3"], BAKE_ARGS, &env);
     let names: Vec<String> = std::fs::read_dir(&manifests).unwrap().map(|f| f.unwrap().file_name().into_string().unwrap()).collect();
-    assert_eq!(names.len(), 6, "{names:?}: 3 rounds and 3 merges");
+    assert_eq!(names.len(), 8, "{names:?}: the pilot, 3 rounds and 4 merges");
 
     // The pods' commands in apply order, as the cluster would run them.
     let check = Path::new(REPO).join("scripts/kubernetes/check.py");
     let o = Command::new("python3").arg(&check).arg(&manifests).arg("--commands").output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let commands: Vec<Vec<String>> = String::from_utf8(o.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(commands.len(), 3 * (3 + 1), "3 rounds of 3 pods and a merge each");
+    assert_eq!(commands.len(), 4 * (3 + 1), "the pilot and 3 rounds, of 3 pods and a merge each");
     for c in &commands {
         let o = Command::new(&c[0]).args(&c[1..]).output().unwrap();
         assert!(o.status.success(), "{c:?}: {}", String::from_utf8_lossy(&o.stderr));
@@ -165,12 +160,12 @@ fn kubernetes_manifests_run_in_order_into_the_single_process_bundle() {
     assert!(std::fs::read(&bundle).unwrap() == expected, "the pods' bundle differs from the single-process bake");
 
     // An Indexed Job whose completions disagree with its shard count is named.
-    let round1: PathBuf = manifests.join("02-r1.yaml");
+    let round1: PathBuf = manifests.join("04-r1.yaml");
     let text =
         std::fs::read_to_string(&round1).unwrap().replace("completions: 3", "completions: 2").replace("parallelism: 3", "parallelism: 2");
     std::fs::write(&round1, text).unwrap();
     let o = Command::new("python3").arg(&check).arg(&manifests).output().unwrap();
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{e}");
-    assert!(e.contains("02-r1.yaml: an Indexed Job of 2 completions must run --shard $(JOB_COMPLETION_INDEX)/2"), "{e}");
+    assert!(e.contains("04-r1.yaml: an Indexed Job of 2 completions must run --shard $(JOB_COMPLETION_INDEX)/2"), "{e}");
 }

@@ -19,8 +19,8 @@ pub fn write_cabin(dir: &Scratch) -> PathBuf {
 
 /// Window light, three bounces, colour, each bounce stored, cleaned inline:
 /// every piece of a bake's bundle that a merge has to reproduce.
-const BAKE_ARGS: &[&str] =
-    &["--window", "glass", "--bounces", "3", "--rays", "12", "--seed", "5", "--adaptive", "0", "--store-bounces", "--clean", "--quiet"];
+/// Adaptive allocation (bake's default) gives the shards a pilot stage.
+const BAKE_ARGS: &[&str] = &["--window", "glass", "--bounces", "3", "--rays", "12", "--seed", "5", "--store-bounces", "--clean", "--quiet"];
 
 fn run(args: &[&str]) -> String {
     let out = prtbake(args);
@@ -66,6 +66,23 @@ fn sharded_bake(dir: &Path, mesh: &Path, args: &[&str], bounces: u32, n: u32) ->
     let part = |round: u32, k: u32| dir.join(format!("r{round}-{k}.prtp"));
     let layer = |round: u32| dir.join(format!("r{round}.prtl"));
     let bundle = dir.join("merged.prtb");
+    // Adaptive allocation (unless --adaptive 0): the pilot stage, merged into the pilot every round reads.
+    let pilot = dir.join("pilot.prta");
+    let adaptive = !args.windows(2).any(|w| w == ["--adaptive", "0"]);
+    if adaptive {
+        let pilot_part = |k: u32| dir.join(format!("pilot-{k}.prtp"));
+        for k in shuffled(n, 50) {
+            let (shard, threads) = (format!("{k}/{n}"), (1 + k % 2).to_string());
+            let part = pilot_part(k);
+            let mut a = vec!["bake", s(mesh), "-o", s(&part), "--shard", &shard, "--round", "pilot", "--threads", &threads];
+            a.extend(args);
+            run(&a);
+        }
+        let parts: Vec<PathBuf> = shuffled(n, 51).into_iter().map(pilot_part).collect();
+        let mut a = vec!["merge", "-o", s(&pilot)];
+        a.extend(parts.iter().map(|p| s(p)));
+        run(&a);
+    }
     for round in 0..=bounces {
         for k in shuffled(n, round) {
             let (shard, round_text, threads) = (format!("{k}/{n}"), round.to_string(), (1 + k % 2).to_string());
@@ -74,6 +91,9 @@ fn sharded_bake(dir: &Path, mesh: &Path, args: &[&str], bounces: u32, n: u32) ->
             let mut a = vec!["bake", s(mesh), "-o", s(&part), "--shard", &shard, "--round", &round_text, "--threads", &threads];
             if round > 0 {
                 a.extend(["--layer", s(&previous)]);
+            }
+            if adaptive {
+                a.extend(["--pilot", s(&pilot)]);
             }
             a.extend(args);
             run(&a);
@@ -119,6 +139,27 @@ fn sharded_transfer_merges_into_the_single_process_bundle() {
     std::fs::create_dir(&work).unwrap();
     let merged = sharded_bake(&work, &mesh, &budgeted, 3, 3);
     assert!(std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(), "3 shards with --max-error: the merged bundle differs");
+    // Uniform points (--adaptive 0): no pilot stage, the same promise.
+    let uniform: Vec<&str> = BAKE_ARGS.iter().copied().chain(["--adaptive", "0"]).collect();
+    let single = dir.path("single-uniform.prtb");
+    let mut a = vec!["bake", s(&mesh), "-o", s(&single), "--threads", "2"];
+    a.extend(&uniform);
+    run(&a);
+    let work = dir.path("uniform");
+    std::fs::create_dir(&work).unwrap();
+    let merged = sharded_bake(&work, &mesh, &uniform, 3, 2);
+    assert!(std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(), "2 uniform shards: the merged bundle differs");
+    // Adaptive rounds need the pilot, and every round 0 shard the same one.
+    let lone = dir.path("lone.prtp");
+    let mut a = vec!["bake", s(&mesh), "-o", s(&lone), "--shard", "0/3", "--round", "0"];
+    a.extend(BAKE_ARGS);
+    let e = refused(&a);
+    assert!(e.contains("needs --pilot"), "{e}");
+    assert!(!lone.exists());
+    let mut a = vec!["bake", s(&mesh), "-o", s(&lone), "--shard", "0/3", "--round", "pilot"];
+    a.extend(&uniform);
+    let e = refused(&a);
+    assert!(e.contains("--adaptive 0"), "{e}");
 }
 
 #[test]

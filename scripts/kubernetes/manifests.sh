@@ -31,7 +31,6 @@ bake_args=("$@")
 . "$(dirname "$0")/../shard-args.sh"
 check_operands "$out" "$n"
 ! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each pod's threads are its cores)" >&2 && exit 2; }
-require_uniform "$@"
 bounces=$(bounces_of "$@")
 base=$(basename "${out%.prtb}" | tr 'A-Z_.' 'a-z--' | tr -cd 'a-z0-9-')
 name=${NAME:-${base:-bake}}
@@ -100,13 +99,28 @@ folders='"$0/hits"'
 for ((round = 0; round <= bounces; round++)); do folders+=" \"\$0/r$round\""; done
 
 step=0
+pilot_args=()
+if is_adaptive "$@"; then
+    # Adaptive allocation's pilot stage: an Indexed Job at the base points and
+    # its merge into the pilot every round reads.
+    folders+=' "$0/pilot"'
+    index='$(JOB_COMPLETION_INDEX)'
+    job "00-pilot.yaml" "$name-pilot" "pilot of adaptive allocation: $n shards, pod K runs --shard K/$n" "$n" \
+        "$prtbake" bake "$mesh" --shard "$index/$n" --round pilot -o "$work/pilot/part-$index.prtp" --threads "$cpus" --quiet "${bake_args[@]}"
+    parts=()
+    for ((k = 0; k < n; k++)); do parts+=("$work/pilot/part-$k.prtp"); done
+    job "01-merge-pilot.yaml" "$name-merge-pilot" "merge of the pilot: after every pod of $name-pilot completed" 0 \
+        "$prtbake" merge "${parts[@]}" -o "$work/pilot.prta" --threads "$cpus"
+    pilot_args=(--pilot "$work/pilot.prta")
+    step=2
+fi
 for ((round = 0; round <= bounces; round++)); do
     layer_args=()
     [ "$round" -eq 0 ] || layer_args=(--layer "$work/r$((round - 1)).prtl")
     index='$(JOB_COMPLETION_INDEX)'
     job "$(printf %02d $step)-r$round.yaml" "$name-r$round" "round $round of $bounces: $n shards, pod K runs --shard K/$n" "$n" \
         "$prtbake" bake "$mesh" --shard "$index/$n" --round "$round" ${layer_args[@]+"${layer_args[@]}"} \
-        --shard-dir "$work/hits" -o "$work/r$round/part-$index.prtp" --threads "$cpus" --quiet "${bake_args[@]}"
+        ${pilot_args[@]+"${pilot_args[@]}"} --shard-dir "$work/hits" -o "$work/r$round/part-$index.prtp" --threads "$cpus" --quiet "${bake_args[@]}"
     parts=()
     for ((k = 0; k < n; k++)); do parts+=("$work/r$round/part-$k.prtp"); done
     target=$out

@@ -101,7 +101,7 @@ echo "slurm: $(sinfo -h -o '%P %D %c %m %T') (SLURM_CONF=$SLURM_CONF)" >&2
 # clean the 333k-triangle cabin again (docs/scale.md, Limits).
 "$prtbake" generate cabin -o "$smoke/cabin-raw.glb"
 "$prtbake" clean "$smoke/cabin-raw.glb" -o "$smoke/cabin.glb" >/dev/null
-args=(--window glass --rays "$rays" --bounces 3 --adaptive 0)
+args=(--window glass --rays "$rays" --bounces 3)
 t2=$(clock)
 last=$(WORK=$smoke/shards PRTBAKE=$prtbake scripts/slurm/submit.sh "$smoke/cabin.glb" "$smoke/slurm.prtb" "$n" "${args[@]}")
 while squeue -h -j "$last" 2>/dev/null | grep -q .; do
@@ -115,5 +115,5 @@ t3=$(clock)
 single_s=$(since "$t3")
 bytes=$(stat -c %s "$smoke/single.prtb")
 if cmp "$smoke/slurm.prtb" "$smoke/single.prtb"; then same=identical; else same=DIFFERENT; fi
-echo "install ${install_s} s, slurm start-up ${startup_s} s, bake through slurm (N = $n, 3 bounces, $rays rays: 4 arrays + 4 merges) ${slurm_s} s, single process ${single_s} s; bundles $same ($bytes bytes)"
+echo "install ${install_s} s, slurm start-up ${startup_s} s, bake through slurm (N = $n, 3 bounces, $rays rays, adaptive: a pilot and 4 rounds, 5 arrays + 5 merges) ${slurm_s} s, single process ${single_s} s; bundles $same ($bytes bytes)"
 [ "$same" = identical ]

@@ -19,11 +19,24 @@ bake_args=("$@")
 . "$(dirname "$0")/submit-lib.sh"
 check_operands "$out" "$n"
 ! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each job's threads are its cores)" >&2 && exit 2; }
-require_uniform "$@"
 [ -f "$mesh" ] || { echo "$0: no mesh at $mesh" >&2 && exit 2; }
 bounces=$(bounces_of "$@")
 work=$(work_dir "$out")
 mkdir -p "$work/hits"
+
+pilot_args=()
+if is_adaptive "$@"; then
+    # Adaptive allocation's pilot stage: an array at the base points, merged
+    # into the pilot every round reads.
+    mkdir -p "$work/pilot"
+    parts=()
+    for ((k = 0; k < n; k++)); do parts+=("$work/pilot/part-$k.prtp"); done
+    array=$(submit_array pilot "$n" bake "$mesh" --shard "{K}/$n" --round pilot -o "$work/pilot/part-{K}.prtp" --quiet "${bake_args[@]}")
+    merge=$(submit_merge merge-pilot "$array" merge "${parts[@]}" -o "$work/pilot.prta")
+    echo "pilot: shards job $array (N = $n), merge job $merge -> $work/pilot.prta" >&2
+    dependency=--dependency=afterok:$merge
+    pilot_args=(--pilot "$work/pilot.prta")
+fi
 
 for ((round = 0; round <= bounces; round++)); do
     layer_args=()
@@ -34,7 +47,7 @@ for ((round = 0; round <= bounces; round++)); do
     target=$out
     [ "$round" -eq "$bounces" ] || target="$work/r$round.prtl"
     array=$(submit_array "r$round" "$n" bake "$mesh" --shard "{K}/$n" --round "$round" ${layer_args[@]+"${layer_args[@]}"} \
-        --shard-dir "$work/hits" -o "$work/r$round/part-{K}.prtp" --quiet "${bake_args[@]}")
+        ${pilot_args[@]+"${pilot_args[@]}"} --shard-dir "$work/hits" -o "$work/r$round/part-{K}.prtp" --quiet "${bake_args[@]}")
     merge=$(submit_merge "merge-r$round" "$array" merge "${parts[@]}" ${layer_args[@]+"${layer_args[@]}"} -o "$target")
     echo "round $round of $bounces: shards job $array (N = $n), merge job $merge -> $target" >&2
     dependency=--dependency=afterok:$merge

@@ -438,13 +438,13 @@ pub(crate) fn run_range(pass: &Pass, range: std::ops::Range<usize>, first_items:
 /// Bounce 0's hit records of a range of items (one per point and ray, when
 /// the pass records them), and the part no task has filled yet.
 pub(crate) struct HitSlots {
-    records: Vec<u64>,
+    pub(crate) records: Vec<u64>,
     /// Index in `records` of the first unfilled slot.
     filled: usize,
 }
 
 impl HitSlots {
-    fn new(pass: &Pass, range: std::ops::Range<usize>) -> HitSlots {
+    pub(crate) fn new(pass: &Pass, range: std::ops::Range<usize>) -> HitSlots {
         let points = pass.items.first_point(range.end) - pass.items.first_point(range.start);
         HitSlots { records: vec![0; pass.record_count(points)], filled: 0 }
     }
@@ -455,7 +455,12 @@ impl HitSlots {
 /// and output, in item order. Each task copies its points' hit records to
 /// their place in `hits`, so the 8 bytes a ray of fresh pages fault in on
 /// every thread, not in the merge.
-fn trace_tasks(pass: &Pass, range: std::ops::Range<usize>, hits: &mut HitSlots, progress: &Progress) -> Vec<(usize, TaskOutput)> {
+pub(crate) fn trace_tasks(
+    pass: &Pass,
+    range: std::ops::Range<usize>,
+    hits: &mut HitSlots,
+    progress: &Progress,
+) -> Vec<(usize, TaskOutput)> {
     let mut unfilled = &mut hits.records[hits.filled..];
     let tasks: Vec<(usize, &mut [u64])> = range
         .clone()
@@ -929,6 +934,13 @@ fn trace_tasks_scattered(pass: &Pass, records: &mut [u64], records_start: usize,
         .collect()
 }
 
+/// Sample points of the base layout of a bake of `mesh` with `params`
+/// (before adaptive allocation adds any): a sharded bake's merge reports
+/// `BakeStats::points_added` against it, as a whole bake does.
+pub fn base_point_count(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams) -> Result<u64, BakeError> {
+    Ok(build_items(mesh, sampled_triangles(mesh, surfaces)?, params, None).point_count())
+}
+
 /// Lists the work items: the `sampled` triangles (interior sampling), or
 /// their vertices (vertex sampling).
 fn build_items(mesh: &Mesh, sampled: Vec<u32>, params: &BakeParams, receivers: Option<&[bool]>) -> Items {
@@ -1106,6 +1118,13 @@ pub(crate) fn sample_weights(b: [f32; 3], area: f32, count: u32) -> [f32; 3] {
 pub(crate) fn triangle_area(mesh: &Mesh, t: u32) -> f32 {
     let [a, b, c] = mesh.triangle_positions(t as usize);
     0.5 * (b - a).cross(c - a).length()
+}
+
+impl<'a> Pass<'a> {
+    /// The same pass over other items (adaptive allocation's base layout).
+    pub(crate) fn with_items(self, items: &'a Items) -> Pass<'a> {
+        Pass { items, ..self }
+    }
 }
 
 impl Pass<'_> {

@@ -31,7 +31,7 @@ pub struct MergeConfig {
 }
 
 /// Outputs a merge may write: the next round's layer or the bundle.
-const MERGE_FORMATS: &[&str] = &["prtl", "prtb"];
+const MERGE_FORMATS: &[&str] = &["prtl", "prtb", "prta"];
 
 /// Reads the parts, merges them and writes the layer or bundle.
 pub fn run(config: &MergeConfig) -> anyhow::Result<()> {
@@ -91,6 +91,19 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
     let round = parts.first().map_or(0, |(_, p)| p.round);
     let mut staged = Staged::new();
     let summary = match merged {
+        TransferMerge::Pilot(pilot) => {
+            if !has_extension(output, "prta") {
+                anyhow::bail!(
+                    "{}: these are pilot parts (--round pilot): their merge is the pilot every round reads with --pilot; name the output .prta",
+                    output.display()
+                );
+            }
+            if config.layer.is_some() {
+                anyhow::bail!("--layer: the pilot stage gathers from no layer");
+            }
+            staged.stage(output, |w| pilot.write_to(w).map(drop)).with_context(|| format!("cannot write {}", output.display()))?;
+            json!({ "kind": "pilot", "vertices": pilot.identity.mesh.vertices, "base_points": pilot.points })
+        }
         TransferMerge::Layer(layer) => {
             if !has_extension(output, "prtl") {
                 anyhow::bail!(
@@ -117,6 +130,13 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
                     problem: "its bundle frame holds another mesh than the one the parts baked".into(),
                 }
                 .into());
+            }
+            // Adaptive allocation's extra points, counted as a whole bake counts them.
+            let mut result = result;
+            if key.params.adaptive > 0.0 {
+                let surfaces = crate::bake::Surfaces::resolve(&b.mesh, &key.window_patterns)?;
+                let base = crate::bake::transfer::base_point_count(&b.mesh, &surfaces, &key.params)?;
+                result.stats.points_added = result.stats.points.saturating_sub(base);
             }
             let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
             let (encoded, choice) =

@@ -14,7 +14,7 @@ use serde_json::json;
 use super::bake_cmd::{bundle_meta, check_windows, load_for_bake, BakeConfig};
 use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
 use super::Output;
-use crate::bake::shards::{self, FileKind, HitFile, LayerFile, RoundInput, Shard, SunKey, TransferKey};
+use crate::bake::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
 use crate::bake::{BuildQuality, Scene, SunStats};
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::files::{read_limited, Limit, Staged};
@@ -24,6 +24,7 @@ use crate::sky;
 pub const PART_FORMAT: &[&str] = &["prtp"];
 pub const HITS_FORMAT: &[&str] = &["prth"];
 pub const LAYER_FORMAT: &[&str] = &["prtl"];
+pub const PILOT_FORMAT: &[&str] = &["prta"];
 
 /// What `bake --shard` asks of one run.
 #[derive(Clone, Debug)]
@@ -31,8 +32,12 @@ pub struct ShardRun {
     pub shard: Shard,
     /// The bounce this run bakes (0..=bounces).
     pub round: u32,
+    /// `--round pilot`: adaptive allocation's pilot instead of a round.
+    pub pilot_stage: bool,
     /// Rounds ≥ 1: the merged layer of the round before.
     pub layer: Option<PathBuf>,
+    /// Every round of an adaptive bake: the merged pilot (`--pilot`).
+    pub pilot: Option<PathBuf>,
     /// The folder of this shard's hit records (default: the part's).
     pub shard_dir: Option<PathBuf>,
 }
@@ -61,6 +66,17 @@ pub fn decode<T>(path: &Path, bytes: &[u8], decode: impl FnOnce(&[u8]) -> Result
 /// Bakes one shard's part of one transfer round and prints what it wrote.
 pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let (shard, round, bounces) = (run.shard, run.round, config.params.bounces);
+    let stage = if run.pilot_stage { Stage::Pilot } else { Stage::Round(round) };
+    let adaptive = config.params.adaptive > 0.0;
+    match (stage, adaptive, &run.pilot) {
+        (Stage::Pilot, false, _) => anyhow::bail!("--round pilot is adaptive allocation's stage; this bake has --adaptive 0"),
+        (Stage::Pilot, true, Some(p)) => anyhow::bail!("--pilot {}: the pilot stage makes the pilot; rounds 0 and later read it", p.display()),
+        (Stage::Round(r), true, None) => anyhow::bail!(
+            "--round {r} of an adaptive bake needs --pilot, the merged pilot (run --round pilot on every shard, then prtbake merge … -o PILOT.prta; docs/scale.md)"
+        ),
+        (Stage::Round(_), false, Some(p)) => anyhow::bail!("--pilot {}: this bake has --adaptive 0 and no pilot stage", p.display()),
+        _ => {}
+    }
     if config.view_box.is_some() {
         anyhow::bail!("--view-box with --shard: sharded bakes store every triangle (bake the view box in one process)");
     }
@@ -75,7 +91,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
         _ => {}
     }
     let hits_path = run.hits_path(&config.output);
-    let writes_hits = round == 0 && bounces > 0;
+    let writes_hits = stage == Stage::Round(0) && bounces > 0;
     let mut outputs = vec![Output::new(&config.output, PART_FORMAT)];
     if writes_hits {
         outputs.push(Output::new(&hits_path, HITS_FORMAT));
@@ -83,6 +99,9 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let mut inputs: Vec<&Path> = vec![&config.input];
     if let Some(layer) = &run.layer {
         inputs.extend([layer.as_path(), hits_path.as_path()]);
+    }
+    if let Some(pilot) = &run.pilot {
+        inputs.push(pilot.as_path());
     }
     super::check_outputs(&inputs, &outputs, config.force)?;
     super::check_threads(config.threads)?;
@@ -102,6 +121,14 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             Some((layer, layer_crc, hits))
         }
     };
+    let pilot_path = run.pilot.clone().unwrap_or_default();
+    let pilot = match &run.pilot {
+        None => None,
+        Some(path) => {
+            let bytes = read_shard_file(path)?;
+            Some(decode(path, &bytes, PilotFile::decode)?)
+        }
+    };
     let key = TransferKey {
         params: config.params,
         window_patterns: config.window_patterns.clone(),
@@ -115,11 +142,12 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
         let scene = Scene::build(mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
         let input =
             input.map(|(layer, layer_crc, hits)| RoundInput { hits_path: &hits_path, hits, layer_path: &layer_path, layer, layer_crc });
-        let output = shards::bake_transfer_shard(mesh, &scene, &surfaces, &key, config.params.quiet, shard, round, input)?;
+        let pilot = pilot.map(|(pilot, crc)| PilotInput { path: &pilot_path, pilot, crc });
+        let output = shards::bake_transfer_shard(mesh, &scene, &surfaces, &key, config.params.quiet, shard, stage, input, pilot)?;
         Ok((output, surfaces, scene.build_time.as_secs_f64()))
     })??;
     let mut part = output.part;
-    if round == bounces && shard.index == 0 {
+    if stage == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
         let meta = bundle_meta(loaded.meta, &config.window_patterns, &surfaces);
         let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None };
@@ -141,7 +169,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             "hits": hits_written.map(super::json_path),
             "hits_bytes": hits_written.map(size),
             "shard": shard.to_string(),
-            "round": round,
+            "round": if run.pilot_stage { json!("pilot") } else { json!(round) },
             "bounces": bounces,
             "items": [part.items.start, part.items.end],
             "item_count": part.item_count,
@@ -155,8 +183,9 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             "peak_memory_bytes": crate::bake::peak_memory_bytes(),
         }));
     }
+    let what = if run.pilot_stage { "pilot".to_string() } else { format!("round {round}/{bounces}") };
     println!(
-        "shard {shard}, round {round}/{bounces}: items {}..{} of {}, {} points, {} rays in {:.2}s; wrote {} ({} bytes){}",
+        "shard {shard}, {what}: items {}..{} of {}, {} points, {} rays in {:.2}s; wrote {} ({} bytes){}",
         part.items.start,
         part.items.end,
         part.item_count,

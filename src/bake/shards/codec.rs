@@ -27,6 +27,8 @@ pub enum FileKind {
     Hits,
     /// `PRTL`: a merged round's layer (`.prtl`).
     Layer,
+    /// `PRTA`: the merged pilot of adaptive allocation (`.prta`).
+    Pilot,
 }
 
 impl FileKind {
@@ -36,6 +38,7 @@ impl FileKind {
             FileKind::SunPart => b'S',
             FileKind::Hits => b'H',
             FileKind::Layer => b'L',
+            FileKind::Pilot => b'A',
         };
         [b'P', b'R', b'T', letter, b'\r', b'\n', 0x1a, b'\n']
     }
@@ -46,19 +49,20 @@ impl FileKind {
             FileKind::SunPart => "a sun part",
             FileKind::Hits => "a hit-record file",
             FileKind::Layer => "a merged layer",
+            FileKind::Pilot => "a merged pilot",
         }
     }
 
     /// The kind a file's first bytes name, or what they look like instead.
     pub fn of(bytes: &[u8]) -> Result<FileKind, String> {
-        let kinds = [FileKind::TransferPart, FileKind::SunPart, FileKind::Hits, FileKind::Layer];
+        let kinds = [FileKind::TransferPart, FileKind::SunPart, FileKind::Hits, FileKind::Layer, FileKind::Pilot];
         if let Some(kind) = kinds.into_iter().find(|k| bytes.starts_with(&k.magic())) {
             return Ok(kind);
         }
         if bytes.starts_with(&crate::bundle::MAGIC) {
             return Err("is a bundle (.prtb), not a shard file".into());
         }
-        Err("is not a prtbake shard file (no PRTP/PRTS/PRTH/PRTL magic)".into())
+        Err("is not a prtbake shard file (no PRTP/PRTS/PRTH/PRTL/PRTA magic)".into())
     }
 }
 

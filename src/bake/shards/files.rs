@@ -174,6 +174,9 @@ pub struct TransferPart {
     pub rejected: u64,
     /// Round 0 of interior sampling: the rows carry their points' DC moments.
     pub tracks_noise: bool,
+    /// The pilot of adaptive allocation (base points only, bounce 0): the
+    /// merge makes a [`PilotFile`] of it, not a layer.
+    pub pilot: bool,
     /// Sums of the vertices whose first item is this shard's.
     pub opened: VertexRows,
     /// Contributions to vertices an earlier shard opened, in item and corner order.
@@ -203,7 +206,7 @@ impl TransferPart {
         for v in [self.rays, self.traced, self.rejected] {
             w.u64(v)?;
         }
-        w.u32(self.tracks_noise as u32)?;
+        w.u32(self.tracks_noise as u32 | (self.pilot as u32) << 1)?;
         self.opened.write(&mut w)?;
         self.late.write(&mut w)?;
         w.blob(&self.frame)?;
@@ -244,10 +247,11 @@ impl TransferPart {
             return Err(format!("round {round} with {pass_channels} of {channels} channels"));
         }
         let (rays, traced, rejected) = (r.u64("rays")?, r.u64("rays traced")?, r.u64("points rejected")?);
-        let tracks_noise = match r.u32("noise flag")? {
-            0 => false,
-            1 if round == 0 => true,
-            f => return Err(format!("noise flag {f} in round {round}: only round 0 may carry moments (flag 1)")),
+        let (tracks_noise, pilot) = match r.u32("row flags")? {
+            0 => (false, false),
+            1 if round == 0 => (true, false),
+            3 if round == 0 => (true, true),
+            f => return Err(format!("row flags {f} in round {round}: only round 0 carries moments (1), and a pilot always does (3)")),
         };
         let stride = (pass_channels * coeffs) as u64;
         let vertex_count = identity.mesh.vertices;
@@ -272,6 +276,7 @@ impl TransferPart {
             traced,
             rejected,
             tracks_noise,
+            pilot,
             opened,
             late,
             frame,
@@ -445,6 +450,49 @@ impl LayerFile {
     }
 }
 
+/// The merged pilot of adaptive allocation (`PRTA`, `.prta`): bounce 0's
+/// base points summed per vertex, what every shard needs to decide where
+/// the extra points go (`bake::adaptive::extra_counts`, the same in every
+/// shard and in a whole bake).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PilotFile {
+    pub identity: Identity,
+    /// Base points of the bake (its base layout).
+    pub points: u64,
+    /// Per vertex: summed sample weight, Σ w·DC and the DC moments.
+    pub weights: Vec<f32>,
+    pub dc_sums: Vec<f32>,
+    pub moments: Vec<[f64; 3]>,
+}
+
+impl PilotFile {
+    pub fn write_to<W: Write>(&self, out: W) -> std::io::Result<u32> {
+        let mut w = Writer::new(out, FileKind::Pilot)?;
+        self.identity.write(&mut w)?;
+        w.u64(self.points)?;
+        w.f32s(&self.weights)?;
+        w.f32s(&self.dc_sums)?;
+        write_moments(&mut w, &self.moments)?;
+        w.finish()
+    }
+
+    /// Decodes a pilot file; also returns its CRC (round-0 parts name it).
+    pub fn decode(bytes: &[u8]) -> Result<(PilotFile, u32), String> {
+        let (mut r, crc) = codec::open(bytes, FileKind::Pilot)?;
+        let identity = Identity::read(&mut r)?;
+        let points = r.u64("base points")?;
+        let v = identity.mesh.vertices;
+        let weights = r.f32s(v, "weights")?;
+        let dc_sums = r.f32s(v, "DC sums")?;
+        let moments = read_moments(&mut r, v, "moments")?;
+        r.finish()?;
+        if weights.iter().chain(&dc_sums).any(|x| !x.is_finite()) || weights.iter().any(|&w| w < 0.0) {
+            return Err("a weight or DC sum is not finite, or a weight is negative".into());
+        }
+        Ok((PilotFile { identity, points, weights, dc_sums, moments }, crc))
+    }
+}
+
 /// One shard's sun bits (`PRTS`, `.prtp`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SunPart {
@@ -539,6 +587,7 @@ mod tests {
             traced: 96,
             rejected: 1,
             tracks_noise: true,
+            pilot: false,
             opened: VertexRows {
                 vertices: vec![3],
                 rows: vec![0.5, -0.25, 0.0, 1.0],

@@ -133,6 +133,7 @@ impl TransferKey {
         ]);
         out.extend_from_slice(&p.inside_distance.to_le_bytes());
         out.extend_from_slice(&self.max_error.unwrap_or(0.0).to_le_bytes());
+        out.extend_from_slice(&p.adaptive.to_le_bytes());
         put_patterns(&mut out, &self.window_patterns);
         out
     }
@@ -176,6 +177,7 @@ impl TransferKey {
             let has_max_error = flag(r.u8("max error flag")?, "max error")?;
             let inside_distance = r.f32("inside distance")?;
             let max_error = r.f64("max error")?;
+            let adaptive = r.f32("adaptive")?;
             let window_patterns = read_patterns(r)?;
             let params = BakeParams {
                 order,
@@ -191,6 +193,7 @@ impl TransferKey {
                 window_sampling,
                 keep_outside_sides,
                 inside_distance,
+                adaptive,
                 ..BakeParams::default()
             };
             params.check().map_err(|e| e.to_string())?;
@@ -215,6 +218,7 @@ impl TransferKey {
             ("window sampling", p.window_sampling.to_string()),
             ("keep outside sides", p.keep_outside_sides.to_string()),
             ("inside distance", p.inside_distance.to_string()),
+            ("adaptive", p.adaptive.to_string()),
             ("window patterns", format!("{:?}", self.window_patterns)),
             ("quantize", format!("{:?}", self.quantize)),
             ("max error", format!("{:?}", self.max_error)),

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use super::codec::FileKind;
-use super::files::{Identity, LayerFile, SunPart, TransferPart};
+use super::files::{Identity, LayerFile, PilotFile, SunPart, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::adaptive::{Moments, VertexDc};
@@ -145,8 +145,14 @@ fn check_together(heads: &[PartHead], kind: FileKind) -> Result<Vec<usize>, Shar
 /// What a transfer merge gives: the next round's layer, or after the last
 /// round the result and the frame its bundle is made from.
 pub enum TransferMerge {
+    /// The pilot stage of an adaptive bake: what every round allocates by.
+    Pilot(PilotFile),
     Layer(LayerFile),
-    Final { result: TransferResult, key: TransferKey, frame: Vec<u8> },
+    Final {
+        result: TransferResult,
+        key: TransferKey,
+        frame: Vec<u8>,
+    },
 }
 
 /// Merges every part of one transfer round. Rounds ≥ 1 also take the layer
@@ -174,6 +180,21 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             != (reference.channels, reference.coeffs, reference.pass_channels, reference.window_triangles)
         {
             return Err(ShardError::mismatch(path, format!("holds rows of another size than {}", first_path.display())));
+        }
+    }
+    for (path, p) in parts {
+        if p.pilot != reference.pilot {
+            return Err(ShardError::mismatch(path, format!("mixes the pilot stage and round 0 with {}", first_path.display())));
+        }
+        // Round 0 of an adaptive bake names the pilot it allocated by.
+        if p.round == 0 && p.layer_crc != reference.layer_crc {
+            return Err(ShardError::mismatch(
+                path,
+                format!(
+                    "allocated its points by another merged pilot than {} (every shard of round 0 needs the same --pilot)",
+                    first_path.display()
+                ),
+            ));
         }
     }
     let key = TransferKey::decode(&first.identity.key).map_err(|e| ShardError::malformed(first_path, format!("parameter block: {e}")))?;
@@ -251,6 +272,20 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
                 moments[v].merge(&Moments::from_array(part.late.moments[j]));
             }
         }
+    }
+    if reference.pilot {
+        if !tracks_noise {
+            return Err(ShardError::mismatch(first_path, "is a pilot part without the moments the allocation needs"));
+        }
+        let dc_sums = sums.iter().step_by(stride).copied().collect();
+        let moments = moments.iter().map(|m| m.to_array()).collect();
+        return Ok(TransferMerge::Pilot(PilotFile {
+            identity: first.identity.clone(),
+            points: reference.point_count,
+            weights,
+            dc_sums,
+            moments,
+        }));
     }
     // As a whole bake computes it after bounce 0; later rounds carry it on.
     let noise = match &previous {

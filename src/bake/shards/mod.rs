@@ -37,10 +37,10 @@ use std::path::PathBuf;
 use crate::mesh::Mesh;
 
 pub use codec::FileKind;
-pub use files::{HitFile, Identity, LayerFile, SunPart, TransferPart};
+pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TransferPart};
 pub use key::{SunKey, TransferKey};
 pub use merge::{merge_sun_parts, merge_transfer, MergedSun, TransferMerge};
-pub use round::{bake_sun_shard, bake_transfer_shard, RoundInput, RoundOutput};
+pub use round::{bake_sun_shard, bake_transfer_shard, PilotInput, RoundInput, RoundOutput, Stage};
 
 /// Most shards of one bake.
 pub const MAX_SHARDS: u32 = 100_000;
@@ -227,6 +227,21 @@ mod tests {
         let bounces = key.params.bounces;
         let mut layer: Option<(LayerFile, u32)> = None;
         let mut hits: Vec<Option<HitFile>> = vec![None; count as usize];
+        // Adaptive allocation: the pilot stage first, merged into the pilot every round reads.
+        let pilot: Option<(PilotFile, u32)> = (key.params.adaptive > 0.0).then(|| {
+            let parts: Vec<(PathBuf, TransferPart)> = (0..count)
+                .map(|index| {
+                    let out =
+                        bake_transfer_shard(mesh, &scene, &surfaces, key, true, Shard { index, count }, Stage::Pilot, None, None).unwrap();
+                    assert!(out.hits.is_none(), "the pilot keeps no hit records");
+                    (PathBuf::from(format!("pilot-{index}")), TransferPart::decode(&out.part.to_bytes()).unwrap())
+                })
+                .collect();
+            let TransferMerge::Pilot(p) = merge_transfer(&parts, None).unwrap() else { panic!("pilot parts merge into a pilot") };
+            let mut bytes = Vec::new();
+            p.write_to(&mut bytes).unwrap();
+            PilotFile::decode(&bytes).unwrap()
+        });
         for round in 0..=bounces {
             let mut parts = Vec::new();
             for index in (0..count).rev() {
@@ -237,7 +252,10 @@ mod tests {
                     layer: layer.clone(),
                     layer_crc: *crc,
                 });
-                let out = bake_transfer_shard(mesh, &scene, &surfaces, key, true, Shard { index, count }, round, input).unwrap();
+                let pilot = pilot.as_ref().map(|(p, crc)| PilotInput { path: Path::new("pilot"), pilot: p.clone(), crc: *crc });
+                let out =
+                    bake_transfer_shard(mesh, &scene, &surfaces, key, true, Shard { index, count }, Stage::Round(round), input, pilot)
+                        .unwrap();
                 if round == 0 {
                     hits[index as usize] = out.hits.map(|h| {
                         let mut bytes = Vec::new();
@@ -256,6 +274,7 @@ mod tests {
                     layer = Some(LayerFile::decode(&bytes).unwrap());
                 }
                 TransferMerge::Final { result, .. } => return result,
+                TransferMerge::Pilot(_) => panic!("rounds do not merge into a pilot"),
             }
         }
         unreachable!("the last round's merge is final")
@@ -274,19 +293,26 @@ mod tests {
             (shapes::Opening::Window, Mode::Window, Sampling::interior(), true, 1, &[3]),
             (shapes::Opening::Hole, Mode::Open, Sampling::Vertex, false, 2, &[4]),
         ];
-        for (opening, mode, sampling, window_sampling, bounces, counts) in cases {
+        let adaptive_cases = [
+            (shapes::Opening::Window, Mode::Window, Sampling::interior(), false, 2, [1u32, 3, 5].as_slice()),
+            (shapes::Opening::Hole, Mode::Open, Sampling::interior(), false, 1, &[2]),
+        ];
+        let all = cases.iter().map(|c| (*c, 0.0f32)).chain(adaptive_cases.iter().map(|c| (*c, 1.0f32)));
+        for ((opening, mode, sampling, window_sampling, bounces, counts), adaptive) in all {
             let (mut mesh, _) = shapes::integrating_sphere(2, 0.6, 0.7, opening);
             if mode == Mode::Window {
                 mesh.materials[0].albedo = [0.7, 0.5, 0.3];
             }
-            let params = BakeParams { rays: 24, bounces, mode, sampling, window_sampling, store_bounces: true, ..BakeParams::default() };
+            let params =
+                BakeParams { rays: 24, bounces, mode, sampling, window_sampling, store_bounces: true, adaptive, ..BakeParams::default() };
             let key = TransferKey { params, window_patterns: Vec::new(), quantize: None, max_error: None };
             let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
             let scene = crate::bake::Scene::build(&mesh, crate::bake::BuildQuality::Sah).unwrap();
             let whole = bake_transfer(&mesh, &scene, &surfaces, &params).unwrap();
+            assert_eq!(whole.stats.points_added > 0, adaptive > 0.0, "adaptive cases add points");
             for &count in counts {
                 let merged = sharded(&mesh, &key, count);
-                let what = format!("{mode:?} {sampling:?}, {count} shards");
+                let what = format!("{mode:?} {sampling:?} adaptive {adaptive}, {count} shards");
                 assert_eq!(bits(&merged.total), bits(&whole.total), "{what}: total");
                 assert_eq!(merged.bounces.len(), whole.bounces.len());
                 for (a, b) in merged.bounces.iter().zip(&whole.bounces) {

@@ -6,14 +6,15 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::files::{HitFile, Identity, LayerFile, SunPart, TransferPart, VertexRows};
+use super::files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TransferPart, VertexRows};
 use super::key::{SunKey, TransferKey};
 use super::merge::identity_difference;
 use super::{split_by_cost, MeshId, Shard, ShardError};
+use crate::bake::adaptive::{Moments, VertexDc};
 use crate::bake::gather::RowBuffer;
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
-use crate::bake::transfer::{run_range, HitRecords, Plan, SourceRows};
+use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};
 use crate::bake::{BakeError, Scene, Surfaces};
 use crate::mesh::Mesh;
 
@@ -36,12 +37,33 @@ pub struct RoundOutput {
     pub seconds: f64,
 }
 
-/// Bakes shard `shard`'s items of transfer round `round` (the bounce): round
-/// 0 traces, later rounds gather from `input`. `quiet` silences the progress line.
+/// What an adaptive bake's shards read in every round: the merged pilot
+/// (where the extra points go), its path for errors and its CRC.
+pub struct PilotInput<'a> {
+    pub path: &'a Path,
+    pub pilot: PilotFile,
+    pub crc: u32,
+}
+
+/// Which pass a transfer shard runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Adaptive allocation's pilot: bounce 0 at the base points only, whose
+    /// merge decides where the extra points go.
+    Pilot,
+    /// Round b = bounce b (with adaptive allocation: over the base and extra points).
+    Round(u32),
+}
+
+/// Bakes shard `shard`'s items of transfer stage `stage`: the pilot of an
+/// adaptive bake, or round b (the bounce): round 0 traces, later rounds
+/// gather from `input`; an adaptive bake's rounds read its merged `pilot`.
+/// `quiet` silences the progress line.
 ///
 /// Errors: bad parameters, a round past the bounces, inputs missing or
 /// present against the round, and inputs from another bake, shard or round
 /// (named with their path).
+#[allow(clippy::too_many_arguments)]
 pub fn bake_transfer_shard(
     mesh: &Mesh,
     scene: &Scene,
@@ -49,14 +71,34 @@ pub fn bake_transfer_shard(
     key: &TransferKey,
     quiet: bool,
     shard: Shard,
-    round: u32,
+    stage: Stage,
     input: Option<RoundInput>,
+    pilot: Option<PilotInput>,
 ) -> Result<RoundOutput, ShardError> {
     let started = Instant::now();
     let params = crate::bake::BakeParams { quiet, ..key.params };
-    if params.adaptive > 0.0 {
-        // Where extra points go depends on every vertex's bounce 0: one process decides it.
-        return Err(BakeError::Params("adaptive allocation runs in one process: a sharded bake cannot use it".into()).into());
+    let adaptive = params.adaptive > 0.0 && matches!(params.sampling, crate::bake::Sampling::Interior { .. });
+    let round = match stage {
+        Stage::Pilot => 0,
+        Stage::Round(r) => r,
+    };
+    match (stage, adaptive, &pilot) {
+        (Stage::Pilot, false, _) => {
+            return Err(BakeError::Params("the pilot stage is adaptive allocation's, and this bake has --adaptive 0".into()).into())
+        }
+        (Stage::Pilot, true, Some(p)) => {
+            return Err(ShardError::mismatch(p.path, "is a merged pilot, which the pilot stage makes: give it to rounds 0 and later"))
+        }
+        (Stage::Round(r), true, None) => {
+            return Err(BakeError::Params(format!(
+                "round {r} of an adaptive bake needs the merged pilot (--pilot): its stage decides where the extra points go"
+            ))
+            .into())
+        }
+        (Stage::Round(_), false, Some(p)) => {
+            return Err(ShardError::mismatch(p.path, "is a merged pilot, but this bake has --adaptive 0 and needs none"))
+        }
+        _ => {}
     }
     if round > params.bounces {
         return Err(BakeError::Params(format!(
@@ -72,10 +114,24 @@ pub fn bake_transfer_shard(
         ))
         .into());
     }
-    let plan = Plan::new(mesh, scene, surfaces, &params, None)?;
+    let mut plan = Plan::new(mesh, scene, surfaces, &params, None)?;
     let identity = Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() };
+    // Shards split the base items by cost, in every stage alike.
     let costs: Vec<u64> = plan.items.points_per_item().iter().map(|&p| p as u64 * params.rays as u64).collect();
     let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+    // Rounds of an adaptive bake run over the unified layout the pilot decides.
+    let mut base_items = None;
+    let mut pilot_crc = 0;
+    if let (Stage::Round(_), Some(p)) = (stage, &pilot) {
+        if let Some(d) = identity_difference(&p.pilot.identity, &identity, super::FileKind::Pilot) {
+            return Err(ShardError::mismatch(p.path, format!("{d} this bake's mesh and arguments: this pilot is another bake's")));
+        }
+        let moments: Vec<Moments> = p.pilot.moments.iter().map(|&m| Moments::from_array(m)).collect();
+        let dc = VertexDc { weights: &p.pilot.weights, dc_sums: p.pilot.dc_sums.clone(), moments: &moments };
+        let extra = plan.extra_counts(&dc);
+        base_items = Some((plan.unify(&extra)?, extra));
+        pilot_crc = p.crc;
+    }
     let points = plan.items.first_point(range.start) as u64..plan.items.first_point(range.end) as u64;
     let mut rejected = vec![false; plan.items.point_count() as usize];
     let mut source = SourceRows::empty();
@@ -88,15 +144,29 @@ pub fn bake_transfer_shard(
         source.rows.as_mut_slice().copy_from_slice(&input.layer.source);
         source.channels = input.layer.source_channels as usize;
     }
-    let record = round == 0 && params.bounces > 0;
-    let cached = input.as_ref().map(|i| HitRecords { records: &i.hits.records, first_point: points.start });
-    let pass = plan.pass(round, &source, &rejected, cached, record);
-    let label = format!("shard {shard}, round {round}/{}", params.bounces);
+    let record = stage == Stage::Round(0) && params.bounces > 0;
+    let label = match stage {
+        Stage::Pilot => format!("shard {shard}, pilot"),
+        Stage::Round(r) => format!("shard {shard}, round {r}/{}", params.bounces),
+    };
     let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
     let first_items = plan.items.first_items(mesh);
-    let sums = run_range(&pass, range.clone(), Some(&first_items), &progress);
+    let sums = match (&base_items, round) {
+        // Adaptive round 0: the base points again (the same bits as the
+        // pilot's), then the extras, combined item by item as a whole bake does.
+        (Some((base, extra)), 0) => {
+            let base_pass = plan.pass(0, &source, &[], None, record).with_items(base);
+            let mut hits = HitSlots::new(&base_pass, range.clone());
+            let tasks = trace_tasks(&base_pass, range.clone(), &mut hits, &progress);
+            adaptive_range(&plan, base, extra, range.clone(), tasks, hits.records, Some(&first_items), &source, record, &progress)
+        }
+        _ => {
+            let cached = input.as_ref().map(|i| HitRecords { records: &i.hits.records, first_point: points.start });
+            let pass = plan.pass(round, &source, &rejected, cached, record);
+            run_range(&pass, range.clone(), Some(&first_items), &progress)
+        }
+    };
     drop(progress);
-    drop(pass);
 
     let stride = plan.pass_channels(round) * plan.coeffs;
     let tracks_noise = !sums.moments.is_empty();
@@ -140,7 +210,8 @@ pub fn bake_transfer_shard(
         points,
         point_count: plan.items.point_count(),
         window_triangles: plan.base_stats().window_triangles,
-        layer_crc: input.as_ref().map_or(0, |i| i.layer_crc),
+        // Round 0 names the pilot it allocated by (0 without one).
+        layer_crc: input.as_ref().map_or(pilot_crc, |i| i.layer_crc),
         pass_channels: plan.pass_channels(round) as u32,
         channels: plan.channels as u32,
         coeffs: plan.coeffs as u32,
@@ -149,6 +220,7 @@ pub fn bake_transfer_shard(
         rejected: sums.rejected.len() as u64,
         opened,
         tracks_noise,
+        pilot: stage == Stage::Pilot,
         late: VertexRows {
             vertices: sums.late.vertices,
             rows: sums.late.rows,
