@@ -357,7 +357,7 @@ pub fn sweep(scenes: &[RealScene], size: Size, cache_dir: &Path) -> anyhow::Resu
     for scene in scenes {
         let reference = reference(scene, cache_dir)?;
         eprintln!(
-            "chart --real: {} reference: {} of {} vertices lit, seeds differ by {:.4} (DC relative RMS)",
+            "chart --real: {} reference: {} of {} vertices lit, its halves differ by {:.4} (DC relative RMS)",
             scene.name,
             reference.lit.len(),
             scene.mesh.vertex_count(),
