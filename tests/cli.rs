@@ -73,12 +73,16 @@ fn bad_input_is_refused_with_the_path() {
     std::fs::write(&empty, "# nothing\n").unwrap();
     let garbage = dir.path("garbage.prtb");
     std::fs::write(&garbage, b"PRTB\r\n\x1a\n garbage").unwrap();
+    let empty_bundle = dir.path("empty.prtb");
+    std::fs::write(&empty_bundle, b"").unwrap();
     let out = dir.path("o.prtb");
     for (args, needle) in [
         (vec!["bake", missing.to_str().unwrap(), "-o", out.to_str().unwrap()], "missing.obj"),
         (vec!["bake", nan.to_str().unwrap(), "-o", out.to_str().unwrap()], "nan.obj"),
         (vec!["bake", empty.to_str().unwrap(), "-o", out.to_str().unwrap()], "empty.obj"),
         (vec!["inspect", garbage.to_str().unwrap()], "garbage.prtb"),
+        (vec!["sun", garbage.to_str().unwrap(), "-o", out.to_str().unwrap()], "garbage.prtb: not a valid bundle"),
+        (vec!["sun", empty_bundle.to_str().unwrap(), "-o", out.to_str().unwrap()], "empty.prtb: not a valid bundle"),
         (vec!["bake", nan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--order", "0"], "order"),
         (vec!["bake", nan.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "100000"], "rays"),
     ] {

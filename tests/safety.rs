@@ -72,6 +72,9 @@ fn outputs_never_overwrite_inputs() {
     std::fs::hard_link(&bundle, &hard).unwrap();
     assert_refused(&prtbake(&["export", s(&bundle), "-o", s(&hard)]), &["hard.glb", "is the input"]);
     assert_eq!(std::fs::read(&bundle).unwrap(), bundle_bytes);
+    // Not in place with --refine: it replaces the bundle's mesh and transfer.
+    assert_refused(&prtbake(&["sun", s(&bundle), "-o", s(&bundle), "--steps", "4", "--refine", "0.1", "--quiet"]), &["is the input"]);
+    assert_eq!(std::fs::read(&bundle).unwrap(), bundle_bytes);
     // The documented in-place update.
     assert_ok(&prtbake(&["sun", s(&bundle), "-o", s(&bundle), "--steps", "4", "--quiet"]));
     assert_ne!(std::fs::read(&bundle).unwrap(), bundle_bytes);

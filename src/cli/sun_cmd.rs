@@ -91,9 +91,11 @@ pub fn run(config: &SunConfig) -> anyhow::Result<()> {
     print_report(&report, config.json)
 }
 
+/// A bundle by its magic, or by its `.prtb` name (so that a damaged one is
+/// reported as a bad bundle, not as an unknown mesh format).
 fn is_bundle(path: &Path) -> anyhow::Result<bool> {
     let head = read_head(path, Limit::Bundle, 8).with_context(|| format!("cannot read {}", path.display()))?;
-    Ok(head == bundle::MAGIC)
+    Ok(head == bundle::MAGIC || path.extension().is_some_and(|e| e.eq_ignore_ascii_case("prtb")))
 }
 
 fn is_obj(path: &Path) -> bool {
@@ -230,7 +232,9 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
 
 /// Loads the input, computes the day, bakes the masks and writes the bundle.
 pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
-    let mut input = load_sun_input(config, BUNDLE_FORMAT, true)?;
+    // In place only without `--refine`: refining replaces the bundle's mesh
+    // and transfer, which the input alone can give back.
+    let mut input = load_sun_input(config, BUNDLE_FORMAT, config.refine.is_none())?;
     // Refining a bundle's mesh re-bakes its transfer on the new vertices:
     // read how before any work, so a bundle that cannot be re-baked stops here.
     let recipe = match (&config.refine, &input.original) {
