@@ -178,16 +178,8 @@ pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &VertexDc, budget:
             corners.iter().map(|&v| pooled[v] / effective[v].max(1.0)).fold(0.0, f64::max)
         })
         .collect();
-    let extra = |lambda: f64| -> Vec<u32> {
-        ratios
-            .iter()
-            .zip(counts)
-            .map(|(&ratio, &n)| {
-                let k = (lambda * ratio).max(1.0).min(f64::from(max_per_triangle.max(n)) / f64::from(n));
-                3 * ((f64::from(n) * (k - 1.0) / 3.0).round() as u32)
-            })
-            .collect()
-    };
+    let extra =
+        |lambda: f64| -> Vec<u32> { ratios.iter().zip(counts).map(|(&ratio, &n)| grown_by(n, lambda * ratio, max_per_triangle)).collect() };
     if budget == 0 {
         return vec![0; counts.len()];
     }
@@ -216,6 +208,13 @@ fn neyman(extra: impl Fn(f64) -> Vec<u32>, budget: u64) -> Vec<u32> {
     extra(low)
 }
 
+/// The extra points, in whole rotation triples, that grow a triangle of `n`
+/// points `factor` times (at least 1×, at most to `max_per_triangle`).
+fn grown_by(n: u32, factor: f64, max_per_triangle: u32) -> u32 {
+    let k = factor.max(1.0).min(f64::from(max_per_triangle.max(n)) / f64::from(n));
+    3 * ((f64::from(n) * (k - 1.0) / 3.0).round() as u32)
+}
+
 /// Grows to [`SEARCH_FACTOR`] × its base points (at most `max_per_triangle`)
 /// every triangle with a corner whose points were all rejected while a
 /// neighbour's were not; a vertex deep inside geometry, all of whose
@@ -230,8 +229,7 @@ fn search_rejected(mesh: &Mesh, triangles: &[u32], counts: &[u32], weights: &[f3
     }
     for ((&t, &n), e) in triangles.iter().zip(counts).zip(extra.iter_mut()) {
         if mesh.triangle(t as usize).iter().any(|&v| weights[v as usize] <= 0.0 && near_weighted[v as usize]) {
-            let k = SEARCH_FACTOR.min(f64::from(max_per_triangle.max(n)) / f64::from(n));
-            *e = (*e).max(3 * ((f64::from(n) * (k - 1.0) / 3.0).round() as u32));
+            *e = (*e).max(grown_by(n, SEARCH_FACTOR, max_per_triangle));
         }
     }
 }
