@@ -22,7 +22,10 @@
 //! - `shaded_error`: the worst over [`budget::reference_lightings`] of the
 //!   relative RMS of shaded radiance, the definition `--max-error` budgets
 //!   storage with (there against the bake itself);
-//! - `black_lit`: lit vertices the bake leaves at DC 0.
+//! - `black_lit`: lit vertices the bake leaves at DC 0; `black_visible`,
+//!   those of them whose reference DC is at least [`VISIBLE_FRACTION`] of
+//!   the lit mean (the rest carry next to no light: under 10⁻⁶ of the
+//!   mean on the Ferrari, where no display shows them).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -38,6 +41,11 @@ use crate::sh;
 /// The first reference seed; a scene's reference uses this and the next
 /// `reference_seed_count - 1` (the swept bakes use the default seed, 1).
 pub const FIRST_REFERENCE_SEED: u32 = 11;
+
+/// A black lit vertex counts as visible when its reference DC is at least
+/// this fraction of the lit vertices' mean: 10 stops below it, about what an
+/// 8-bit sRGB display still tells from black at an exposure that shows the mean.
+pub const VISIBLE_FRACTION: f64 = 1e-3;
 
 /// Errors the summary reports the time to reach.
 pub const TARGETS: [f64; 3] = [0.10, 0.05, 0.02];
@@ -258,6 +266,9 @@ pub struct Score {
     pub dc_error: f64,
     pub shaded_error: f64,
     pub black_lit: usize,
+    /// Black lit vertices whose reference DC is at least [`VISIBLE_FRACTION`]
+    /// of the lit mean.
+    pub black_visible: usize,
     /// The brightest black lit vertex's reference DC over the lit vertices'
     /// mean reference DC (0 with none black): how much light the black ones miss.
     pub brightest_black: f64,
@@ -296,6 +307,7 @@ pub fn score(transfer: &[f32], noise: &[f32], reference: &RealReference, lightin
         dc_error: relative_rms(&exact_dc, &baked_dc),
         shaded_error,
         black_lit: baked_dc.iter().filter(|&&d| d == 0.0).count(),
+        black_visible: baked_dc.iter().zip(&exact_dc).filter(|(&b, &r)| b == 0.0 && r >= VISIBLE_FRACTION * lit_mean).count(),
         brightest_black,
         noise_estimate,
     }
@@ -317,14 +329,14 @@ pub struct RealRow {
 
 /// The CSV header, in column order.
 pub const CSV_HEADER: &str =
-    "scene,setting,rays,adaptive,seconds,points,rays_traced,dc_error,shaded_error,black_lit,brightest_black,noise_estimate";
+    "scene,setting,rays,adaptive,seconds,points,rays_traced,dc_error,shaded_error,black_lit,brightest_black,noise_estimate,black_visible";
 
 pub fn to_csv(rows: &[RealRow]) -> String {
     let mut s = String::from(CSV_HEADER);
     s.push('\n');
     for r in rows {
         s += &format!(
-            "{},{},{},{},{:.3},{},{},{:.6},{:.6},{},{:.6},{:.6}\n",
+            "{},{},{},{},{:.3},{},{},{:.6},{:.6},{},{:.6},{:.6},{}\n",
             r.scene,
             r.setting,
             r.rays,
@@ -336,7 +348,8 @@ pub fn to_csv(rows: &[RealRow]) -> String {
             r.score.shaded_error,
             r.score.black_lit,
             r.score.brightest_black,
-            r.score.noise_estimate
+            r.score.noise_estimate,
+            r.score.black_visible
         );
     }
     s
@@ -374,7 +387,7 @@ pub fn sweep(scenes: &[RealScene], size: Size, cache_dir: &Path) -> anyhow::Resu
             let seconds = started.elapsed().as_secs_f64();
             let score = score(&result.total, &result.noise, &reference, &lightings);
             eprintln!(
-                "chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  DC error {:.4} (noise estimate {:.4})  shaded {:.4}  black lit {} (brightest {:.3} of the mean)",
+                "chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  DC error {:.4} (noise estimate {:.4})  shaded {:.4}  black lit {}, visible {} (brightest {:.3} of the mean)",
                 scene.name,
                 setting,
                 rays,
@@ -383,6 +396,7 @@ pub fn sweep(scenes: &[RealScene], size: Size, cache_dir: &Path) -> anyhow::Resu
                 score.noise_estimate,
                 score.shaded_error,
                 score.black_lit,
+                score.black_visible,
                 score.brightest_black
             );
             rows.push(RealRow {
@@ -465,7 +479,7 @@ mod tests {
         let lightings = budget::reference_lightings(2);
         let exact = score(&transfer, &[0.01, 0.0, 0.02], &reference, &lightings);
         assert_eq!(exact.dc_error, 0.0);
-        assert_eq!((exact.shaded_error, exact.black_lit, exact.brightest_black), (0.0, 0, 0.0));
+        assert_eq!((exact.shaded_error, exact.black_lit, exact.black_visible, exact.brightest_black), (0.0, 0, 0, 0.0));
         // Noise estimate: sqrt((0.01² + 0.02²) / (0.3² + 0.2²)); the unlit vertex's noise is not counted.
         assert!((exact.noise_estimate - (0.0005f64 / 0.13).sqrt()).abs() < 1e-6, "{}", exact.noise_estimate);
         assert!(score(&transfer, &[], &reference, &lightings).noise_estimate.is_nan());
@@ -473,11 +487,18 @@ mod tests {
         off[4] = 7.0; // the unlit vertex: not scored
         off[2 * n] = 0.0; // a lit vertex turned black
         let s = score(&off, &[], &reference, &lightings);
-        assert_eq!(s.black_lit, 1);
+        assert_eq!((s.black_lit, s.black_visible), (1, 1));
         // The black vertex's reference DC 0.2 over the lit mean 0.25.
         assert!((s.brightest_black - 0.8).abs() < 1e-6, "{}", s.brightest_black);
         // DC error: sqrt(0.2² / (0.3² + 0.2²)).
         assert!((s.dc_error - (0.04f64 / 0.13).sqrt()).abs() < 1e-6, "{}", s.dc_error);
         assert!(s.shaded_error > 0.0);
+        // A lit vertex far below 10⁻³ of the mean, left black: counted, not visible.
+        let mut dim = transfer.clone();
+        dim[2 * n] = 1e-5;
+        let dim_reference = RealReference { transfer: dim.clone(), ..reference };
+        dim[2 * n] = 0.0;
+        let d = score(&dim, &[], &dim_reference, &lightings);
+        assert_eq!((d.black_lit, d.black_visible), (1, 0));
     }
 }
