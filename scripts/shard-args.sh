@@ -15,7 +15,7 @@ bounces_of() {
 }
 
 # Succeeds when the bake args "$@" allocate adaptively: bake's default
-# (--adaptive 1) unless --adaptive 0 or, without --adaptive, --sampling
+# (--adaptive 0.25) unless --adaptive 0 or, without --adaptive, --sampling
 # vertex. Such a bake has a pilot stage before round 0 (docs/scale.md).
 is_adaptive() {
     local prev= arg adaptive= sampling=interior

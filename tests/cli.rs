@@ -408,7 +408,7 @@ fn clean_and_bake_cut_intersections() {
 }
 
 /// Issue 17: `bake --adaptive F` adds points after bounce 0 and records the
-/// factor in META; it is on (1) by default, off with `--sampling vertex`; a
+/// factor in META; it is on (0.25, at 32 rays) by default, off with `--sampling vertex`; a
 /// factor outside 0..=16, or one with `--sampling vertex`, is refused with
 /// exit 2 and nothing written, and so is an adaptive shard's round without
 /// the merged pilot.
@@ -433,11 +433,16 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
     assert_eq!(added, Some(points[1] - points[0]), "META counts the added points");
     assert_eq!(meta(&adaptive_out)["params"]["adaptive"].as_f64(), Some(1.0));
     assert!(meta(&base_out)["params"].get("adaptive").is_none(), "a bake without it records nothing new");
-    // The default is adaptive: the same bytes as `--adaptive 1`.
+    // The default is adaptive at 32 rays: the same bytes as `--rays 32 --adaptive 0.25`.
     let default_out = dir.path("default.prtb");
-    let o = prtbake(&[&base[..], &["-o", default_out.to_str().unwrap()]].concat());
+    let quarter_out = dir.path("quarter.prtb");
+    let defaults = ["bake", obj.to_str().unwrap(), "--bounces", "1", "--quiet", "--json"];
+    let o = prtbake(&[&defaults[..], &["-o", default_out.to_str().unwrap()]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(std::fs::read(&default_out).unwrap() == std::fs::read(&adaptive_out).unwrap(), "the default is --adaptive 1");
+    let o = prtbake(&[&base[..], &["-o", quarter_out.to_str().unwrap(), "--adaptive", "0.25"]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(&default_out).unwrap() == std::fs::read(&quarter_out).unwrap(), "the default is --rays 32 --adaptive 0.25");
+    assert_eq!(meta(&default_out)["params"]["adaptive"].as_f64(), Some(0.25));
     // ... but not with vertex sampling, which adaptive allocation cannot serve.
     let vertex_out = dir.path("vertex.prtb");
     let o = prtbake(&[&base[..], &["-o", vertex_out.to_str().unwrap(), "--sampling", "vertex"]].concat());
