@@ -78,8 +78,9 @@ struct BakeArgs {
     /// SH order n: n² coefficients per channel.
     #[arg(long, default_value_t = 3)]
     order: usize,
-    /// Rays per sample point (≤ 65536). The default is a fast bake (4.5% total
-    /// error on the Ferrari); `--rays 128 --adaptive 1` a final one (2%).
+    /// Rays per sample point (≤ 65536). The default is a fast bake (the Ferrari
+    /// in window mode, 3 bounces: 4.5% total error); `--rays 128 --adaptive 1`
+    /// a final one (2%).
     #[arg(long, default_value_t = 32)]
     rays: u32,
     #[arg(long, default_value_t = 1)]
