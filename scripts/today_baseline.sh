@@ -16,7 +16,15 @@ DATA=${1:-../shared/data}
 CACHE=${2:-docs/chart}
 OUT=${3:-target/today-baseline}
 COMMIT=ea47cd5
+# OUT is this script's alone: an existing folder it did not make is refused,
+# so that its bundles, JSON and worktree never replace anybody's files.
+MARK=.today-baseline
+if [ -e "$OUT" ] && [ ! -e "$OUT/$MARK" ] && [ -n "$(ls -A "$OUT" 2>/dev/null)" ]; then
+    echo "$0: $OUT exists and is not a folder this script made (no $MARK in it); choose another OUT" >&2
+    exit 2
+fi
 mkdir -p "$OUT" "$CACHE"
+touch "$OUT/$MARK"
 OUT=$(cd "$OUT" && pwd)
 
 if [ ! -d "$OUT/src" ]; then

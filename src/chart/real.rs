@@ -279,6 +279,16 @@ pub struct Score {
     pub noise_estimate: f64,
 }
 
+impl Score {
+    /// One line of the figures, for progress and reports.
+    pub fn summary(&self) -> String {
+        format!(
+            "DC error {:.4} (noise estimate {:.4})  shaded {:.4}  black lit {}, visible {} (brightest {:.3} of the mean)",
+            self.dc_error, self.noise_estimate, self.shaded_error, self.black_lit, self.black_visible, self.brightest_black
+        )
+    }
+}
+
 /// Scores a one-channel transfer of the reference's order and vertex count,
 /// with its per-vertex DC standard errors `noise` (empty when not measured).
 pub fn score(transfer: &[f32], noise: &[f32], reference: &RealReference, lightings: &[Lighting]) -> Score {
@@ -386,19 +396,7 @@ pub fn sweep(scenes: &[RealScene], size: Size, cache_dir: &Path) -> anyhow::Resu
             let (result, _, _) = bake_mesh(&scene.mesh, &params, &scene.window_patterns)?;
             let seconds = started.elapsed().as_secs_f64();
             let score = score(&result.total, &result.noise, &reference, &lightings);
-            eprintln!(
-                "chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  DC error {:.4} (noise estimate {:.4})  shaded {:.4}  black lit {}, visible {} (brightest {:.3} of the mean)",
-                scene.name,
-                setting,
-                rays,
-                seconds,
-                score.dc_error,
-                score.noise_estimate,
-                score.shaded_error,
-                score.black_lit,
-                score.black_visible,
-                score.brightest_black
-            );
+            eprintln!("chart --real: {:<8} {:<10} {:>4} rays {:>8.2}s  {}", scene.name, setting, rays, seconds, score.summary());
             rows.push(RealRow {
                 scene: scene.name.into(),
                 setting: setting.into(),

@@ -136,17 +136,7 @@ pub fn run_real(
         for s in &sweeps {
             println!("  {}: {} lit vertices; reference halves differ by {:.4}", s.name, s.reference.lit.len(), s.reference.seed_difference);
             for r in &s.rows {
-                println!(
-                    "    {:<10} {:>4} rays {:>8.2}s  DC error {:.4} (noise estimate {:.4})  shaded {:.4}  black lit {} (visible {})",
-                    r.setting,
-                    r.rays,
-                    r.seconds,
-                    r.score.dc_error,
-                    r.score.noise_estimate,
-                    r.score.shaded_error,
-                    r.score.black_lit,
-                    r.score.black_visible
-                );
+                println!("    {:<10} {:>4} rays {:>8.2}s  {}", r.setting, r.rays, r.seconds, r.score.summary());
             }
         }
     }
