@@ -5,6 +5,7 @@
 //! real_score DATA CACHE SCENE export OUT.obj        # the scene's mesh as the chart bakes it
 //! real_score DATA CACHE SCENE score BUNDLE.prtb…    # bundles of that mesh (any prtbake version)
 //! real_score DATA CACHE SCENE bake RAYS:ADAPTIVE[:ws][:seed=N]…
+//! real_score DATA CACHE SCENE split HIGH SETTING…   # error by bounce against a bake at HIGH
 //! ```
 //!
 //! DATA is ../shared/data, CACHE the chart's output folder holding
@@ -14,13 +15,17 @@
 //! `bake` bakes in process with the chart's parameters (order 3, 3 bounces,
 //! one channel) at the given rays and `--adaptive`, `ws` adding
 //! `--window-sampling`, and says of the black lit vertices how many of the
-//! reference's seeds light them.
+//! reference's seeds light them. `split` bakes HIGH (a setting as for
+//! `bake`, far more rays) keeping each bounce, then each SETTING, and says
+//! how far each one's bounce 0 and its later bounces together lie from
+//! HIGH's, relative to HIGH's total over the reference's lit vertices: where
+//! a setting's error comes from (HIGH's own noise included).
 use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, ensure, Context};
-use prtbake::bake::{bake_mesh, BakeParams};
+use prtbake::bake::{bake_mesh, BakeParams, TransferResult};
 use prtbake::chart::real::{self, RealReference, RealScene, Score};
 use prtbake::chart::scenes::Size;
 
@@ -70,9 +75,65 @@ fn main() -> anyhow::Result<()> {
                 println!("  black lit vertices by how many of the {} reference seeds light them (0 … all): {by_seeds:?}", seed_dc.len());
             }
         }
-        other => bail!("unknown command {other:?}: export, score or bake"),
+        "split" => {
+            ensure!(args.len() >= 6, "split needs HIGH and at least one SETTING");
+            let keep_bounces =
+                |setting: &str| Ok::<_, anyhow::Error>(BakeParams { store_bounces: true, ..parse_setting(setting, &scene.base)? });
+            let (high, _, _) = bake_mesh(&scene.mesh, &keep_bounces(&args[4])?, &scene.window_patterns)?;
+            let split = BounceSplit::new(&high, &reference.lit, n);
+            println!("{name} {}: bounce 0 holds {:.3} of the lit vertices' summed DC", args[4], split.direct_share());
+            for setting in &args[5..] {
+                let started = Instant::now();
+                let (result, _, _) = bake_mesh(&scene.mesh, &keep_bounces(setting)?, &scene.window_patterns)?;
+                let seconds = started.elapsed().as_secs_f64();
+                let [total, direct, indirect] = split.errors(&result);
+                println!("{name} {setting} {seconds:.2} s: DC error against {}: total {total:.4}, bounce 0 {direct:.4}, bounces 1+ {indirect:.4}", args[4]);
+            }
+        }
+        other => bail!("unknown command {other:?}: export, score, bake or split"),
     }
     Ok(())
+}
+
+/// A bake kept bounce by bounce, to split another bake's DC error into its
+/// bounce 0's and its later bounces' parts.
+struct BounceSplit<'a> {
+    high: &'a TransferResult,
+    lit: &'a [usize],
+    n: usize,
+    /// Σ over lit vertices of the high bake's total DC².
+    norm: f64,
+}
+
+impl<'a> BounceSplit<'a> {
+    fn new(high: &'a TransferResult, lit: &'a [usize], n: usize) -> Self {
+        let norm = lit.iter().map(|&v| (high.total[v * n] as f64).powi(2)).sum();
+        BounceSplit { high, lit, n, norm }
+    }
+
+    /// DC of vertex `v`: 0 the total, 1 bounce 0, 2 the later bounces.
+    fn dc(&self, result: &TransferResult, v: usize, part: usize) -> f64 {
+        let at = |layer: &[f32]| layer[v * self.n] as f64;
+        match part {
+            0 => at(&result.total),
+            1 => at(&result.bounces[0]),
+            _ => result.bounces[1..].iter().map(|b| at(b)).sum(),
+        }
+    }
+
+    fn direct_share(&self) -> f64 {
+        let sum = |part| self.lit.iter().map(|&v| self.dc(self.high, v, part)).sum::<f64>();
+        sum(1) / sum(0)
+    }
+
+    /// Relative RMS DC difference from the high bake of the total, bounce 0
+    /// and the later bounces, each over the high bake's total.
+    fn errors(&self, result: &TransferResult) -> [f64; 3] {
+        [0, 1, 2].map(|part| {
+            let squared: f64 = self.lit.iter().map(|&v| (self.dc(result, v, part) - self.dc(self.high, v, part)).powi(2)).sum();
+            (squared / self.norm).sqrt()
+        })
+    }
 }
 
 /// `RAYS:ADAPTIVE[:ws][:seed=N]` over the scene's base parameters.

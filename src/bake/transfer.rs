@@ -1355,7 +1355,7 @@ impl Pass<'_> {
                 if visibility > 0.0 {
                     let w = match (sample_windows, scratch.hits.get(i).copied().flatten()) {
                         (Some(windows), Some(hit)) if closest => {
-                            let pdf = windows.pdf(self.mesh, point.position, hit.triangle, query.direction, hit.t);
+                            let pdf = windows.pdf(point.position, hit.triangle, query.direction, hit.t);
                             visibility * self.window_mis_weight(point, query.direction, pdf)
                         }
                         _ => visibility * ray_weight,
@@ -1412,7 +1412,7 @@ impl Pass<'_> {
         for k in 0..self.params.rays {
             let (u_pick, _) = sample_2d(self.params.pattern, k, 2, point.seed);
             let (u1, u2) = sample_2d(self.params.pattern, k, 1, point.seed);
-            let Some(draw) = windows.draw(self.mesh, point.position, u_pick, u1, u2) else { continue };
+            let Some(draw) = windows.draw(point.position, u_pick, u1, u2) else { continue };
             // A pane touching the point: the offset origin may lie past it.
             if draw.distance <= 16.0 * self.scene.origin_offset {
                 continue;
