@@ -19,7 +19,8 @@
 //! `bake`, far more rays) keeping each bounce, then each SETTING, and says
 //! how far each one's bounce 0 and its later bounces together lie from
 //! HIGH's, relative to HIGH's total over the reference's lit vertices: where
-//! a setting's error comes from (HIGH's own noise included).
+//! a setting's error comes from (HIGH's own noise included; give HIGH
+//! another seed, `…:seed=7`, or the shared rays hide part of the error).
 use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
