@@ -223,7 +223,7 @@ struct RefineArgs {
     #[arg(long, value_name = "LENGTH")]
     min_edge: Option<f32>,
     /// `bake` with --refine or --max-vertices: a difference between an edge's vertices counts only
-    /// past K standard errors of their estimates (bounce 0's own spread), so noise is not split;
+    /// past K standard errors of their estimates (each bounce's own spread), so noise is not split;
     /// 0 splits noise as light [default: 2].
     #[arg(long, value_name = "K")]
     refine_noise: Option<f64>,

@@ -176,11 +176,10 @@ pub fn measure(
 }
 
 /// Per lighting, the relative RMS of shaded radiance (as [`relative_rms`]
-/// counts it) that the bake's own noise amounts to: a vertex's bounce-0 DC
-/// standard error `noise[v]` (`TransferResult::noise`) is its DC's absolute
-/// noise in every channel (later bounces gather over many points and add
-/// little), scaled to each lighting as the vertex's shading per unit of its
-/// DC. `None` unless `noise` has one value per vertex.
+/// counts it) that the bake's own noise amounts to: a vertex's DC standard
+/// error over every bounce `noise[v]` (`TransferResult::noise`) is its DC's
+/// absolute noise in every channel, scaled to each lighting as the vertex's
+/// shading per unit of its DC. `None` unless `noise` has one value per vertex.
 pub fn noise_errors(transfer: &[f32], order: usize, channels: usize, noise: &[f32], lightings: &[Lighting]) -> Option<Vec<f64>> {
     let n = sh::coeff_count(order);
     let stride = (channels * n).max(1);

@@ -261,9 +261,10 @@ pub struct TransferResult {
     pub total: Vec<f32>,
     /// Each bounce (0 = direct) when `store_bounces`, else empty.
     pub bounces: Vec<Vec<f32>>,
-    /// Per vertex, the standard error of bounce 0's DC estimate, from its
-    /// points' spread (`bake::adaptive::Moments`); empty when not measured
-    /// (vertex sampling, sharded bakes). Not stored in bundles.
+    /// Per vertex, the standard error of its DC estimate (channel 0): each
+    /// bounce's from its points' spread (`bake::adaptive::Moments`), the
+    /// bounces added in quadrature (`adaptive::add_noise_in_quadrature`);
+    /// empty when not measured (vertex sampling). Not stored in bundles.
     pub noise: Vec<f32>,
     pub stats: BakeStats,
 }

@@ -22,7 +22,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::adaptive::{Moments, VertexDc};
+use super::adaptive::{add_noise_in_quadrature, Moments, VertexDc};
 use super::enclosure::Sides;
 use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
@@ -235,7 +235,8 @@ pub(crate) struct Pass<'a> {
     /// the rays are the same, only the values at their ends change.
     hit_cache: Option<HitRecords<'a>>,
     record_hits: bool,
-    /// Bounce 0: keep each item corner's [`Moments`] (for the noise estimate).
+    /// Interior sampling: keep each item corner's [`Moments`] of this
+    /// bounce's point DC (the noise estimate adds every bounce's).
     track_noise: bool,
     /// Window triangles to sample directly for bounce 0 (window mode).
     windows: Option<&'a WindowLights>,
@@ -253,8 +254,8 @@ pub(crate) struct TaskOutput {
     traced: u64,
     /// Hit records of this task's points, in point order (bounce 0 with caching).
     hits: Vec<u64>,
-    /// Per item and corner, the moments of the points' DC (bounce 0 when
-    /// the pass tracks noise, else empty).
+    /// Per item and corner, the moments of the points' DC (when the pass
+    /// tracks noise, else empty).
     moments: Vec<Moments>,
 }
 
@@ -368,7 +369,7 @@ impl<'a> Plan<'a> {
             reject_distance: self.params.inside_distance * self.scene.diagonal,
             hit_cache: if bounce > 0 { cached } else { None },
             record_hits: bounce == 0 && record_hits,
-            track_noise: bounce == 0 && self.items.corners() == 3,
+            track_noise: self.items.corners() == 3,
             windows: self.windows.as_ref(),
         }
     }
@@ -703,17 +704,20 @@ fn bake_layers(
             run_range(&pass, 0..plan.items.len(), None, &progress)
         };
         drop(progress);
+        let pass_channels = plan.pass_channels(bounce);
         if bounce == 0 {
-            noise = VertexDc::new(&sums.weights, &sums.sums, coeffs, &sums.moments).standard_errors();
             vertex_weight = sums.weights;
             if use_cache {
                 hit_cache = sums.hits;
             }
         }
+        if !sums.moments.is_empty() {
+            let sigma = VertexDc::new(&vertex_weight, &sums.sums, pass_channels * coeffs, &sums.moments).standard_errors();
+            add_noise_in_quadrature(&mut noise, &sigma);
+        }
         for index in sums.rejected {
             rejected[index as usize] = true;
         }
-        let pass_channels = plan.pass_channels(bounce);
         let mut layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
         match kept {
             Some(kept) => {

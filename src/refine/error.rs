@@ -111,26 +111,25 @@ pub fn transfer_edge_errors(mesh: &Mesh, result: &TransferResult, mean: &MeanSha
         .collect()
 }
 
-/// Per sky, each vertex's standard error of shaded luminance: bounce 0's
-/// DC standard error (`TransferResult::noise`) scaled by the vertex's
-/// bounce-0 shading per unit of DC, i.e. the same relative noise as its DC
-/// (most of a bake's noise is bounce 0's visibility; later bounces gather
-/// over many points and are smoother). Empty rows (zeros) when the bake
-/// measured no noise (vertex sampling) or kept no bounce-0 layer.
+/// Per sky, each vertex's standard error of shaded luminance: its DC
+/// standard error over every bounce (`TransferResult::noise`) scaled by the
+/// vertex's shading per unit of DC, i.e. the same relative noise as its DC.
+/// Empty rows (zeros) when the bake measured no noise (vertex sampling).
 fn shading_noise(result: &TransferResult, skies: &[Vec<[f32; 3]>]) -> Vec<Vec<f64>> {
     let vertex_count = result.total.len() / (result.channels * crate::sh::coeff_count(result.order)).max(1);
-    let (Some(direct), true) = (result.bounces.first(), result.noise.len() == vertex_count) else {
+    if result.noise.len() != vertex_count {
         return skies.iter().map(|_| vec![0.0; vertex_count]).collect();
-    };
+    }
+    let total = &result.total;
     let stride = result.channels * crate::sh::coeff_count(result.order);
     skies
         .iter()
         .map(|sky| {
-            layer_luminances(direct, result, sky)
+            layer_luminances(total, result, sky)
                 .iter()
                 .enumerate()
                 .map(|(v, &y)| {
-                    let dc = f64::from(direct[v * stride]);
+                    let dc = f64::from(total[v * stride]);
                     if dc > 0.0 {
                         f64::from(result.noise[v]) * y.abs() / dc
                     } else {

@@ -59,7 +59,7 @@ pub struct RefineParams {
     /// At most this many split-and-re-bake rounds.
     pub max_rounds: u32,
     /// Transfer: a luminance difference counts only past this many standard
-    /// errors of the two vertices' estimates (bounce 0's spread), so that
+    /// errors of the two vertices' estimates (every bounce's spread), so that
     /// noise is not split; 0 counts noise as light.
     pub noise_sigmas: f64,
 }

@@ -249,9 +249,9 @@ impl TransferPart {
         let (rays, traced, rejected) = (r.u64("rays")?, r.u64("rays traced")?, r.u64("points rejected")?);
         let (tracks_noise, pilot) = match r.u32("row flags")? {
             0 => (false, false),
-            1 if round == 0 => (true, false),
+            1 => (true, false),
             3 if round == 0 => (true, true),
-            f => return Err(format!("row flags {f} in round {round}: only round 0 carries moments (1), and a pilot always does (3)")),
+            f => return Err(format!("row flags {f} in round {round}: rows carry moments (1), and only round 0's pilot is a pilot (3)")),
         };
         let stride = (pass_channels * coeffs) as u64;
         let vertex_count = identity.mesh.vertices;

@@ -9,7 +9,7 @@ use super::codec::FileKind;
 use super::files::{Identity, LayerFile, PilotFile, SunPart, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
-use crate::bake::adaptive::{Moments, VertexDc};
+use crate::bake::adaptive::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
 use crate::bake::{BakeStats, TransferResult};
 
@@ -237,8 +237,8 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         Some(layer) => layer.weights.clone(),
         None => zeroed(vertex_count, first_path)?,
     };
-    // Round 0 of interior sampling: each vertex's DC moments, added as the sums are.
-    let tracks_noise = round == 0 && reference.tracks_noise;
+    // Interior sampling: each vertex's DC moments, added as the sums are.
+    let tracks_noise = reference.tracks_noise;
     if let Some((path, _)) = parts.iter().find(|(_, p)| p.tracks_noise != reference.tracks_noise) {
         return Err(ShardError::mismatch(path, format!("carries noise moments, and {} does not (or the reverse)", first_path.display())));
     }
@@ -287,12 +287,11 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             moments,
         }));
     }
-    // As a whole bake computes it after bounce 0; later rounds carry it on.
-    let noise = match &previous {
-        Some(layer) => layer.noise.clone(),
-        None if tracks_noise => VertexDc::new(&weights, &sums, coeffs, &moments).standard_errors(),
-        None => Vec::new(),
-    };
+    // As a whole bake computes it: the rounds so far, in quadrature.
+    let mut noise = previous.as_ref().map_or_else(Vec::new, |layer| layer.noise.clone());
+    if tracks_noise {
+        add_noise_in_quadrature(&mut noise, &VertexDc::new(&weights, &sums, stride, &moments).standard_errors());
+    }
 
     let layer = normalised_layer(&sums, &weights, pass_channels, channels, coeffs);
     let (mut total, mut layers, mut rays_per_bounce, points_rejected, rays_traced) = match previous {
