@@ -109,8 +109,8 @@ impl Moments {
     }
 }
 
-/// Each vertex's bounce-0 DC statistics: what the noise estimate and the
-/// allocation read.
+/// Each vertex's DC statistics in one bounce: what the noise estimate (every
+/// bounce) and the allocation (bounce 0) read.
 pub(crate) struct VertexDc<'a> {
     pub(crate) weights: &'a [f32],
     /// Σ w·x of the DC per vertex.

@@ -107,8 +107,8 @@ pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::
         meta["total_error"] = json!(total);
         meta["within_budget"] = json!(c.within_budget());
         meta["total_error_metric"] = json!(
-            "per sky sqrt(noise^2 + storage^2), worst over the skies; noise: each vertex's bounce-0 DC standard error \
-             from its points' spread, scaled to the sky's shading as a relative error (bias from truncated bounces not counted)"
+            "per sky sqrt(noise^2 + storage^2), worst over the skies; noise: each vertex's DC standard error, each bounce's \
+             from its points' spread, in quadrature, scaled to the sky's shading as a relative error (bias from truncated bounces not counted)"
         );
     }
     meta

@@ -273,7 +273,7 @@ pub struct Score {
     /// mean reference DC (0 with none black): how much light the black ones miss.
     pub brightest_black: f64,
     /// The bake's own estimate of its DC noise, `sqrt(Σ σ² / Σ r²)` over the
-    /// lit vertices (σ: `TransferResult::noise`, bounce 0's standard error;
+    /// lit vertices (σ: `TransferResult::noise`, every bounce's in quadrature;
     /// NaN when the bake measured none), beside `dc_error` to show how far
     /// the estimate can be trusted.
     pub noise_estimate: f64,

@@ -358,8 +358,8 @@ pub struct LayerFile {
     pub rays_per_bounce: Vec<u64>,
     /// Per vertex: barycentric weight (from round 0).
     pub weights: Vec<f32>,
-    /// Per vertex: bounce 0's DC standard error (`TransferResult::noise`),
-    /// from round 0's moments; empty when not tracked.
+    /// Per vertex: the DC standard error of the rounds so far in quadrature
+    /// (`TransferResult::noise`), from their moments; empty when not tracked.
     pub noise: Vec<f32>,
     /// Per vertex `[source channel][coeff]`: this bounce normalised, what the next round gathers.
     pub source: Vec<f32>,
