@@ -32,23 +32,25 @@ use prtbake::chart::scenes::Size;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    ensure!(args.len() >= 4, "usage: real_score DATA CACHE SCENE export OUT.obj | score BUNDLE… | bake RAYS:ADAPTIVE[:ws][:seed=N]…");
+    ensure!(
+        args.len() >= 4,
+        "usage: real_score DATA CACHE SCENE export OUT.obj | score BUNDLE… | bake RAYS:ADAPTIVE[:ws][:seed=N]… | split HIGH SETTING…"
+    );
     let (data, cache, name, command) = (Path::new(&args[0]), Path::new(&args[1]), args[2].as_str(), args[3].as_str());
     let scenes = real::scenes(data, Size::Full, 14_000 << 20)?;
     let scene = scenes.iter().find(|s| s.name == name).with_context(|| format!("no scene {name} (ferrari, room, cabin)"))?;
     if command == "export" {
-        prtbake::mesh::write_obj(Path::new(args.get(4).context("export needs OUT.obj")?), &scene.mesh)?;
+        let out = Path::new(args.get(4).context("export needs OUT.obj")?);
+        // Never over the scene's own file (the room is an OBJ too).
+        let inputs: Vec<&Path> = scene.source.iter().map(|p| p.as_path()).collect();
+        prtbake::files::check_outputs(&inputs, &[prtbake::files::Output::new(out, &["obj"])], false)?;
+        prtbake::mesh::write_obj(out, &scene.mesh)?;
         return Ok(());
     }
     let reference = real::reference(scene, cache)?;
     let lightings = prtbake::budget::reference_lightings(reference.order);
     let n = prtbake::sh::coeff_count(reference.order);
-    let print = |label: &str, s: &Score| {
-        println!(
-            "{name} {label}: DC error {:.4}  shaded {:.4}  noise estimate {:.4}  black lit {} (visible {}, brightest {:.3e} of the mean)",
-            s.dc_error, s.shaded_error, s.noise_estimate, s.black_lit, s.black_visible, s.brightest_black
-        )
-    };
+    let print = |label: &str, s: &Score| println!("{name} {label}: {}", s.summary());
     match command {
         "score" => {
             for path in &args[4..] {

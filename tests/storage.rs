@@ -58,8 +58,8 @@ fn quantized_bundles_decode_within_recorded_error() {
 #[test]
 fn max_error_picks_lower_order_when_the_budget_allows() {
     let dir = Scratch::new("budget");
-    // --adaptive 1 keeps the bake's own noise (4.8% here with the default 0.25) well
-    // inside the budget, so storage has room to drop an order.
+    // --adaptive 1 keeps the bake's own noise well inside the budget (with the
+    // default 0.25 the noise leaves storage no room), so it can drop an order.
     let (loose, report) = bake(&dir, "loose.prtb", &["--order", "4", "--max-error", "0.05", "--adaptive", "1"]);
     let b = read_bundle(&loose).unwrap();
     let s = &b.meta["storage"];

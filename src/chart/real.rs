@@ -53,6 +53,8 @@ pub const TARGETS: [f64; 3] = [0.10, 0.05, 0.02];
 /// A real scene ready to sweep.
 pub struct RealScene {
     pub name: &'static str,
+    /// The file the mesh was read from (`None`: generated).
+    pub source: Option<PathBuf>,
     pub mesh: Mesh,
     pub window_patterns: Vec<String>,
     /// Mode, order, bounces, channels; rays = the CLI default for the scene.
@@ -109,6 +111,7 @@ pub fn scenes(data: &Path, size: Size, hit_cache_bytes: u64) -> anyhow::Result<V
     let (cabin, _) = crate::clean::clean_mesh(&raw, &cad)?;
     let cabin = RealScene {
         name: "cabin",
+        source: None,
         mesh: cabin,
         window_patterns: Vec::new(),
         base: base(Mode::Window, 192, hit_cache_bytes),
@@ -130,9 +133,10 @@ pub fn scenes(data: &Path, size: Size, hit_cache_bytes: u64) -> anyhow::Result<V
             .with_context(|| format!("chart --real: cannot load the scene {relative}"))?;
         Ok(Some((loaded.mesh, path)))
     };
-    if let Some((mesh, _)) = load("car-ferrari458/ferrari_nodraco.glb")? {
+    if let Some((mesh, path)) = load("car-ferrari458/ferrari_nodraco.glb")? {
         out.push(RealScene {
             name: "ferrari",
+            source: Some(path),
             mesh,
             window_patterns: vec!["Glass_Gray".into()],
             base: base(Mode::Window, 256, hit_cache_bytes),
@@ -146,6 +150,7 @@ pub fn scenes(data: &Path, size: Size, hit_cache_bytes: u64) -> anyhow::Result<V
         let (mesh, _) = crate::clean::clean_mesh(&raw, &cad).with_context(|| format!("{}: cannot clean", path.display()))?;
         out.push(RealScene {
             name: "room",
+            source: Some(path),
             mesh,
             window_patterns: Vec::new(),
             base: base(Mode::Open, 256, hit_cache_bytes),
