@@ -5,6 +5,7 @@ mod bake_props;
 mod chart;
 mod clean_props;
 mod cli;
+mod convert_mitsuba;
 mod estimator;
 mod export;
 mod hostile_bake;

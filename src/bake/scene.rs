@@ -226,6 +226,32 @@ impl Scene {
         Ok(scene)
     }
 
+    /// The scene's geometry (face normals, diagonal, offsets) without a BVH,
+    /// for passes that only gather from recorded hits (a sharded bake's
+    /// rounds ≥ 1): building the BVH would be most of their time. A ray
+    /// traced in it hits nothing.
+    pub fn without_bvh(mesh: &Mesh) -> Result<Scene, SceneError> {
+        check_extent(mesh)?;
+        let empty = Mesh {
+            positions: mesh.positions.clone(),
+            indices: Vec::new(),
+            tri_material: Vec::new(),
+            tri_group: Vec::new(),
+            materials: mesh.materials.clone(),
+            ..Mesh::default()
+        };
+        let mut scene = Scene::build(&empty, BuildQuality::Sah)?;
+        // The same arithmetic as `build`'s, so gathers see the same bits.
+        scene.face_normals = (0..mesh.triangle_count())
+            .map(|t| {
+                let [a, b, c] = mesh.triangle_positions(t);
+                let t = Triangle { v0: a.into(), v1: b.into(), v2: c.into() };
+                Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero()
+            })
+            .collect();
+        Ok(scene)
+    }
+
     /// Unit geometric normal of mesh triangle `t` (counter-clockwise front).
     #[inline]
     pub fn face_normal(&self, t: u32) -> Vec3 {

@@ -826,6 +826,10 @@ pub(crate) fn adaptive_range(
     };
     let Items::Interior { first_sample: unified_first, .. } = &plan.items else { unreachable!("the unified layout is interior") };
     let pass = plan.pass(0, source, &[], None, record_hits);
+    if range.is_empty() {
+        // A shard with no items (more shards than the cost can split) adds nothing.
+        return RangeSums::empty(&pass);
+    }
     let rays = if pass.record_hits { plan.params.rays as usize } else { 0 };
     let stride = plan.coeffs;
     // Base records to their unified places, last item first: every block

@@ -159,6 +159,10 @@ pub fn load_for_bake(config: &BakeConfig, outputs: &[Output]) -> anyhow::Result<
         mesh = cleaned;
     }
     let clean_seconds = config.clean.is_some().then(|| clean_start.elapsed().as_secs_f64());
+    // The bundle says which glass was a window (the viewer, the panel,
+    // `inspect`): marked once here, so whole bakes, shards and their merge
+    // all store the same material section.
+    let mesh = bake::Surfaces::with_window_roles(&mesh, &config.window_patterns)?;
     Ok(LoadedMesh { mesh, meta, load_seconds, clean_seconds })
 }
 
@@ -282,7 +286,6 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         }
         None => (std::borrow::Cow::Borrowed(mesh), result),
     };
-    let stored_mesh = bake::Surfaces::with_window_roles(&stored_mesh, &config.window_patterns)?;
     let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage, &config.output)?;
     warn_over_budget(choice.as_ref(), &config.output);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;

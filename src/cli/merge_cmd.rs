@@ -176,6 +176,7 @@ fn merge_sun(config: &MergeConfig, parts: &[(PathBuf, SunPart)]) -> anyhow::Resu
     let masks = super::with_threads(config.threads, || {
         crate::bake::sun::sun_masks_from_bits(&b.mesh, &surfaces, &suns, &merged.key.params, &merged.bits, merged.rays)
     })??;
+    super::sun_cmd::warn_if_never_lit(output, merged.key.params.mode, &merged.key.window_patterns, &masks.stats);
     let mut meta = b.meta;
     let sun_meta =
         meta.get_mut("sun").and_then(|s| s.as_object_mut()).ok_or_else(|| frame_error("its frame's META has no sun object".into()))?;

@@ -139,7 +139,12 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let (output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = crate::bake::Surfaces::resolve(mesh, &config.window_patterns)?;
         check_windows(config, &surfaces)?;
-        let scene = Scene::build(mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
+        // Rounds ≥ 1 gather from round 0's hit records and trace nothing.
+        let scene = match stage {
+            Stage::Round(r) if r > 0 => Scene::without_bvh(mesh),
+            _ => Scene::build(mesh, BuildQuality::Sah),
+        }
+        .with_context(|| config.input.display().to_string())?;
         let input =
             input.map(|(layer, layer_crc, hits)| RoundInput { hits_path: &hits_path, hits, layer_path: &layer_path, layer, layer_crc });
         let pilot = pilot.map(|(pilot, crc)| PilotInput { path: &pilot_path, pilot, crc });
@@ -224,6 +229,7 @@ fn placeholder_stats(steps: &[SunStep]) -> SunStats {
 /// Traces one shard's sun samples into a part and prints what it wrote.
 pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
     let input = load_sun_input(config, PART_FORMAT, false)?;
+    let config = &super::sun_cmd::with_bundle_windows(config, &input)?;
     let started = std::time::Instant::now();
     let (part, steps) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let steps = day_steps(config, &input)?;

@@ -115,6 +115,9 @@ pub struct SunInput {
     pub file_up: UpAxis,
     /// The input's file name, as META `source` records it.
     pub source_name: Option<String>,
+    /// The light the input bundle was baked for (its transfer's, else its
+    /// earlier sun masks'): window mode and patterns.
+    pub recorded_windows: Option<(Mode, Vec<String>)>,
 }
 
 impl SunInput {
@@ -153,8 +156,11 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
         (b.mesh, Some((bytes, b.meta)), b.transfer.is_some())
     } else {
-        (super::load_mesh(input, config.up, quiet, &outputs, config.force)?, None, false)
+        // The new bundle says which glass was a window, as a transfer bake's does.
+        let mesh = super::load_mesh(input, config.up, quiet, &outputs, config.force)?;
+        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false)
     };
+    let recorded_windows = original.as_ref().and_then(|(_, meta)| recorded_windows(meta, had_transfer));
     let up = Vec3::Y;
     let north = match config.north {
         Some(n) => {
@@ -168,7 +174,72 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
     let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
-    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name })
+    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows })
+}
+
+/// The mode and `--window` patterns a bundle's META records: its transfer
+/// bake's when it has one, else its sun bake's.
+fn recorded_windows(meta: &serde_json::Value, had_transfer: bool) -> Option<(Mode, Vec<String>)> {
+    let from = if had_transfer { meta } else { meta.get("sun")? };
+    let mode: Mode = serde_json::from_value(from.pointer("/params/mode")?.clone()).ok()?;
+    let patterns = from
+        .get("window_patterns")
+        .and_then(|p| p.as_array())
+        .map_or_else(Vec::new, |a| a.iter().filter_map(|p| p.as_str().map(String::from)).collect());
+    Some((mode, patterns))
+}
+
+/// `config` with the window setup of the input bundle: a `sun` given
+/// neither `--window` nor `--window-mode` lights the bundle as its bake did
+/// (masks of another light than the transfer's would be silently wrong); a
+/// different setup is refused.
+pub fn with_bundle_windows(config: &SunConfig, input: &SunInput) -> anyhow::Result<SunConfig> {
+    let Some((mode, patterns)) = &input.recorded_windows else { return Ok(config.clone()) };
+    let asked_nothing = config.params.mode == Mode::Open && config.window_patterns.is_empty();
+    if asked_nothing {
+        if *mode == Mode::Window && !config.params.quiet {
+            eprintln!("sun: window mode with --window {patterns:?}, as {} was baked", config.input.display());
+        }
+        let mut adopted = config.clone();
+        adopted.params.mode = *mode;
+        adopted.window_patterns = patterns.clone();
+        return Ok(adopted);
+    }
+    if config.params.mode != *mode || config.window_patterns != *patterns {
+        let describe = |mode: Mode, patterns: &[String]| match mode {
+            Mode::Open => "open mode".to_string(),
+            Mode::Window => format!("window mode with --window {patterns:?}"),
+        };
+        anyhow::bail!(
+            "{}: baked in {}, but this sun bake asks for {}: the masks would light the scene differently from the bundle's transfer; give the same --window patterns, or none to use the bundle's",
+            config.input.display(),
+            describe(*mode, patterns),
+            describe(config.params.mode, &config.window_patterns)
+        );
+    }
+    Ok(config.clone())
+}
+
+/// Says on stderr when no vertex is lit at any step: a site, date, north or
+/// up axis that keeps the sun out of the scene gives all-dark masks.
+pub fn warn_if_never_lit(output: &Path, mode: Mode, window_patterns: &[String], stats: &SunStats) {
+    if stats.vertices == 0 || stats.lit_vertices.iter().any(|&n| n > 0) {
+        return;
+    }
+    let why = if stats.day_steps == 0 {
+        "the sun is below the horizon at every step (check --date, --from/--to and --tz)".to_string()
+    } else if mode == Mode::Window {
+        format!(
+            "the sun never reaches a surface through the windows ({window_patterns:?}) in {} daytime steps: check --north (the direction of geographic north in the file's axes; default -Z, or +Y with --up z) and --up, which turn the sun's path around the scene",
+            stats.day_steps
+        )
+    } else {
+        format!(
+            "no surface faces the sun unshadowed in {} daytime steps: check --north (default -Z, or +Y with --up z) and --up",
+            stats.day_steps
+        )
+    };
+    eprintln!("warning: {}: no vertex is lit at any step; {why}", output.display());
 }
 
 /// The day: sun position, colour and sky per step.
@@ -235,6 +306,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     // In place only without `--refine`: refining replaces the bundle's mesh
     // and transfer, which the input alone can give back.
     let mut input = load_sun_input(config, BUNDLE_FORMAT, config.refine.is_none())?;
+    let config = &with_bundle_windows(config, &input)?;
     // Refining a bundle's mesh re-bakes its transfer on the new vertices:
     // read how before any work, so a bundle that cannot be re-baked stops here.
     let recipe = match (&config.refine, &input.original) {
@@ -261,6 +333,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
         Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None))
     })??;
+    warn_if_never_lit(&config.output, config.params.mode, &config.window_patterns, &masks.stats);
     let refine = refined.map(|(mesh, report)| {
         input.mesh = mesh;
         report

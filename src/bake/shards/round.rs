@@ -116,9 +116,6 @@ pub fn bake_transfer_shard(
     }
     let mut plan = Plan::new(mesh, scene, surfaces, &params, None)?;
     let identity = Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() };
-    // Shards split the base items by cost, in every stage alike.
-    let costs: Vec<u64> = plan.items.points_per_item().iter().map(|&p| p as u64 * params.rays as u64).collect();
-    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
     // Rounds of an adaptive bake run over the unified layout the pilot decides.
     let mut base_items = None;
     let mut pilot_crc = 0;
@@ -132,6 +129,11 @@ pub fn bake_transfer_shard(
         base_items = Some((plan.unify(&extra)?, extra));
         pilot_crc = p.crc;
     }
+    // Shards split the items by their cost in points × rays: the pilot stage
+    // the base points, every round of an adaptive bake the points the pilot
+    // decided (base and extra), so the rounds' shards stay balanced.
+    let costs: Vec<u64> = plan.items.points_per_item().iter().map(|&p| p as u64 * params.rays as u64).collect();
+    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
     let points = plan.items.first_point(range.start) as u64..plan.items.first_point(range.end) as u64;
     let mut rejected = vec![false; plan.items.point_count() as usize];
     let mut source = SourceRows::empty();
