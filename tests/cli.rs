@@ -186,11 +186,20 @@ fn panel_gathers_the_ground_and_refuses_bad_input() {
     let r = &doc["readability"];
     assert!(r["min_contrast_ratio"].as_f64().unwrap() <= r["median_contrast_ratio"].as_f64().unwrap());
     assert_eq!(r["window_share"], 0.0, "no windows in the open scene");
+    // Open mode: the panel sees the sky itself, so not everything it reflects is the interior's.
+    let (sky, interior) = (r["sky_share"].as_f64().unwrap(), r["interior_share"].as_f64().unwrap());
+    assert!(sky > 0.05 && (sky + interior - 1.0).abs() < 1e-6, "{r}");
     let (two, exr2) = run("2", "two.exr", &["--eye=1,2,3"]);
     assert!(two.status.success());
     assert_eq!(std::fs::read(&exr1).unwrap(), std::fs::read(&exr2).unwrap(), "EXR differs between 1 and 2 threads");
     assert_eq!(std::fs::read(exr1.with_extension("cr.png")).unwrap(), std::fs::read(exr2.with_extension("cr.png")).unwrap());
 
+    // A light past f32 gives no statistic: exit 2, nothing written.
+    let (overflow, out) = run("1", "overflow.exr", &["--eye=1,2,3", "--lux", "1e39"]);
+    assert_eq!(overflow.status.code(), Some(2), "{}", String::from_utf8_lossy(&overflow.stdout));
+    let message = String::from_utf8_lossy(&overflow.stderr);
+    assert!(message.contains("scene.prtb") && message.contains("not finite"), "{message}");
+    assert!(!out.exists() && !out.with_extension("cr.png").exists());
     let (behind, _) = run("1", "behind.exr", &["--eye=0,-1,0"]);
     assert_eq!(behind.status.code(), Some(2));
     let message = String::from_utf8_lossy(&behind.stderr);

@@ -309,7 +309,7 @@ mod tests {
 
     #[test]
     fn texels_off_the_panel_take_a_neighbour_and_lookup_is_nearest() {
-        let texel = |v: f32| Some(TexelResult { radiance: [v; 3], through_windows: [0.0; 3], luminance_error: 0.0 });
+        let texel = |v: f32| Some(TexelResult { radiance: [v; 3], through_windows: [0.0; 3], from_sky: [0.0; 3], luminance_error: 0.0 });
         // 3 × 2: only (0,0) = 1 and (2,1) = 5 are on the panel.
         let results = [texel(1.0), None, None, None, None, texel(5.0)];
         let t = PanelTexture::from_results(&results, 3, 2, 4);
