@@ -34,7 +34,13 @@ fn parse_round(text: &str) -> Result<RoundArg, String> {
 const DEFAULT_ADAPTIVE: f32 = 0.25;
 
 #[derive(Parser)]
-#[command(name = "prtbake", version, about = "Precomputed radiance transfer, baked offline", propagate_version = true)]
+#[command(
+    name = "prtbake",
+    version,
+    about = "Precomputed radiance transfer, baked offline",
+    propagate_version = true,
+    args_override_self = true
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -85,9 +91,9 @@ struct BakeArgs {
     rays: u32,
     #[arg(long, default_value_t = 1)]
     seed: u32,
-    /// Worker threads (0 = all cores). The output does not depend on it.
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
+    /// Worker threads (0 = all cores) [default: 0]. The output does not depend on it.
+    #[arg(long, value_name = "T", value_parser = parse_threads)]
+    threads: Option<usize>,
     /// Up axis of OBJ files (glTF is always +Y up).
     #[arg(long, value_enum, default_value_t = Up::Y)]
     up: Up,
@@ -193,6 +199,12 @@ struct BakeArgs {
     /// round 0 and read by later rounds [default: the part's folder].
     #[arg(long, value_name = "DIR", requires = "shard")]
     shard_dir: Option<PathBuf>,
+    /// Check these arguments as a bake of N shards would read them, print its plan on stdout
+    /// (`shards=N`, `bounces=B`, `pilot=0|1`, `threads_given=0|1`, one per line) and exit
+    /// without baking: what the launchers in scripts/ run, so they read every number as
+    /// prtbake does.
+    #[arg(long, value_name = "N", conflicts_with = "shard")]
+    plan_shards: Option<u32>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -383,9 +395,9 @@ struct SunArgs {
     /// Seed of the sample placement (the same seed as `bake` gives the same points).
     #[arg(long, default_value_t = 1)]
     seed: u32,
-    /// Worker threads (0 = all cores). The output does not depend on it.
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
+    /// Worker threads (0 = all cores) [default: 0]. The output does not depend on it.
+    #[arg(long, value_name = "T", value_parser = parse_threads)]
+    threads: Option<usize>,
     /// Tracing loop nesting (for measurement; the masks are the same).
     #[arg(long, value_enum, default_value_t = LoopOrderArg::StepOuter)]
     loop_order: LoopOrderArg,
@@ -397,6 +409,10 @@ struct SunArgs {
     /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
+    /// Check these arguments as a sun bake of N shards would read them, print its plan on
+    /// stdout (`shards=N`, `threads_given=0|1`) and exit: what scripts/slurm/submit-sun.sh runs.
+    #[arg(long, value_name = "N", conflicts_with = "shard")]
+    plan_shards: Option<u32>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -524,7 +540,7 @@ enum Command {
         rays: u32,
         #[arg(long, default_value_t = 1)]
         seed: u32,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         #[arg(long)]
         json: bool,
@@ -554,7 +570,7 @@ enum Command {
         /// [default: half the memory available at start]
         #[arg(long, requires = "real")]
         hit_cache_mib: Option<u64>,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         #[arg(long)]
         json: bool,
@@ -568,7 +584,7 @@ enum Command {
         /// Output folder.
         #[arg(short, long, default_value = "demo-out")]
         output: PathBuf,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         #[arg(long)]
         json: bool,
@@ -591,7 +607,7 @@ enum Command {
         /// Rounds ≥ 1: the merged layer of the round before, which the parts gathered from.
         #[arg(long, value_name = "FILE.prtl")]
         layer: Option<PathBuf>,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         /// Replace the output even if it is read-only.
         #[arg(long)]
@@ -615,6 +631,11 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+}
+
+/// `--threads T`: a count ≥ 0 (0 = every core), with a message that says so.
+fn parse_threads(text: &str) -> Result<usize, String> {
+    text.trim().parse::<usize>().map_err(|_| format!("expected a number of threads, 0 or more (0 uses every core), not {text:?}"))
 }
 
 /// A panel's texels `WxH` (each 1..=4096), named by `flag` in the error.
@@ -736,7 +757,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         up: up_axis(a.up),
         params,
         window_patterns: a.windows,
-        threads: a.threads,
+        threads: a.threads.unwrap_or(0),
         json: a.json,
         clean,
         storage: cli::bake_cmd::StorageRequest { quantize, max_error: a.max_error },
@@ -871,7 +892,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         sky_order: a.sky_order,
         params,
         window_patterns: a.windows,
-        threads: a.threads,
+        threads: a.threads.unwrap_or(0),
         json: a.json,
         force: a.force,
     })
@@ -949,7 +970,7 @@ struct PanelArgs {
     #[arg(long)]
     contrast: Option<PathBuf>,
     /// Worker threads (0 = all cores). The output does not depend on it.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = parse_threads)]
     threads: usize,
     /// Statistics as JSON on stdout.
     #[arg(long)]
@@ -1053,9 +1074,25 @@ fn panel_config(a: PanelArgs) -> anyhow::Result<cli::panel_cmd::PanelConfig> {
 
 fn run(command: Command) -> anyhow::Result<Outcome> {
     match command {
-        Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
+        Command::Bake(args) => {
+            let plan = args.plan_shards;
+            let threads_given = args.threads.is_some();
+            let config = bake_config(args)?;
+            match plan {
+                Some(n) => cli::shard_cmd::print_plan(n, &config.output, Some(&config.params), threads_given).map(|_| Outcome::Ok),
+                None => cli::bake_cmd::run(&config).map(|_| Outcome::Ok),
+            }
+        }
         Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
-        Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
+        Command::Sun(args) => {
+            let plan = args.plan_shards;
+            let threads_given = args.threads.is_some();
+            let config = sun_config(args)?;
+            match plan {
+                Some(n) => cli::shard_cmd::print_plan(n, &config.output, None, threads_given).map(|_| Outcome::Ok),
+                None => cli::sun_cmd::run(&config).map(|_| Outcome::Ok),
+            }
+        }
         Command::Generate { scene, output, detail, copies, force } => {
             cli::generate_cmd::run(&scene, &output, detail.as_deref(), copies, force).map(|_| Outcome::Ok)
         }

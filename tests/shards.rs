@@ -283,7 +283,7 @@ fn shards_are_idempotent_and_merges_name_bad_parts() {
 /// glass in the file), a seat block inside (`seat_leather`) and a ground
 /// triangle last whose area dwarfs the rest: most of the bake's cost sits in
 /// the last item, so several shards get no item at all.
-fn write_box_with_pane(dir: &Scratch) -> PathBuf {
+pub fn write_box_with_pane(dir: &Scratch) -> PathBuf {
     let obj = dir.path("pane-box.obj");
     let mut text = String::from("mtllib pane-box.mtl\n");
     let corners = |x0: f32, y0: f32, z0: f32, x1: f32, y1: f32, z1: f32| -> Vec<[f32; 3]> {

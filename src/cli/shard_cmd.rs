@@ -204,6 +204,27 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `bake`/`sun --plan-shards N`: the arguments checked as prtbake reads them,
+/// and the plan a launcher needs, one `key=value` per line: the shard count,
+/// for a transfer bake its bounces (rounds 0..=B) and whether it has a pilot
+/// stage, and whether `--threads` was given.
+pub fn print_plan(shards: u32, output: &Path, params: Option<&crate::bake::BakeParams>, threads_given: bool) -> anyhow::Result<()> {
+    if shards == 0 {
+        anyhow::bail!("--plan-shards 0: a sharded bake has at least one shard");
+    }
+    if !output.extension().is_some_and(|e| e.eq_ignore_ascii_case("prtb")) {
+        anyhow::bail!("{}: a sharded bake's output is the merged bundle; name it .prtb", output.display());
+    }
+    println!("shards={shards}");
+    if let Some(p) = params {
+        let pilot = p.adaptive > 0.0 && matches!(p.sampling, crate::bake::Sampling::Interior { .. });
+        println!("bounces={}", p.bounces);
+        println!("pilot={}", u8::from(pilot));
+    }
+    println!("threads_given={}", u8::from(threads_given));
+    Ok(())
+}
+
 /// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
 /// metadata without its stats: what every shard of one sun bake must share.
 fn day_crc(steps: &[SunStep], meta_without_stats: &serde_json::Value) -> u32 {
