@@ -259,8 +259,13 @@ impl RefineArgs {
                 anyhow::bail!("--refine-noise {k}: expected a finite number of standard errors ≥ 0 (e.g. 2)");
             }
         }
-        if self.max_vertices == Some(0) {
-            anyhow::bail!("--max-vertices 0: expected at least one vertex");
+        match self.max_vertices {
+            Some(0) => anyhow::bail!("--max-vertices 0: expected at least one vertex"),
+            Some(n) if n > prtbake::refine::MAX_VERTICES => anyhow::bail!(
+                "--max-vertices {n}: at most {} (the refined mesh, its samples and its transfer must fit in memory; refine a part of the scene, or shard the bake)",
+                prtbake::refine::MAX_VERTICES
+            ),
+            _ => {}
         }
         Ok(match (self.refine, self.max_vertices) {
             (None, None) if self.min_edge.is_some() => anyhow::bail!("--min-edge needs --refine or --max-vertices"),
@@ -574,6 +579,9 @@ enum Command {
         threads: usize,
         #[arg(long)]
         json: bool,
+        /// Replace read-only outputs.
+        #[arg(long)]
+        force: bool,
     },
     /// The LCD panel's reflections by final gather (measured BRDF, PRT-lit interior, sky through the windows) and its contrast ratio.
     #[command(allow_negative_numbers = true)]
@@ -1098,10 +1106,12 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
         }
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
-        Command::Chart { output, quick, real: true, data, hit_cache_mib, threads, json } => {
-            cli::chart_cmd::run_real(&output, &data, hit_cache_bytes(hit_cache_mib), quick, threads, json)
+        Command::Chart { output, quick, real: true, data, hit_cache_mib, threads, json, force } => {
+            cli::chart_cmd::run_real(&output, &data, hit_cache_bytes(hit_cache_mib), quick, threads, json, force)
         }
-        Command::Chart { output, quick, real: false, threads, json, .. } => cli::chart_cmd::run(&output, quick, threads, json),
+        Command::Chart { output, quick, real: false, threads, json, force, .. } => {
+            cli::chart_cmd::run(&output, quick, threads, json, force)
+        }
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)?).map(|_| Outcome::Ok),
         Command::Panel(args) => cli::panel_cmd::run(&panel_config(args)?).map(|_| Outcome::Ok),

@@ -360,12 +360,22 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
         &["--refine-noise", "2"],
         &["--refine", "0.1", "--refine-noise", "-1"],
         &["--refine", "0.1", "--refine-noise", "inf"],
+        // Past what fits: refused at once (it ran for minutes, then aborted on allocation).
+        &["--max-vertices", "4294967295"],
     ];
     for bad in bad_requests {
         let out = dir.path("bad.prtb");
-        let o = prtbake(&[&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
-        assert_eq!(o.status.code(), Some(2), "{bad:?}");
-        assert!(!out.exists());
+        for command in ["bake", "sun"] {
+            if command == "sun" && bad.contains(&"--refine-noise") {
+                continue;
+            }
+            let o = prtbake(&[&[command, obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
+            assert_eq!(o.status.code(), Some(2), "{command} {bad:?}");
+            assert!(!out.exists());
+            if bad[1] == "4294967295" {
+                assert!(String::from_utf8_lossy(&o.stderr).contains("at most 25000000"), "{}", String::from_utf8_lossy(&o.stderr));
+            }
+        }
     }
     // Sun masks have no noise estimate to discount: asking for it is refused, not ignored.
     let out = dir.path("bad.prtb");

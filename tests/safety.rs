@@ -184,6 +184,40 @@ fn clean_outputs_land_together() {
     assert_ok(&prtbake(&["clean", s(&obj), "-o", s(&c), "--report", s(&dir.path("r.json")), "--quiet"]));
     assert!(c.exists() && dir.path("c.mtl").exists() && dir.path("r.json").exists());
     assert!(temporaries(&dir.0).is_empty());
+    // A name the folder cannot hold is refused before any work: the mesh and
+    // its .mtl that would have landed first are untouched.
+    let (obj_before, mtl_before) = (std::fs::read(&c).unwrap(), std::fs::read(dir.path("c.mtl")).unwrap());
+    let long_report = dir.path(&format!("{}.json", "r".repeat(251)));
+    let o = prtbake(&["clean", s(&obj), "-o", s(&c), "--report", s(&long_report), "--max-edge", "0.3", "--quiet"]);
+    assert_refused(&o, &["256 bytes", "more than the 255"]);
+    assert!(std::fs::read(&c).unwrap() == obj_before && std::fs::read(dir.path("c.mtl")).unwrap() == mtl_before);
+    let long_bundle = dir.path(&format!("{}.prtb", "b".repeat(251)));
+    let o = bake_quick(&obj, &long_bundle, &["--rays", "65536"]);
+    assert_refused(&o, &["256 bytes"]);
+    assert!(temporaries(&dir.0).is_empty());
+}
+
+/// Two OBJ names that differ only in bytes that are not UTF-8 must not share
+/// one `.mtl`: such a name cannot be written in the OBJ's `mtllib` line, so it
+/// is refused before any work.
+#[cfg(unix)]
+#[test]
+fn obj_names_that_are_not_utf8_are_refused() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = Scratch::new("safety-mtl-names");
+    let obj = tetra(&dir, "t.obj");
+    for byte in [0xffu8, 0xfe] {
+        let bytes = [b'o', b'u', b't', byte, b'.', b'o', b'b', b'j'];
+        let out = dir.0.join(std::ffi::OsStr::from_bytes(&bytes));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_prtbake")).arg("clean").arg(&obj).arg("-o").arg(&out).output().unwrap();
+        assert_refused(&o, &["must be UTF-8"]);
+        assert!(!out.exists());
+    }
+    assert_eq!(std::fs::read_dir(&dir.0).unwrap().count(), 1, "only the input is there");
+    // The .mtl beside a name is that name's, byte for byte.
+    let a = prtbake::mesh::mtl_path_for(&dir.0.join(std::ffi::OsStr::from_bytes(b"out\xff.obj")));
+    let b = prtbake::mesh::mtl_path_for(&dir.0.join(std::ffi::OsStr::from_bytes(b"out\xfe.obj")));
+    assert_ne!(a, b);
 }
 
 /// Item 4: Ctrl-C or SIGTERM during a bake exits 130/143 at once, says

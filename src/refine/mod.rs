@@ -68,6 +68,10 @@ pub struct RefineParams {
 pub const DEFAULT_MIN_EDGE_FRACTION: f32 = 2e-4;
 /// The default budget: this many times the input's vertices.
 pub const DEFAULT_BUDGET_FACTOR: usize = 4;
+/// The largest vertex budget accepted: the refined mesh (with its one-rings),
+/// its sample points and order-3 colour transfer take about 0.5 KB a vertex,
+/// about 12 GB here, half of a 24 GB machine. More is refused before any work.
+pub const MAX_VERTICES: usize = 25_000_000;
 /// The default round limit.
 pub const DEFAULT_MAX_ROUNDS: u32 = 16;
 /// The default `noise_sigmas`: a difference two standard errors deep is
@@ -82,7 +86,7 @@ impl RefineParams {
     pub fn for_mesh(mesh: &Mesh, error: Option<f64>, max_vertices: Option<usize>, min_edge: Option<f32>) -> RefineParams {
         RefineParams {
             error,
-            max_vertices: max_vertices.unwrap_or(mesh.vertex_count().saturating_mul(DEFAULT_BUDGET_FACTOR)),
+            max_vertices: max_vertices.unwrap_or(mesh.vertex_count().saturating_mul(DEFAULT_BUDGET_FACTOR).min(MAX_VERTICES)),
             min_edge: min_edge.unwrap_or(DEFAULT_MIN_EDGE_FRACTION * mesh.referenced_diagonal()),
             max_rounds: DEFAULT_MAX_ROUNDS,
             noise_sigmas: DEFAULT_NOISE_SIGMAS,
@@ -101,6 +105,9 @@ impl RefineParams {
         }
         if !(self.min_edge.is_finite() && self.min_edge >= 0.0) {
             return Err(BakeError::Params(format!("refine min edge {} must be finite and >= 0", self.min_edge)));
+        }
+        if self.max_vertices > MAX_VERTICES {
+            return Err(BakeError::Params(format!("refine budget {} vertices is over the {MAX_VERTICES} that fit", self.max_vertices)));
         }
         Ok(())
     }
