@@ -161,12 +161,12 @@ struct BakeArgs {
     /// after --up), found by ray casting; occlusion and bounces still use the whole scene.
     #[arg(long, value_name = "BOX", allow_hyphen_values = true)]
     view_box: Option<String>,
-    /// Viewpoints sampled in the view box.
-    #[arg(long, default_value_t = 256)]
-    view_points: u32,
-    /// Rays per viewpoint (≤ 65536).
-    #[arg(long, default_value_t = 16384)]
-    view_rays: u32,
+    /// With --view-box: viewpoints sampled in the box [default: 256].
+    #[arg(long, requires = "view_box")]
+    view_points: Option<u32>,
+    /// With --view-box: rays per viewpoint (≤ 65536) [default: 16384].
+    #[arg(long, requires = "view_box")]
+    view_rays: Option<u32>,
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
@@ -773,15 +773,12 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         view_box: match &a.view_box {
             Some(text) => {
                 let view_box = prtbake::bake::cull::ViewBox::parse(text).map_err(anyhow::Error::msg)?;
-                if !(1..=MAX_VIEW_POINTS).contains(&a.view_points) || a.view_rays == 0 || a.view_rays > 65536 {
+                let (view_points, view_rays) = (a.view_points.unwrap_or(256), a.view_rays.unwrap_or(16384));
+                if !(1..=MAX_VIEW_POINTS).contains(&view_points) || view_rays == 0 || view_rays > 65536 {
                     anyhow::bail!("--view-points must be in 1..={MAX_VIEW_POINTS} and --view-rays in 1..=65536");
                 }
-                let params = prtbake::bake::cull::CullParams {
-                    points: a.view_points,
-                    rays_per_point: a.view_rays,
-                    seed: a.seed,
-                    ..Default::default()
-                };
+                let params =
+                    prtbake::bake::cull::CullParams { points: view_points, rays_per_point: view_rays, seed: a.seed, ..Default::default() };
                 Some((view_box, params))
             }
             None => None,

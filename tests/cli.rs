@@ -486,3 +486,44 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
         assert!(!out.exists());
     }
 }
+
+/// Flags that only mean something with another are refused without it
+/// (`--view-points` was ignored without `--view-box`); `export --layer
+/// direct` names bounce 0 as `view --layers direct` does; messages name
+/// layers and vectors as a user writes them.
+#[test]
+fn small_argument_rules() {
+    let dir = Scratch::new("cli-small");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let out = dir.path("s.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--view-points", "100000000"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--view-box"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.exists());
+    let o = prtbake(&[
+        "bake",
+        obj.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--rays",
+        "8",
+        "--bounces",
+        "1",
+        "--store-bounces",
+        "--quiet",
+    ]);
+    assert!(o.status.success());
+    let glb = dir.path("direct.glb");
+    let o = prtbake(&["export", out.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--layer", "direct", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["report"]["layer"], "bounce 0");
+    let o = prtbake(&["export", out.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--layer", "5"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no bounce 5 layer"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = prtbake(&["inspect", out.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("layers total, bounce 0, bounce 1"), "{}", String::from_utf8_lossy(&o.stdout));
+    let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", dir.path("n.prtb").to_str().unwrap(), "--north", "0,1,0"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(2) && e.contains("--north 0,1,0") && !e.contains("Vec3"), "{e}");
+}

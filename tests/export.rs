@@ -155,7 +155,7 @@ fn export_command_writes_a_glb() {
     // A bad layer is an error naming the problem, exit code 2.
     let bad = prtbake(&["export", input.to_str().unwrap(), "-o", output.to_str().unwrap(), "--layer", "9"]);
     assert_eq!(bad.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("Bounce(9)"));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("no bounce 9 layer"));
 }
 
 /// glTF wants unit normals and no empty primitive: a bundle whose normals are

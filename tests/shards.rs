@@ -348,3 +348,23 @@ fn merges_keep_the_window_roles_and_shards_may_be_empty() {
         }
     }
 }
+
+/// A pilot part among round-0 parts is named as the other stage, and a
+/// truncated part as truncated (not by the garbage where its length was).
+#[test]
+fn merges_name_a_part_of_another_stage_and_a_truncated_part() {
+    let dir = Scratch::new("shards-stages");
+    let mesh = write_box_with_pane(&dir);
+    let args = ["--window", "pane", "--bounces", "1", "--rays", "4", "--quiet"];
+    let work = dir.path("w");
+    std::fs::create_dir(&work).unwrap();
+    sharded_bake(&work, &mesh, &args, 1, 2);
+    let (pilot_0, r0_1) = (work.join("pilot-0.prtp"), work.join("r0-1.prtp"));
+    let e = refused(&merge(&[&r0_1, &pilot_0], &dir.path("x.prtl")));
+    assert!(e.contains(&format!("{}: is a part of the pilot stage, but {} of round 0", pilot_0.display(), r0_1.display())), "{e}");
+    let bytes = std::fs::read(work.join("r0-0.prtp")).unwrap();
+    let cut = dir.path("cut.prtp");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let e = refused(&merge(&[&cut, &r0_1], &dir.path("x.prtl")));
+    assert!(e.contains(&format!("{}: is {} bytes and does not end in its own length", cut.display(), bytes.len() / 2)), "{e}");
+}

@@ -699,3 +699,35 @@ fn panel_worker_refines_to_the_screenshot_texture_and_restarts_on_a_new_eye() {
         eprintln!("worker, eye {k}: textures seen at {seen:?} samples per texel");
     }
 }
+
+/// A bundle of sun masks alone is shown (albedo × the sun term) instead of
+/// refused; steps from a list of directions have no time of day, so the
+/// report gives none and `--time` is refused in favour of `--step`.
+#[test]
+fn sun_only_and_direction_bundles_are_viewed() {
+    if gpu_or_skip("sun_only_and_direction_bundles_are_viewed").is_none() {
+        return;
+    }
+    let dir = crate::util::Scratch::new("view-sun-only");
+    let obj = dir.path("scene.obj");
+    crate::util::write_scene_obj(&obj);
+    let csv = dir.path("suns.csv");
+    std::fs::write(&csv, "0.3,1,0.2\n-0.5,0.8,0.4\n").unwrap();
+    let sun = dir.path("sun.prtb");
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let o = crate::util::prtbake(&["sun", &s(&obj), "-o", &s(&sun), "--directions", &s(&csv), "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let shot = dir.path("sun.png");
+    let o = crate::util::prtbake(&["view", &s(&sun), "--step", "0", "--screenshot", &s(&shot), "--size", "96x64", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(report["step_local_time"].is_null(), "{report}");
+    let image = Image::decode_png(&std::fs::read(&shot).unwrap()).unwrap();
+    let lit = (0..image.height)
+        .flat_map(|y| (0..image.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| image.pixel(x, y)[..3].iter().any(|&c| c > 8));
+    assert!(lit.count() > 100, "the sunlit ground shows");
+    let o = crate::util::prtbake(&["view", &s(&sun), "--time", "09:00", "--screenshot", &s(&shot), "--size", "96x64"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--step"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -93,6 +93,15 @@ pub enum LayerKind {
     Bounce(u32),
 }
 
+impl std::fmt::Display for LayerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LayerKind::Total => write!(f, "total"),
+            LayerKind::Bounce(b) => write!(f, "bounce {b}"),
+        }
+    }
+}
+
 impl LayerKind {
     /// The on-disk code: 0 total, 1 + b for bounce b; `None` for `Bounce(u32::MAX)`.
     pub fn code(self) -> Option<u32> {

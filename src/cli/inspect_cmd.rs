@@ -15,7 +15,7 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
     let transfer = b.transfer.as_ref().map(|t| {
         json!({
             "order": t.order, "channels": t.channels, "quantization": t.quantization.name(),
-            "layers": t.layers.iter().map(|l| format!("{:?}", l.kind)).collect::<Vec<_>>(),
+            "layers": t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
         })
     });
     let lapse = b.sun.as_ref().map(|s| time_lapse(s, b.mesh.vertex_count(), &b.meta));
@@ -49,12 +49,12 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
     println!("  mesh: {} vertices, {} triangles, {} materials", b.mesh.vertex_count(), b.mesh.triangle_count(), b.mesh.materials.len());
     if let Some(t) = &b.transfer {
         println!(
-            "  transfer: order {} ({} coefficients), {} channel(s), {}, layers {:?}",
+            "  transfer: order {} ({} coefficients), {} channel(s), {}, layers {}",
             t.order,
             t.order * t.order,
             t.channels,
             t.quantization.name(),
-            t.layers.iter().map(|l| l.kind).collect::<Vec<_>>()
+            t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ")
         );
     }
     if let Some(s) = &b.sun {

@@ -166,7 +166,8 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
         Some(n) => {
             let n = file_up.to_y_up(n);
             if !(n - up * n.dot(up)).is_finite() || (n - up * n.dot(up)).length() < 1e-6 {
-                anyhow::bail!("--north {:?} must be finite and not parallel to up", config.north.unwrap_or_default());
+                let n = config.north.unwrap_or_default();
+                anyhow::bail!("--north {},{},{} must be finite and not parallel to up", n.x, n.y, n.z);
             }
             n
         }

@@ -113,6 +113,14 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         None => crate::sky::time::default_tz_minutes(),
     };
     let wants_time_lapse = config.sky || config.time.is_some() || config.step.is_some();
+    // Steps from a list of directions (`sun --directions`) have no time of day.
+    let has_clock = bundle.meta.pointer("/sun/source/kind").and_then(|k| k.as_str()) == Some("spa");
+    if bundle.sun.is_some() && !has_clock && config.time.is_some() {
+        anyhow::bail!(
+            "{}: the time lapse's steps come from a list of sun directions, with no time of day: choose one with --step K",
+            path.display()
+        );
+    }
     let step = match (&bundle.sun, config.step, &config.time) {
         (None, _, _) if wants_time_lapse => {
             anyhow::bail!("{}: the bundle has no time lapse (sun masks), so --sky, --time and --step do not apply", path.display())
@@ -230,7 +238,7 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         _ => None,
     };
     let step_time = match (&bundle.sun, step) {
-        (Some(sun), Some(k)) => Some(view::lighting::step_local_time(sun, k, tz_minutes)),
+        (Some(sun), Some(k)) if has_clock => Some(view::lighting::step_local_time(sun, k, tz_minutes)),
         _ => None,
     };
     if is_exr(screenshot) {

@@ -43,6 +43,18 @@ impl Image {
         Ok(out)
     }
 
+    /// Decodes an 8-bit RGBA PNG (what [`Image::encode_png`] writes).
+    pub fn decode_png(bytes: &[u8]) -> Result<Image, String> {
+        let mut reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().map_err(|e| e.to_string())?;
+        let mut rgba = vec![0; reader.output_buffer_size().ok_or("image too large")?];
+        let info = reader.next_frame(&mut rgba).map_err(|e| e.to_string())?;
+        if (info.color_type, info.bit_depth) != (png::ColorType::Rgba, png::BitDepth::Eight) {
+            return Err(format!("{:?} {:?}: expected 8-bit RGBA", info.color_type, info.bit_depth));
+        }
+        rgba.truncate(info.buffer_size());
+        Ok(Image { width: info.width, height: info.height, rgba })
+    }
+
     /// Writes the image as PNG at `path` (atomically).
     pub fn write_png(&self, path: &Path) -> Result<(), ViewError> {
         let error = |message: String| ViewError::Write { path: path.to_path_buf(), message };

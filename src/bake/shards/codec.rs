@@ -193,7 +193,12 @@ pub fn open(bytes: &[u8], expected: FileKind) -> Result<(Reader<'_>, u32), Strin
     let (content, crc_bytes) = bytes.split_at(bytes.len() - 4);
     let length = u64::from_le_bytes(content[content.len() - 8..].try_into().unwrap_or([0; 8]));
     if length != bytes.len() as u64 {
-        return Err(format!("says it is {length} bytes but is {}: truncated or extended", bytes.len()));
+        // The length sits in the trailer: when it disagrees, those bytes are
+        // whatever the cut left at the end, so they are not quoted.
+        return Err(format!(
+            "is {} bytes and does not end in its own length and CRC-32: truncated or extended (a copy cut short, or bytes appended)",
+            bytes.len()
+        ));
     }
     let stored = u32::from_le_bytes(crc_bytes.try_into().unwrap_or([0; 4]));
     let crc = crc32fast::hash(content);

@@ -69,6 +69,8 @@ struct PartHead<'a> {
     shard: u32,
     /// Transfer rounds; sun parts are all round 0.
     round: u32,
+    /// A part of adaptive allocation's pilot stage (before round 0).
+    pilot: bool,
     items: std::ops::Range<u32>,
     item_count: u32,
     points: std::ops::Range<u64>,
@@ -88,14 +90,15 @@ fn check_together(heads: &[PartHead], kind: FileKind) -> Result<Vec<usize>, Shar
                 format!("{d} {}: parts of one merge must come from one bake", first.path.display()),
             ));
         }
-        if head.round != first.round {
+        if (head.round, head.pilot) != (first.round, first.pilot) {
+            let stage = |h: &PartHead| if h.pilot { "the pilot stage".to_string() } else { format!("round {}", h.round) };
             return Err(ShardError::mismatch(
                 head.path,
                 format!(
-                    "is a part of round {}, but {} of round {}: merge one round at a time",
-                    head.round,
+                    "is a part of {}, but {} of {}: merge one stage or round at a time",
+                    stage(head),
                     first.path.display(),
-                    first.round
+                    stage(first)
                 ),
             ));
         }
@@ -166,6 +169,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             identity: &p.identity,
             shard: p.shard,
             round: p.round,
+            pilot: p.pilot,
             items: p.items.clone(),
             item_count: p.item_count,
             points: p.points.clone(),
@@ -410,6 +414,7 @@ pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardE
             identity: &p.identity,
             shard: p.shard,
             round: 0,
+            pilot: false,
             items: p.items.clone(),
             item_count: p.item_count,
             points: p.points.clone(),
