@@ -8,6 +8,7 @@ mod cli;
 mod convert_mitsuba;
 mod estimator;
 mod export;
+mod fuzz_args;
 mod hostile_bake;
 mod safety;
 mod schedulers;

@@ -184,6 +184,9 @@ pub fn hit_file_name(shard: Shard) -> String {
 }
 
 #[cfg(test)]
+mod fuzz_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
