@@ -531,9 +531,11 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
-    /// Show what a bundle holds.
+    /// Show what a bundle holds, or what a mesh is made of before baking: its materials and
+    /// groups with triangles, areas and likely roles (glass, emitters), to choose --window.
     #[command(allow_negative_numbers = true)]
     Inspect {
+        /// A bundle (.prtb) or a mesh (.obj, .gltf, .glb).
         bundle: PathBuf,
         #[arg(long)]
         json: bool,

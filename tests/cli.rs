@@ -527,3 +527,35 @@ fn small_argument_rules() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.code() == Some(2) && e.contains("--north 0,1,0") && !e.contains("Vec3"), "{e}");
 }
+
+/// `inspect MESH` lists what a mesh is made of before a bake: materials and
+/// groups with exact triangle counts and areas, and their likely role.
+#[test]
+fn inspect_lists_a_meshs_materials_and_groups() {
+    let dir = Scratch::new("cli-inspect-mesh");
+    let obj = dir.path("room.obj");
+    // A 2 × 1 floor (two triangles), a 1 × 1 pane, a lamp triangle of area 0.5.
+    std::fs::write(dir.path("room.mtl"), "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl Window_Glass\nKd 0.9 0.9 0.9\nnewmtl lamp\nKd 1 1 1\n")
+        .unwrap();
+    std::fs::write(
+        &obj,
+        "mtllib room.mtl\nv 0 0 0\nv 2 0 0\nv 2 0 1\nv 0 0 1\nv 0 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\n\
+         o floor\nusemtl floor\nf 1 3 2\nf 1 4 3\no front\nusemtl Window_Glass\nf 5 6 7\nf 5 7 8\nusemtl lamp\nf 1 2 5\n",
+    )
+    .unwrap();
+    let o = prtbake(&["inspect", obj.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mesh = &doc["mesh"];
+    assert_eq!(mesh["triangles"], 5);
+    let row = |list: &str, name: &str| mesh[list].as_array().unwrap().iter().find(|e| e["name"] == name).unwrap().clone();
+    let (floor, glass, lamp) = (row("materials", "floor"), row("materials", "Window_Glass"), row("materials", "lamp"));
+    assert_eq!((floor["triangles"].as_u64(), floor["area"].as_f64()), (Some(2), Some(2.0)));
+    assert_eq!((glass["triangles"].as_u64(), glass["area"].as_f64(), glass["likely"].as_str()), (Some(2), Some(1.0), Some("glass?")));
+    assert_eq!((lamp["triangles"].as_u64(), lamp["likely"].as_str()), (Some(1), Some("emitter?")));
+    assert!(floor["likely"].is_null());
+    assert_eq!(row("groups", "front")["triangles"], 3);
+    let o = prtbake(&["inspect", obj.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("--window 'Window_Glass'"), "{text}");
+}
