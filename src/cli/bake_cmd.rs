@@ -339,6 +339,59 @@ fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bak
     Ok((result, surfaces, scene.build_time.as_secs_f64(), Some((visible, report))))
 }
 
+/// Share of sample points inside geometry past which a bake says so.
+pub const REJECTED_WARNING_SHARE: f64 = 0.1;
+
+/// Says on stderr when many sample points were inside geometry: they are
+/// dropped, so the surfaces they stood for are estimated from fewer points
+/// (or none: black vertices), and the mesh likely has interpenetrating parts.
+pub fn warn_rejected(s: &bake::BakeStats, output: &std::path::Path) {
+    if s.points == 0 || (s.points_rejected as f64) < REJECTED_WARNING_SHARE * s.points as f64 {
+        return;
+    }
+    eprintln!(
+        "warning: {}: {} of {} sample points ({:.0}%) lie inside geometry and were dropped: the mesh has solids passing through each other or overlapping shells (clean --cut-intersections cuts where surfaces cross; inspect MESH lists its parts); {} vertices got no sample",
+        output.display(),
+        s.points_rejected,
+        s.points,
+        100.0 * s.points_rejected as f64 / s.points as f64,
+        s.vertices_without_samples
+    );
+}
+
+/// Where a bake's time went, one line: the phases and their seconds,
+/// the largest first named as such.
+pub fn time_line(report: &BakeReport) -> String {
+    let s = &report.result.stats;
+    let mut phases: Vec<(String, f64)> = vec![("load".into(), report.load_seconds)];
+    if let Some(c) = report.clean_seconds {
+        phases.push(("clean".into(), c));
+    }
+    match &report.refine {
+        None => {
+            phases.push(("BVH build".into(), report.build_seconds));
+            for (b, seconds) in s.seconds_per_bounce.iter().enumerate() {
+                phases.push((if b == 0 { "bounce 0 (traced)".into() } else { format!("bounce {b}") }, *seconds));
+            }
+        }
+        Some(r) => {
+            phases.push((format!("{} BVH builds", r.rounds.len()), r.bvh_build_seconds));
+            phases.push((format!("refinement's bakes and splits ({} rounds)", r.rounds.len()), (r.seconds - r.bvh_build_seconds).max(0.0)));
+        }
+    }
+    phases.push(("write".into(), report.write_seconds));
+    phase_line(&phases)
+}
+
+/// "time: 12.3 s: bounce 0 (traced) 9.1 s (74%), …", largest first.
+pub fn phase_line(phases: &[(String, f64)]) -> String {
+    let total: f64 = phases.iter().map(|p| p.1).sum();
+    let mut sorted: Vec<&(String, f64)> = phases.iter().filter(|p| p.1 > 0.0).collect();
+    sorted.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let parts: Vec<String> = sorted.iter().map(|(name, t)| format!("{name} {t:.2} s ({:.0}%)", 100.0 * t / total.max(1e-12))).collect();
+    format!("time: {total:.2} s: {}", parts.join(", "))
+}
+
 /// Prints the final stats line, or the JSON document with `--json`.
 pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     let s = &report.result.stats;
@@ -385,6 +438,8 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
     }
+    warn_rejected(s, &report.output);
+    println!("{}", time_line(report));
     if let Some(c) = &report.storage {
         let s = &c.chosen;
         println!(

@@ -76,6 +76,8 @@ pub struct SunReport {
     pub input_was_bundle: bool,
     pub sky_seconds: f64,
     pub build_seconds: f64,
+    /// Encoding and writing the bundle (and re-baking its transfer after `--refine`).
+    pub write_seconds: f64,
     pub bundle_bytes: u64,
     /// What adaptive refinement did (`--refine`).
     pub refine: Option<crate::refine::RefineReport>,
@@ -351,6 +353,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         sun_meta["refine"] = r.meta();
     }
     let output = &config.output;
+    let write_start = Instant::now();
     let encoded = match (&refine, &input.original) {
         // The mesh changed: the bundle is made anew (the transfer re-baked on it, if it had one).
         (Some(_), Some((_, meta))) => {
@@ -374,6 +377,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         input_was_bundle: input.was_bundle(),
         sky_seconds,
         build_seconds,
+        write_seconds: write_start.elapsed().as_secs_f64(),
         bundle_bytes,
         refine,
     })
@@ -440,6 +444,16 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
     }
+    let mut phases = vec![("sky".to_string(), report.sky_seconds)];
+    match &report.refine {
+        None => phases.extend([("BVH build".to_string(), report.build_seconds), ("sun rays".to_string(), s.seconds)]),
+        Some(r) => phases.extend([
+            (format!("{} BVH builds", r.rounds.len()), r.bvh_build_seconds),
+            (format!("refinement's sun rays and splits ({} rounds)", r.rounds.len()), (r.seconds - r.bvh_build_seconds).max(0.0)),
+        ]),
+    }
+    phases.push(("write".to_string(), report.write_seconds));
+    println!("{}", super::bake_cmd::phase_line(&phases));
     println!(
         "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
         report.output.display(),
