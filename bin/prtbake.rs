@@ -108,6 +108,11 @@ struct BakeArgs {
     /// Window mode even without --window (materials with the window role only).
     #[arg(long)]
     window_mode: bool,
+    /// Materials or groups (glob, repeatable) whose back side reflects nothing in bounces. By
+    /// default a diffuse surface reflects on whichever side light reaches it (open mode, as a
+    /// path tracer's two-sided diffuse; window mode reflects from both sides already).
+    #[arg(long = "one-sided", value_name = "PATTERN")]
+    one_sided: Vec<String>,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -767,6 +772,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         up: up_axis(a.up),
         params,
         window_patterns: a.windows,
+        one_sided_patterns: a.one_sided,
         threads: a.threads.unwrap_or(0),
         json: a.json,
         clean,

@@ -18,6 +18,7 @@ pub mod shards;
 pub mod sun;
 pub mod surfaces;
 pub mod transfer;
+pub(crate) mod twins;
 mod window_light;
 
 pub use sampling::DirectionPattern;
@@ -116,6 +117,12 @@ pub struct BakeParams {
     /// A sample is inside geometry when most of its probe rays hit back faces
     /// closer than this fraction of the scene diagonal.
     pub inside_distance: f32,
+    /// Open mode with bounces: a diffuse surface reflects on the side light
+    /// reaches it from, back faces included (`bake::twins`), unless its
+    /// material is one-sided (`--one-sided`). Off, a ray that meets a back
+    /// face brings nothing back (bakes recorded before this field existed).
+    #[serde(default)]
+    pub two_sided: bool,
     /// No progress line on stderr (not part of the bake: never stored).
     #[serde(skip, default = "quiet_by_default")]
     pub quiet: bool,
@@ -153,6 +160,7 @@ impl Default for BakeParams {
             window_sampling: false,
             keep_outside_sides: false,
             inside_distance: 0.05,
+            two_sided: true,
             quiet: true,
             hit_cache_bytes: transfer::HIT_CACHE_BUDGET_BYTES,
         }
@@ -232,6 +240,9 @@ pub struct BakeStats {
     pub points_added: u64,
     /// Vertices no sample reached (only on window or degenerate triangles): their transfer is zero.
     pub vertices_without_samples: u64,
+    /// Triangles whose back side reflects light with sample points of its own
+    /// (open mode with bounces, `bake::twins`); their points are in `points`.
+    pub back_sides: u64,
     /// Rays evaluated per bounce (bounces ≥ 1 reuse bounce 0's hits when they fit in memory).
     pub rays_per_bounce: Vec<u64>,
     pub seconds_per_bounce: Vec<f64>,
@@ -266,6 +277,11 @@ pub struct TransferResult {
     /// bounces added in quadrature (`adaptive::add_noise_in_quadrature`);
     /// empty when not measured (vertex sampling). Not stored in bundles.
     pub noise: Vec<f32>,
+    /// The back sides' layers (`bake::twins`), bounce by bounce, one row per
+    /// vertex (zero where a vertex has no back side of its own), when
+    /// `store_bounces` and the bake had back sides: what a partial re-bake
+    /// keeps (`crate::refine`). Not stored in bundles.
+    pub back: Vec<Vec<f32>>,
     pub stats: BakeStats,
 }
 
@@ -317,9 +333,20 @@ pub fn bake_mesh(
     params: &BakeParams,
     window_patterns: &[String],
 ) -> Result<(TransferResult, Surfaces, f64), BakeError> {
+    bake_mesh_with(mesh, params, window_patterns, &[])
+}
+
+/// [`bake_mesh`] with the materials or groups matching `one_sided_patterns`
+/// one-sided (their back reflects nothing in bounces; `Surfaces::with_one_sided`).
+pub fn bake_mesh_with(
+    mesh: &crate::mesh::Mesh,
+    params: &BakeParams,
+    window_patterns: &[String],
+    one_sided_patterns: &[String],
+) -> Result<(TransferResult, Surfaces, f64), BakeError> {
     params.check()?;
     check_mesh(mesh)?;
-    let surfaces = Surfaces::resolve(mesh, window_patterns)?;
+    let surfaces = Surfaces::resolve(mesh, window_patterns)?.with_one_sided(mesh, one_sided_patterns)?;
     let scene = Scene::build(mesh, BuildQuality::Sah)?;
     let build_seconds = scene.build_time.as_secs_f64();
     let result = bake_transfer(mesh, &scene, &surfaces, params)?;

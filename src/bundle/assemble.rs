@@ -65,6 +65,9 @@ pub fn make_bundle_stored(
     if s.points_added > 0 {
         meta["stats"]["points_added"] = json!(s.points_added);
     }
+    if s.back_sides > 0 {
+        meta["stats"]["back_sides"] = json!(s.back_sides);
+    }
     if let (Some(m), serde_json::Value::Object(extra)) = (meta.as_object_mut(), extra_meta) {
         m.extend(extra);
     }

@@ -21,6 +21,8 @@ pub struct BakeConfig {
     pub up: UpAxis,
     pub params: BakeParams,
     pub window_patterns: Vec<String>,
+    /// `--one-sided`: materials or groups whose back reflects nothing.
+    pub one_sided_patterns: Vec<String>,
     pub threads: usize,
     pub json: bool,
     /// Clean the mesh first with these parameters (`--clean`).
@@ -167,12 +169,23 @@ pub fn load_for_bake(config: &BakeConfig, outputs: &[Output]) -> anyhow::Result<
 }
 
 /// The metadata a bundle records beyond the bake: `base` (source, clean)
-/// with the window patterns and the window materials found.
-pub fn bundle_meta(base: serde_json::Value, window_patterns: &[String], surfaces: &bake::Surfaces) -> serde_json::Value {
+/// with the window and one-sided patterns and the window materials found.
+pub fn bundle_meta(
+    base: serde_json::Value,
+    window_patterns: &[String],
+    one_sided_patterns: &[String],
+    surfaces: &bake::Surfaces,
+) -> serde_json::Value {
     let mut meta = base;
     meta["window_patterns"] = json!(window_patterns);
+    meta["one_sided_patterns"] = json!(one_sided_patterns);
     meta["windows"] = json!(surfaces.window_names);
     meta
+}
+
+/// The surfaces of `mesh` as a bake of `config` sees them.
+pub fn surfaces_of(mesh: &Mesh, config: &BakeConfig) -> Result<bake::Surfaces, bake::surfaces::PatternError> {
+    bake::Surfaces::resolve(mesh, &config.window_patterns)?.with_one_sided(mesh, &config.one_sided_patterns)
 }
 
 /// Refuses window mode without a window.
@@ -246,7 +259,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         super::with_threads(config.threads, || bake_maybe_refined(mesh, config))?.with_context(|| config.input.display().to_string())?;
     check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
-    let mut extra_meta = bundle_meta(extra_meta, &config.window_patterns, &surfaces);
+    let mut extra_meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
     let (mesh, refine) = match refined {
         Some((refined_mesh, report)) => {
             extra_meta["refine"] = report.meta();
@@ -275,6 +288,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
             let compacted = TransferResult {
                 total: move_layer(&result.total),
                 bounces: result.bounces.iter().map(|l| move_layer(l)).collect(),
+                back: Vec::new(),
                 noise: if result.noise.is_empty() {
                     Vec::new()
                 } else {
@@ -316,8 +330,13 @@ fn bake_maybe_refined(mesh: &Mesh, config: &BakeConfig) -> Result<RefinedBake, b
         let (r, s, b, c) = bake_maybe_culled(mesh, config)?;
         return Ok((r, s, b, c, None));
     };
-    let (refined, result, surfaces, report) =
-        crate::refine::refine_transfer(mesh.clone(), &config.params, &config.window_patterns, &request.params(mesh))?;
+    let (refined, result, surfaces, report) = crate::refine::refine_transfer(
+        mesh.clone(),
+        &config.params,
+        &config.window_patterns,
+        &config.one_sided_patterns,
+        &request.params(mesh),
+    )?;
     // The rounds' BVH builds are inside the refinement's time.
     Ok((result, surfaces, 0.0, None, Some((refined, report))))
 }
@@ -326,11 +345,11 @@ fn bake_maybe_refined(mesh: &Mesh, config: &BakeConfig) -> Result<RefinedBake, b
 /// (without bounces) shoots rays only from them, every triangle still occluding.
 fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bake::BakeError> {
     let Some((view_box, cull_params)) = &config.view_box else {
-        let (r, s, b) = bake::bake_mesh(mesh, &config.params, &config.window_patterns)?;
+        let (r, s, b) = bake::bake_mesh_with(mesh, &config.params, &config.window_patterns, &config.one_sided_patterns)?;
         return Ok((r, s, b, None));
     };
     config.params.check()?;
-    let surfaces = bake::Surfaces::resolve(mesh, &config.window_patterns)?;
+    let surfaces = surfaces_of(mesh, config)?;
     let scene = bake::Scene::build(mesh, bake::BuildQuality::Sah)?;
     let (visible, report) = bake::cull::visible_triangles(mesh, &scene, &surfaces, view_box, cull_params);
     // Bounces gather from every triangle's previous bounce, so they need the full bake.
@@ -437,6 +456,12 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     );
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
+    }
+    if s.back_sides > 0 {
+        println!(
+            "two-sided: {} of {} triangles reflect on their back side too (open surfaces; --one-sided PATTERN turns it off)",
+            s.back_sides, s.triangles
+        );
     }
     warn_rejected(s, &report.output);
     println!("{}", time_line(report));

@@ -134,7 +134,8 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             // Adaptive allocation's extra points, counted as a whole bake counts them.
             let mut result = result;
             if key.params.adaptive > 0.0 {
-                let surfaces = crate::bake::Surfaces::resolve(&b.mesh, &key.window_patterns)?;
+                let surfaces =
+                    crate::bake::Surfaces::resolve(&b.mesh, &key.window_patterns)?.with_one_sided(&b.mesh, &key.one_sided_patterns)?;
                 let base = crate::bake::transfer::base_point_count(&b.mesh, &surfaces, &key.params)?;
                 result.stats.points_added = result.stats.points.saturating_sub(base);
             }

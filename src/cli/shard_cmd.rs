@@ -132,12 +132,13 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let key = TransferKey {
         params: config.params,
         window_patterns: config.window_patterns.clone(),
+        one_sided_patterns: config.one_sided_patterns.clone(),
         quantize: config.storage.quantize,
         max_error: config.storage.max_error,
     };
     let mesh = &loaded.mesh;
     let (output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
-        let surfaces = crate::bake::Surfaces::resolve(mesh, &config.window_patterns)?;
+        let surfaces = super::bake_cmd::surfaces_of(mesh, config)?;
         check_windows(config, &surfaces)?;
         // Rounds ≥ 1 gather from round 0's hit records and trace nothing.
         let scene = match stage {
@@ -154,7 +155,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let mut part = output.part;
     if stage == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
-        let meta = bundle_meta(loaded.meta, &config.window_patterns, &surfaces);
+        let meta = bundle_meta(loaded.meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
         let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None };
         part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
     }

@@ -215,6 +215,7 @@ pub fn refine_transfer(
     mesh: Mesh,
     params: &BakeParams,
     window_patterns: &[String],
+    one_sided_patterns: &[String],
     refine: &RefineParams,
 ) -> Result<(Mesh, TransferResult, Surfaces, RefineReport), BakeError> {
     params.check()?;
@@ -223,7 +224,7 @@ pub fn refine_transfer(
     let mut report = RefineReport { params: Some(*refine), input_vertices: mesh.vertex_count(), ..RefineReport::default() };
     let layered = BakeParams { store_bounces: true, ..*params };
     let mut mesh = mesh;
-    let mut surfaces = Surfaces::resolve(&mesh, window_patterns)?;
+    let mut surfaces = Surfaces::resolve(&mesh, window_patterns)?.with_one_sided(&mesh, one_sided_patterns)?;
     let whole_start = std::time::Instant::now();
     let scene = Scene::build(&mesh, BuildQuality::Sah)?;
     report.bvh_build_seconds += scene.build_time.as_secs_f64();
@@ -242,10 +243,11 @@ pub fn refine_transfer(
         let kept_layers: Vec<Vec<f32>> =
             result.bounces.iter().map(|l| extend_rows(l, vertices_before, split.mesh.vertex_count())).collect();
         mesh = split.mesh;
-        surfaces = Surfaces::resolve(&mesh, window_patterns)?;
+        surfaces = Surfaces::resolve(&mesh, window_patterns)?.with_one_sided(&mesh, one_sided_patterns)?;
         let scene = Scene::build(&mesh, BuildQuality::Sah)?;
         report.bvh_build_seconds += scene.build_time.as_secs_f64();
-        let kept = bake::transfer::Kept { layers: &kept_layers, vertices: &rebake.kept_vertices };
+        let kept_back: Vec<Vec<f32>> = result.back.iter().map(|l| extend_rows(l, vertices_before, mesh.vertex_count())).collect();
+        let kept = bake::transfer::Kept { layers: &kept_layers, back: &kept_back, vertices: &rebake.kept_vertices };
         let kept_noise = extend_rows(&result.noise, vertices_before, mesh.vertex_count());
         result = bake::transfer::bake_transfer_update(&mesh, &scene, &surfaces, &layered, &rebake.receivers, &kept)?;
         // A kept vertex keeps its value, so it keeps its noise too.

@@ -71,7 +71,7 @@ fn refine_noise(
     noise_sigmas: f64,
 ) -> (Mesh, TransferResult, RefineReport) {
     let refine = RefineParams { error, max_vertices: budget, min_edge: 0.02, max_rounds: DEFAULT_MAX_ROUNDS, noise_sigmas };
-    let (m, r, _, report) = refine_transfer(mesh.clone(), params, &[], &refine).expect("refine");
+    let (m, r, _, report) = refine_transfer(mesh.clone(), params, &[], &[], &refine).expect("refine");
     (m, r, report)
 }
 

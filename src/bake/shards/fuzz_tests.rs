@@ -95,7 +95,7 @@ fn real_files() -> Round {
     let (mut mesh, _) = shapes::integrating_sphere(1, 0.6, 0.7, shapes::Opening::Window);
     mesh.materials[0].albedo = [0.7, 0.5, 0.3];
     let params = BakeParams { rays: 8, bounces: 1, mode: Mode::Window, adaptive: 1.0, quiet: true, ..BakeParams::default() };
-    let key = TransferKey { params, window_patterns: Vec::new(), quantize: None, max_error: None };
+    let key = TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None };
     let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
     let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
     let shard = |index| Shard { index, count: 2 };

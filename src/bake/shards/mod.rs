@@ -308,7 +308,7 @@ mod tests {
             }
             let params =
                 BakeParams { rays: 24, bounces, mode, sampling, window_sampling, store_bounces: true, adaptive, ..BakeParams::default() };
-            let key = TransferKey { params, window_patterns: Vec::new(), quantize: None, max_error: None };
+            let key = TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None };
             let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
             let scene = crate::bake::Scene::build(&mesh, crate::bake::BuildQuality::Sah).unwrap();
             let whole = bake_transfer(&mesh, &scene, &surfaces, &params).unwrap();

@@ -115,7 +115,13 @@ pub fn bake_transfer_shard(
         .into());
     }
     let mut plan = Plan::new(mesh, scene, surfaces, &params, None)?;
-    let identity = Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() };
+    let identity = Identity {
+        mesh: MeshId::of(mesh),
+        plan_vertices: plan.mesh.vertex_count() as u64,
+        plan_triangles: plan.mesh.triangle_count() as u64,
+        shards: shard.count,
+        key: key.encode(),
+    };
     // Rounds of an adaptive bake run over the unified layout the pilot decides.
     let mut base_items = None;
     let mut pilot_crc = 0;
@@ -152,7 +158,7 @@ pub fn bake_transfer_shard(
         Stage::Round(r) => format!("shard {shard}, round {r}/{}", params.bounces),
     };
     let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
-    let first_items = plan.items.first_items(mesh);
+    let first_items = plan.items.first_items(&plan.mesh);
     let sums = match (&base_items, round) {
         // Adaptive round 0: the base points again (the same bits as the
         // pilot's), then the extras, combined item by item as a whole bake does.
@@ -297,7 +303,13 @@ pub fn bake_sun_shard(
     let first_point = |item: usize| plan.layout.first_sample.get(item).map_or(plan.layout.sample_count(), |&f| f as u64);
     let (bits, rays) = plan.trace_items(scene, surfaces, range.clone());
     Ok(SunPart {
-        identity: Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() },
+        identity: Identity {
+            mesh: MeshId::of(mesh),
+            plan_vertices: mesh.vertex_count() as u64,
+            plan_triangles: mesh.triangle_count() as u64,
+            shards: shard.count,
+            key: key.encode(),
+        },
         shard: shard.index,
         items: range.start as u32..range.end as u32,
         item_count: costs.len() as u32,
