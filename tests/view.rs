@@ -731,3 +731,50 @@ fn sun_only_and_direction_bundles_are_viewed() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--step"), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// The photographic default keeps the sun patch of a dim scene from
+/// clipping (the highlight guard): a floor in skylight with a small patch
+/// of sun some 240 times brighter. Without the guard every pixel of the
+/// patch was white (code 255, measured); with it none is (253), and the
+/// patch stays far brighter than the shade (75).
+#[test]
+fn photographic_default_keeps_sun_patches_of_a_dim_scene() {
+    let Some(gpu) = gpu_or_skip("photographic_default_keeps_sun_patches_of_a_dim_scene") else { return };
+    let (mut bundle, _suns, plane_vertices) = plane_and_sphere_time_lapse();
+    // A dim room in daylight, in absolute units: 30 of skylight, a sun of
+    // 10,000 through a small opening: a 0.8 m square patch of the 4 m floor.
+    let series = bundle.sun.as_mut().unwrap();
+    series.steps.iter_mut().for_each(|s| s.sun_rgb = [1.0e4; 3]);
+    let positions = bundle.mesh.positions.clone();
+    let (words, masks) =
+        SunSeries::pack(2, positions.len(), |v, _| v < plane_vertices && positions[v].x.abs() < 0.4 && (positions[v].z - 1.2).abs() < 0.4);
+    (series.words_per_vertex, series.masks) = (words, masks);
+    let sun = bundle.sun.as_ref().unwrap();
+    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    let ambient = 30.0f32;
+    let lighting = vec![[ambient * (4.0 * std::f32::consts::PI).sqrt(); 3]];
+    let (width, height) = (160, 160);
+    let camera = Camera::look_at(Vec3::new(0.0, 6.0, 0.5), Vec3::ZERO, scene.bounds);
+    let tonemap = ToneMap { operator: ToneOperator::Photographic, ..ToneMap::default() };
+    let settings = FrameSettings { lighting, sun_step: Some(0), backdrop: Backdrop::Black, tonemap };
+    let image = render_image(&gpu, &scene, Some(sun), &camera, &settings, width, height).unwrap();
+    let n = 41usize;
+    let (mut lit, mut shade) = (Vec::new(), Vec::new());
+    for v in (0..plane_vertices).filter(|v| (v % n).abs_diff(n / 2) < 18 && (v / n).abs_diff(n / 2) < 18) {
+        let Some((x, y)) = camera.project(bundle.mesh.positions[v], width, height) else { continue };
+        let code = image.pixel(x.floor() as u32, y.floor() as u32)[1];
+        if sun.bit(v, 0) {
+            lit.push(code)
+        } else {
+            shade.push(code)
+        }
+    }
+    lit.sort_unstable();
+    shade.sort_unstable();
+    let clipped = lit.iter().filter(|&&c| c == 255).count() as f64 / lit.len() as f64;
+    let (lit_median, shade_median) = (lit[lit.len() / 2], shade[shade.len() / 2]);
+    eprintln!("sunlit {} pixels: {:.0}% clipped, median code {lit_median}; shade median {shade_median}", lit.len(), 100.0 * clipped);
+    assert!(lit.len() > 40 && shade.len() > 200, "{} lit, {} in shade", lit.len(), shade.len());
+    assert!(clipped < 0.1, "{:.0}% of the sunlit pixels clip", 100.0 * clipped);
+    assert!(f64::from(lit_median) > 1.5 * f64::from(shade_median).max(1.0), "sun {lit_median} against shade {shade_median}");
+}

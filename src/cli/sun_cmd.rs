@@ -78,6 +78,8 @@ pub struct SunReport {
     pub build_seconds: f64,
     /// Encoding and writing the bundle (and re-baking its transfer after `--refine`).
     pub write_seconds: f64,
+    /// `--refine` on a bundle with transfer: the transfer was baked again on the refined mesh.
+    pub transfer_rebaked: bool,
     pub bundle_bytes: u64,
     /// What adaptive refinement did (`--refine`).
     pub refine: Option<crate::refine::RefineReport>,
@@ -378,6 +380,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         sky_seconds,
         build_seconds,
         write_seconds: write_start.elapsed().as_secs_f64(),
+        transfer_rebaked: recipe.is_some(),
         bundle_bytes,
         refine,
     })
@@ -452,7 +455,8 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
             (format!("refinement's sun rays and splits ({} rounds)", r.rounds.len()), (r.seconds - r.bvh_build_seconds).max(0.0)),
         ]),
     }
-    phases.push(("write".to_string(), report.write_seconds));
+    let write = if report.transfer_rebaked { "transfer re-baked on the refined mesh, and write" } else { "write" };
+    phases.push((write.to_string(), report.write_seconds));
     println!("{}", super::bake_cmd::phase_line(&phases));
     println!(
         "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
