@@ -149,7 +149,7 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
         UpAxis::Y
     };
     let (mesh, original, had_transfer) = if input_was_bundle {
-        let bytes = read_limited(input, Limit::Bundle).with_context(|| format!("cannot read {}", input.display()))?;
+        let bytes = bundle::read_bundle_bytes(input)?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
         (b.mesh, Some((bytes, b.meta)), b.transfer.is_some())
     } else {
