@@ -55,6 +55,8 @@ pub fn write_scene_obj(path: &Path) {
 pub fn prtbake_peak_memory(args: &[&str]) -> (Output, u64) {
     use std::io::Read;
     use std::process::Stdio;
+    // Reaped by wait4 below (std's wait would not report the memory).
+    #[allow(clippy::zombie_processes)]
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_prtbake"))
         .args(args)
         .stdout(Stdio::piped())
