@@ -79,6 +79,7 @@ pub fn prtbake_peak_memory(args: &[&str]) -> (Output, u64) {
     use std::os::unix::process::ExitStatusExt;
     let output =
         Output { status: std::process::ExitStatus::from_raw(status), stdout: stdout.join().unwrap(), stderr: stderr.join().unwrap() };
-    // Linux reports ru_maxrss in KiB.
-    (output, usage.ru_maxrss as u64 * 1024)
+    // ru_maxrss is in KiB on Linux and the BSDs, in bytes on macOS.
+    let unit = if cfg!(target_os = "macos") { 1 } else { 1024 };
+    (output, usage.ru_maxrss as u64 * unit)
 }
