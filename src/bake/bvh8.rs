@@ -312,6 +312,13 @@ impl Walk {
         self.t_max = t_max;
     }
 
+    /// The maximum distance the walk has come down to (the query's, or
+    /// shortened by the leaves' answers).
+    #[inline(always)]
+    pub fn t_max(&self) -> f32 {
+        self.t_max
+    }
+
     /// Visits the next node or leaf, then picks the one after it, and
     /// returns false once the walk has ended. Every child the ray enters is
     /// prefetched when its parent is tested, so a step rarely waits on memory
@@ -334,6 +341,8 @@ impl Walk {
             }
         } else {
             let node = &nodes[self.next as usize];
+            #[cfg(test)]
+            super::queries::work::add(1);
             let entry = &mut self.entry;
             let mut mask = T::test(node, ray, t_min, self.t_max, entry);
             if mask != 0 {

@@ -6,6 +6,7 @@ pub(crate) mod adaptive;
 pub mod bvh8;
 pub mod cull;
 pub(crate) mod enclosure;
+pub mod fans;
 mod gather;
 pub mod hugepages;
 pub mod leaf_blocks;

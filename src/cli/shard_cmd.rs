@@ -17,7 +17,8 @@ use super::Output;
 use crate::bake::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
 use crate::bake::{BuildQuality, Scene, SunStats};
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
-use crate::files::{read_limited, Limit, Staged};
+use crate::files::read::{read_head, read_tail};
+use crate::files::{Limit, Staged};
 use crate::sky;
 
 /// Extensions of a part, a hit-record file and a merged layer.
@@ -53,9 +54,16 @@ impl ShardRun {
     }
 }
 
-/// Reads a shard file of `kind` whole (bounded), with the path in every error.
+/// Reads a shard file whole (bounded), with the path in every error; its
+/// header and trailer are read and checked against the file's size first
+/// ([`shards::codec::check_frame`]), so a file of another size than its
+/// trailer gives is refused before its body is read.
 pub fn read_shard_file(path: &Path) -> anyhow::Result<Vec<u8>> {
-    read_limited(path, Limit::Shard).with_context(|| format!("cannot read {}", path.display()))
+    let cannot_read = || format!("cannot read {}", path.display());
+    let head = read_head(path, Limit::Shard, shards::codec::HEADER_LEN as u64).with_context(cannot_read)?;
+    let (tail, size) = read_tail(path, Limit::Shard, shards::codec::TRAILER_LEN as u64).with_context(cannot_read)?;
+    shards::codec::check_frame(&head, &tail, size).map_err(|problem| shards::ShardError::malformed(path, problem))?;
+    read_head(path, Limit::Shard, size).with_context(cannot_read)
 }
 
 /// Decodes with the file named in the error.
@@ -310,4 +318,36 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
         config.output.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bake::shards::codec::{self, FileKind};
+    use crate::files::read::bytes_read;
+
+    /// A shard file of another size than its trailer gives (a layer
+    /// extended to a sparse 3 GiB, or cut short) is refused after its header
+    /// and trailer, naming the file and both sizes; the file itself reads whole.
+    #[test]
+    fn shard_files_are_checked_against_their_trailer_before_reading() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grown.prtl");
+        let bytes = codec::to_vec(FileKind::Layer, |w| w.f32s(&[1.0; 1000]));
+        std::fs::write(&path, &bytes).unwrap();
+        bytes_read::take();
+        assert_eq!(read_shard_file(&path).unwrap(), bytes);
+        let frame = (codec::HEADER_LEN + codec::TRAILER_LEN) as u64;
+        assert_eq!(bytes_read::take(), frame + bytes.len() as u64);
+        let big = 3u64 << 30;
+        for len in [big, bytes.len() as u64 - 4] {
+            std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(len).unwrap();
+            let message = format!("{:#}", read_shard_file(&path).unwrap_err());
+            assert_eq!(bytes_read::take(), frame);
+            // Extended with zeros, the trailer reads 0; cut short, the last 12 bytes are not a trailer.
+            let trailer = if len == big { "0".to_string() } else { String::new() };
+            let says = format!("is {len} bytes, but its trailer gives its length as {trailer}");
+            assert!(message.contains("grown.prtl") && message.contains(&says) && message.contains("truncated or extended"), "{message}");
+        }
+    }
 }

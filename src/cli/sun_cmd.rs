@@ -156,7 +156,11 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
         UpAxis::Y
     };
     let (mesh, original, had_transfer) = if input_was_bundle {
-        let bytes = read_limited(input, Limit::Bundle).with_context(|| format!("cannot read {}", input.display()))?;
+        let bytes = bundle::read_bundle_bytes(input).map_err(|e| match e {
+            bundle::BundleError::Io { source, .. } => anyhow::Error::new(source).context(format!("cannot read {}", input.display())),
+            bundle::BundleError::InFile { source, .. } => anyhow::anyhow!("{}: not a valid bundle: {source}", input.display()),
+            other => other.into(),
+        })?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
         (b.mesh, Some((bytes, b.meta)), b.transfer.is_some())
     } else {

@@ -172,6 +172,32 @@ pub fn to_vec(kind: FileKind, body: impl FnOnce(&mut Writer<&mut Vec<u8>>) -> st
     out
 }
 
+/// What a shard file's first [`HEADER_LEN`] and last [`TRAILER_LEN`] bytes
+/// (`head`, `tail`) say of a file of `file_len` bytes: its kind (any shard
+/// file), its major version and flags, and that the length its trailer
+/// gives is the file's. A reader checks this before reading the body, so a
+/// part with gigabytes appended (or a file of zeros behind a shard magic)
+/// costs 28 bytes; [`open`] checks the rest, the CRC included, once read.
+pub fn check_frame(head: &[u8], tail: &[u8], file_len: u64) -> Result<FileKind, String> {
+    let kind = FileKind::of(head)?;
+    if file_len < (HEADER_LEN + TRAILER_LEN) as u64 || head.len() < HEADER_LEN || tail.len() < TRAILER_LEN {
+        return Err(format!("is {file_len} bytes, shorter than a header and trailer: truncated"));
+    }
+    let major = u16::from_le_bytes([head[8], head[9]]);
+    if major != MAJOR {
+        return Err(format!("is format version {major}, this prtbake reads version {MAJOR}: bake and merge with the same release"));
+    }
+    if head[12..16] != [0; 4] {
+        return Err("has flags set that this version does not know".into());
+    }
+    let tail = &tail[tail.len() - TRAILER_LEN..];
+    let length = u64::from_le_bytes(tail[..8].try_into().unwrap_or([0; 8]));
+    if length != file_len {
+        return Err(format!("is {file_len} bytes, but its trailer gives its length as {length}: truncated or extended"));
+    }
+    Ok(kind)
+}
+
 /// Checks a file's header and trailer: its kind is `expected`, its major
 /// version is this reader's, its length is the one it says and its CRC
 /// matches. Returns a reader over the body and the file's CRC.
