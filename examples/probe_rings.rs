@@ -89,13 +89,21 @@ fn rings(args: &[String]) -> Result<(), String> {
         for &t in &ring[v as usize] {
             let corners = mesh.triangle(t as usize);
             let corner = ["a", "b", "c"][corners.iter().position(|&c| c == v).unwrap_or(0)];
-            let p: Vec<String> = corners.iter().map(|&c| mesh.positions[c as usize]).flat_map(|q| q.to_array()).map(|x| x.to_string()).collect();
-            let n: Vec<String> = corners.iter().map(|&c| mesh.normals[c as usize]).flat_map(|q| q.to_array()).map(|x| x.to_string()).collect();
+            let p: Vec<String> =
+                corners.iter().map(|&c| mesh.positions[c as usize]).flat_map(|q| q.to_array()).map(|x| x.to_string()).collect();
+            let n: Vec<String> =
+                corners.iter().map(|&c| mesh.normals[c as usize]).flat_map(|q| q.to_array()).map(|x| x.to_string()).collect();
             text += &format!("{v},{t},{},{corner},{}\n", p.join(","), n.join(","));
         }
     }
     std::fs::write(out, text).map_err(|e| format!("{}: {e}", out.display()))?;
-    println!("{}: {} vertices ({} candidates{})", out.display(), chosen.len(), candidates.len(), free.map(|f| format!(", rings within {f}")).unwrap_or_default());
+    println!(
+        "{}: {} vertices ({} candidates{})",
+        out.display(),
+        chosen.len(),
+        candidates.len(),
+        free.map(|f| format!(", rings within {f}")).unwrap_or_default()
+    );
     Ok(())
 }
 
@@ -112,9 +120,12 @@ fn compare(args: &[String]) -> Result<(), String> {
         let (mut diff2, mut ref2, mut noise2, mut sum_p, mut sum_m, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
         for line in text.lines().filter(|l| !l.starts_with("id")) {
             let f: Vec<&str> = line.split(',').collect();
-            let (Some(id), Some(m), Some(sigma), Some(used)) =
-                (f.first().and_then(|s| s.parse::<usize>().ok()), f.get(1).and_then(|s| s.parse::<f64>().ok()), f.get(2).and_then(|s| s.parse::<f64>().ok()), f.get(3).and_then(|s| s.parse::<u64>().ok()))
-            else {
+            let (Some(id), Some(m), Some(sigma), Some(used)) = (
+                f.first().and_then(|s| s.parse::<usize>().ok()),
+                f.get(1).and_then(|s| s.parse::<f64>().ok()),
+                f.get(2).and_then(|s| s.parse::<f64>().ok()),
+                f.get(3).and_then(|s| s.parse::<u64>().ok()),
+            ) else {
                 continue;
             };
             // Vertices the reference found no point for, or gave no spread, are not compared.

@@ -193,7 +193,11 @@ pub fn check_frame(head: &[u8], tail: &[u8], file_len: u64) -> Result<FileKind, 
     let tail = &tail[tail.len() - TRAILER_LEN..];
     let length = u64::from_le_bytes(tail[..8].try_into().unwrap_or([0; 8]));
     if length != file_len {
-        return Err(format!("is {file_len} bytes, but its trailer gives its length as {length}: truncated or extended"));
+        // The length sits in the trailer: when it disagrees, those bytes are
+        // whatever the cut left at the end, so they are not quoted.
+        return Err(format!(
+            "is {file_len} bytes and does not end in its own length and CRC-32: truncated or extended (a copy cut short, or bytes appended)"
+        ));
     }
     Ok(kind)
 }
