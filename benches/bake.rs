@@ -6,7 +6,7 @@
 //!
 //! And whole bakes of a closed cone whose apex valence grows from 2.5k to
 //! 20k (`bake/cone_valence`): the time must grow about as the triangles do
-//! (fans, `prtbake::bake::fans`), not as their square.
+//! (fans, `prtbake::trace::fans`), not as their square.
 //!
 //! Run: `cargo bench --bench bake` (add `-- trace` etc. to filter; only the
 //! cones: `cargo bench --bench bake -- cone_valence`).
@@ -15,10 +15,12 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, sampling, BakeParams, BatchMode, Batching, BuildQuality, Mode, RayQuery, Scene, Traversal};
+use prtbake::bake::{bake_mesh, BakeParams, Mode};
 use prtbake::clean::fixtures::{fan, FanShape};
 use prtbake::fixtures::cabin::generate_cabin;
 use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
+use prtbake::sampling;
+use prtbake::trace::{BatchMode, Batching, BuildQuality, RayQuery, Scene, Traversal};
 use rayon::prelude::*;
 
 /// Cells per metre giving the cabin ≥ 500k triangles.

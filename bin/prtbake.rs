@@ -740,7 +740,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     };
     let shard = match &a.shard {
         Some(text) => Some(cli::shard_cmd::ShardRun {
-            shard: prtbake::bake::shards::Shard::parse(text)?,
+            shard: prtbake::shards::Shard::parse(text)?,
             round: match a.round {
                 Some(RoundArg::Bounce(r)) => r,
                 _ => 0,
@@ -895,7 +895,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     params.check()?;
     Ok(cli::sun_cmd::SunConfig {
         refine: a.refine.request()?,
-        shard: a.shard.as_deref().map(prtbake::bake::shards::Shard::parse).transpose()?,
+        shard: a.shard.as_deref().map(prtbake::shards::Shard::parse).transpose()?,
         input: a.input,
         output: a.output,
         up,

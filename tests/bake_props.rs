@@ -2,8 +2,9 @@
 //! side-blind window mode.
 
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, scene, BakeParams, BatchMode, Batching, BuildQuality, Hit, Mode, RayQuery, Sampling, Scene, Traversal};
+use prtbake::bake::{bake_mesh, BakeParams, Mode, Sampling};
 use prtbake::mesh::{MaterialRole, Mesh};
+use prtbake::trace::{scene, BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, Traversal};
 use prtbake::verify::shapes;
 
 fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
@@ -176,8 +177,8 @@ fn bvh_rays_from_walls_match_brute_force() {
             let n = scene.face_normal(t as u32);
             let [a, b, c] = box_mesh.triangle_positions(t);
             for k in 0..8u32 {
-                let (u1, u2) = prtbake::bake::sampling::sample_2d(prtbake::bake::DirectionPattern::Sobol, k, 0, t as u32);
-                let d = prtbake::bake::sampling::cosine_sphere(n, u1, u2);
+                let (u1, u2) = prtbake::sampling::sample_2d(prtbake::bake::DirectionPattern::Sobol, k, 0, t as u32);
+                let d = prtbake::sampling::cosine_sphere(n, u1, u2);
                 let origin = scene.offset_origin((a + b + c) / 3.0, n, d);
                 let bvh = scene.closest_hit(origin, d, f32::INFINITY).map(|h| h.triangle);
                 let brute = scene::brute_force_closest(&box_mesh, origin, d, f32::INFINITY).map(|b| b.0);

@@ -2,8 +2,9 @@
 //! `sun` command on meshes and bundles, thread-count independence.
 
 use glam::Vec3;
-use prtbake::bake::{bake_sun_masks, BuildQuality, LoopOrder, Scene, SunParams, Surfaces};
+use prtbake::bake::{bake_sun_masks, LoopOrder, SunParams, Surfaces};
 use prtbake::bundle;
+use prtbake::trace::{BuildQuality, Scene};
 use prtbake::verify::shapes;
 
 use crate::util::{prtbake, write_scene_obj, Scratch};

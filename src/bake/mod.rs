@@ -3,32 +3,23 @@
 //! arrays and statistics.
 
 pub(crate) mod adaptive;
-pub mod bvh8;
 pub mod cull;
 pub(crate) mod enclosure;
-pub mod fans;
-mod gather;
-pub mod hugepages;
-pub mod leaf_blocks;
+pub(crate) mod gather;
 pub mod progress;
-pub mod queries;
-pub mod sah;
-pub mod sampling;
-pub mod scene;
-pub mod shards;
 pub mod sun;
 pub mod surfaces;
 pub mod transfer;
 pub(crate) mod twins;
 mod window_light;
 
-pub use sampling::DirectionPattern;
-pub use scene::{check_extent, BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, SceneError, Traversal, MAX_SCENE_EXTENT};
+pub use crate::sampling::DirectionPattern;
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
 pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 
 use crate::sh;
+use crate::trace::{Batching, BuildQuality, Scene, SceneError};
 
 /// Which light reaches a point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -174,8 +165,8 @@ impl BakeParams {
         if self.order == 0 || self.order > sh::MAX_ORDER {
             return Err(BakeError::Params(format!("order {} is outside 1..={}", self.order, sh::MAX_ORDER)));
         }
-        if self.rays == 0 || self.rays > sampling::MAX_RAYS_PER_POINT {
-            return Err(BakeError::Params(format!("rays per sample {} is outside 1..={}", self.rays, sampling::MAX_RAYS_PER_POINT)));
+        if self.rays == 0 || self.rays > crate::sampling::MAX_RAYS_PER_POINT {
+            return Err(BakeError::Params(format!("rays per sample {} is outside 1..={}", self.rays, crate::sampling::MAX_RAYS_PER_POINT)));
         }
         if !(0.0..=16.0).contains(&self.adaptive) {
             return Err(BakeError::Params(format!(

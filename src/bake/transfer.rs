@@ -26,14 +26,14 @@ use super::adaptive::{add_noise_in_quadrature, Moments, VertexDc};
 use super::enclosure::Sides;
 use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
-use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
-use super::scene::{Batching, RayQuery, Scene};
 use super::surfaces::Surfaces;
 use super::twins::{Twins, NO_TWIN};
 use super::window_light::WindowLights;
 use super::{BakeError, BakeParams, BakeStats, Mode, Sampling, TransferResult};
 use crate::mesh::Mesh;
+use crate::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
 use crate::sh;
+use crate::trace::scene::{Batching, RayQuery, Scene};
 
 /// What a vertex's transfer means, recorded in every bundle's META
 /// (`conventions.vertex_transfer`): bundles before it (no such key) averaged
@@ -83,7 +83,7 @@ struct Scratch {
     basis: Vec<f32>,
     /// The rays of the batch being traced, and their answers.
     queries: Vec<RayQuery>,
-    hits: Vec<Option<super::Hit>>,
+    hits: Vec<Option<crate::trace::Hit>>,
     occluded: Vec<bool>,
     /// Per window-light query: the window triangle aimed at and the light pdf of its direction.
     targets: Vec<(u32, f64)>,
@@ -1551,7 +1551,7 @@ impl Pass<'_> {
     /// other way: its barycentrics are (v, u)); `NO_HIT` where no light
     /// comes back (a window, a back face without a twin).
     #[inline]
-    fn record_of(&self, hit: &super::Hit) -> u64 {
+    fn record_of(&self, hit: &crate::trace::Hit) -> u64 {
         if self.surfaces.window_transmittance[hit.triangle as usize].is_some() {
             return NO_HIT;
         }

@@ -350,7 +350,7 @@ fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bak
     };
     config.params.check()?;
     let surfaces = surfaces_of(mesh, config)?;
-    let scene = bake::Scene::build(mesh, bake::BuildQuality::Sah)?;
+    let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah)?;
     let (visible, report) = bake::cull::visible_triangles(mesh, &scene, &surfaces, view_box, cull_params);
     // Bounces gather from every triangle's previous bounce, so they need the full bake.
     let receivers = (config.params.bounces == 0).then_some(visible.as_slice());

@@ -13,10 +13,10 @@ use super::bake_cmd::{encode_transfer_bundle, StorageRequest};
 use super::shard_cmd::{decode, read_shard_file};
 use super::sun_cmd::sun_stats_meta;
 use super::Output;
-use crate::bake::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
 use crate::bake::Surfaces;
 use crate::bundle;
 use crate::files::Staged;
+use crate::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
 
 /// A checked `merge` configuration.
 #[derive(Clone, Debug)]

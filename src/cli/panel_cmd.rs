@@ -11,7 +11,7 @@ use glam::Vec3;
 use serde_json::json;
 
 use super::Output;
-use crate::bake::{BuildQuality, Scene, Surfaces};
+use crate::bake::Surfaces;
 use crate::brdf::{EnergyReport, PanelBrdf};
 use crate::bundle::Bundle;
 use crate::files::Staged;
@@ -20,6 +20,7 @@ use crate::panel::{
     TexelResult,
 };
 use crate::sky::{LocalDate, Site};
+use crate::trace::{BuildQuality, Scene};
 
 /// The light outside.
 #[derive(Clone, Debug)]

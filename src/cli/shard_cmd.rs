@@ -14,12 +14,13 @@ use serde_json::json;
 use super::bake_cmd::{bundle_meta, check_windows, load_for_bake, BakeConfig};
 use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
 use super::Output;
-use crate::bake::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
-use crate::bake::{BuildQuality, Scene, SunStats};
+use crate::bake::SunStats;
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::files::read::{read_head, read_tail};
 use crate::files::{Limit, Staged};
+use crate::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
 use crate::sky;
+use crate::trace::{BuildQuality, Scene};
 
 /// Extensions of a part, a hit-record file and a merged layer.
 pub const PART_FORMAT: &[&str] = &["prtp"];
@@ -323,8 +324,8 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bake::shards::codec::{self, FileKind};
     use crate::files::read::bytes_read;
+    use crate::shards::codec::{self, FileKind};
 
     /// A shard file of another size than its trailer gives (a layer
     /// extended to a sparse 3 GiB, or cut short) is refused after its header

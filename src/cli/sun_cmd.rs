@@ -14,11 +14,12 @@ use anyhow::Context;
 use glam::Vec3;
 use serde_json::json;
 
-use crate::bake::{self, BuildQuality, Mode, Scene, SunMasks, SunParams, SunStats, Surfaces};
+use crate::bake::{self, Mode, SunMasks, SunParams, SunStats, Surfaces};
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::files::read::read_head;
 use crate::files::{read_limited, Limit};
 use crate::mesh::UpAxis;
+use crate::trace::{BuildQuality, Scene};
 
 use super::bake_cmd::BUNDLE_FORMAT;
 use super::Output;
@@ -62,7 +63,7 @@ pub struct SunConfig {
     /// Replace a read-only output (`--force`).
     pub force: bool,
     /// Trace one shard's samples into a part instead of the bundle (`--shard`).
-    pub shard: Option<crate::bake::shards::Shard>,
+    pub shard: Option<crate::shards::Shard>,
     /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`); a bundle's
     /// transfer is then baked again on the refined mesh (`sun_rebake`).
     pub refine: Option<super::bake_cmd::RefineRequest>,

@@ -10,10 +10,11 @@ use std::path::Path;
 use anyhow::Context;
 use serde_json::Value;
 
-use crate::bake::{self, BakeParams, BuildQuality, Scene, Surfaces};
+use crate::bake::{self, BakeParams, Surfaces};
 use crate::budget;
 use crate::bundle::{make_bundle_stored, Bundle, Quantization};
 use crate::mesh::Mesh;
+use crate::trace::{BuildQuality, Scene};
 
 /// How a bundle's transfer was baked and stored, read from its META.
 #[derive(Clone, Debug)]

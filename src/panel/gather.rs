@@ -21,11 +21,11 @@ use rayon::prelude::*;
 use super::environment::Environment;
 use super::interior::Interior;
 use super::layout::{PanelLayout, NO_TRIANGLE};
-use crate::bake::sampling::{hash_seed, sample_2d, tangent_frame, DirectionPattern};
 use crate::brdf::Brdf;
+use crate::sampling::{hash_seed, sample_2d, tangent_frame, DirectionPattern};
 
 /// The most samples a texel can take (one Sobol stream: 2^16 points).
-pub const MAX_SAMPLES: u32 = crate::bake::sampling::MAX_RAYS_PER_POINT;
+pub const MAX_SAMPLES: u32 = crate::sampling::MAX_RAYS_PER_POINT;
 
 /// Choices of the estimator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -3,11 +3,12 @@
 use glam::{Vec2, Vec3};
 
 use super::*;
-use crate::bake::{BakeParams, BuildQuality, Sampling, Scene, Surfaces};
+use crate::bake::{BakeParams, Sampling, Surfaces};
 use crate::brdf::{albedo_quadrature, AntiGlare, Brdf, BrdfSample, PanelBrdf};
 use crate::fixtures::builder::MeshBuilder;
 use crate::mesh::{Material, MaterialRole, Mesh};
 use crate::sh::EquirectImage;
+use crate::trace::{BuildQuality, Scene};
 
 /// A Lambertian panel (`ρ/π`, cosine sampling).
 struct Lambert(f32);
@@ -122,7 +123,7 @@ fn mirror_returns_the_environment_in_the_mirror_direction() {
     let (width, height) = (64u32, 32u32);
     let rgb = (0..width * height)
         .map(|i| {
-            let h = crate::bake::sampling::hash_seed(&[i]);
+            let h = crate::sampling::hash_seed(&[i]);
             [(h & 0xff) as f32 + 1.0, (h >> 8 & 0xff) as f32 + 1.0, (h >> 16 & 0xff) as f32 + 1.0]
         })
         .collect();
@@ -235,7 +236,7 @@ fn furnace_returns_albedo_times_radiance_for_every_brdf() {
         for (i, r) in results.iter().enumerate() {
             let n = layout.normal[i];
             let wo = (eye - layout.point[i]).normalize();
-            let (t, bt) = crate::bake::sampling::tangent_frame(n);
+            let (t, bt) = crate::sampling::tangent_frame(n);
             let wo_local = Vec3::new(wo.dot(t), wo.dot(bt), wo.dot(n));
             let a = albedo_quadrature(brdf.as_ref(), wo_local, 256, 512).map(|x| x as f32);
             let expected = luminance([a[0] * l[0], a[1] * l[1], a[2] * l[2]]);
@@ -269,7 +270,7 @@ fn sun_disk_glare_needs_light_sampling() {
     let expected: Vec<f32> = (0..layout.texel_count())
         .map(|i| {
             let wo = (eye - layout.point[i]).normalize();
-            let (t, b) = crate::bake::sampling::tangent_frame(Vec3::Y);
+            let (t, b) = crate::sampling::tangent_frame(Vec3::Y);
             let local = |d: Vec3| Vec3::new(d.dot(t), d.dot(b), d.y);
             let (k, omega) = (64, sun.solid_angle());
             let mut sum = 0.0f64;
@@ -321,7 +322,7 @@ fn error_falls_as_one_over_root_samples() {
     let expected: Vec<f32> = (0..layout.texel_count())
         .map(|i| {
             let wo = (eye - layout.point[i]).normalize();
-            let (t, bt) = crate::bake::sampling::tangent_frame(Vec3::Y);
+            let (t, bt) = crate::sampling::tangent_frame(Vec3::Y);
             luminance(albedo_quadrature(&brdf, Vec3::new(wo.dot(t), wo.dot(bt), wo.y), 512, 1024).map(|x| x as f32))
         })
         .collect();

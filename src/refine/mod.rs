@@ -40,9 +40,10 @@ pub mod probe;
 
 use glam::Vec3;
 
-use crate::bake::{self, BakeError, BakeParams, BuildQuality, Scene, SunMasks, SunParams, Surfaces, TransferResult};
+use crate::bake::{self, BakeError, BakeParams, SunMasks, SunParams, Surfaces, TransferResult};
 use crate::clean::split_edges;
 use crate::mesh::Mesh;
+use crate::trace::{BuildQuality, Scene};
 
 pub use error::{sun_edge_errors, transfer_edge_errors, MeanShading};
 

@@ -15,8 +15,9 @@
 use std::path::{Path, PathBuf};
 
 use super::*;
-use crate::bake::{BakeParams, BuildQuality, Mode, Scene, SunParams, Surfaces};
+use crate::bake::{BakeParams, Mode, SunParams, Surfaces};
 use crate::bundle::fuzz_tests::{largest_allocation, reset_largest_allocation};
+use crate::trace::{BuildQuality, Scene};
 use crate::verify::shapes;
 
 /// xorshift64*: replayable from its seed.

@@ -15,8 +15,9 @@ use crate::bake::gather::RowBuffer;
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
 use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};
-use crate::bake::{BakeError, Scene, Surfaces};
+use crate::bake::{BakeError, Surfaces};
 use crate::mesh::Mesh;
+use crate::trace::Scene;
 
 /// What a transfer shard of round b ≥ 1 reads: its own hit records (from
 /// round 0) and the merged layer of round b − 1, with their paths for errors.

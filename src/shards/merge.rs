@@ -470,7 +470,7 @@ mod tests {
     /// does not exist: a part with one is refused, not merged.
     #[test]
     fn sun_bits_past_the_last_step_are_refused() {
-        use crate::bake::shards::{Identity, MeshId};
+        use crate::shards::{Identity, MeshId};
         let key = SunKey { params: crate::bake::SunParams::default(), window_patterns: Vec::new(), steps: 5, day_crc: 7 };
         let identity = Identity {
             mesh: MeshId { crc: 1, vertices: 3, triangles: 1 },

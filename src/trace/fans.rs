@@ -382,10 +382,10 @@ impl<L: Leaves> Leaves for FanLeaves<'_, L> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bake::queries::work;
-    use crate::bake::scene::{brute_force_closest, BatchMode, Batching, BuildQuality, RayQuery, Scene, Traversal};
     use crate::bake::{bake_mesh, BakeParams};
     use crate::clean::fixtures::{fan, FanShape};
+    use crate::trace::queries::work;
+    use crate::trace::scene::{brute_force_closest, BatchMode, Batching, BuildQuality, RayQuery, Scene, Traversal};
     use crate::verify::shapes;
     use glam::{Mat3, Vec3};
 
@@ -454,7 +454,7 @@ mod tests {
         let (mut scene, paths) = scene_with_paths(&mesh);
         let fans = scene.fans.as_ref().expect("the scene has fans");
         assert_eq!(fans.hubs.len(), 4);
-        let mut rand = crate::bake::sampling::test_stream(99);
+        let mut rand = crate::sampling::test_stream(99);
         let mut queries = Vec::new();
         for _ in 0..3000 {
             let origin = Vec3::new(rand() * 8.0 - 4.0, rand() * 3.0 - 1.0, rand() * 6.0 - 3.0);
@@ -467,7 +467,7 @@ mod tests {
             let (u, v) = (rand(), rand());
             let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
             let normal = scene.face_normal(t as u32);
-            let direction = crate::bake::sampling::cosine_sphere(normal, rand(), rand());
+            let direction = crate::sampling::cosine_sphere(normal, rand(), rand());
             let origin = scene.offset_origin(a + (b - a) * u + (c - a) * v, normal, direction);
             queries.push(RayQuery { origin, direction, t_max: f32::INFINITY });
         }

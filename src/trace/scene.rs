@@ -27,7 +27,7 @@ use super::bvh8::{self, Bvh8, Node8, NodeTest, ScalarTest};
 use super::fans::{find_fans, Fans};
 use super::leaf_blocks::{LeafBlocks, LeafTest, ScalarLeaf};
 use super::queries::{self, ClosestWalk, OcclusionWalk, QueryWalk};
-use super::sampling;
+use crate::sampling;
 
 use crate::mesh::Mesh;
 

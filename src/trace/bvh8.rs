@@ -557,7 +557,7 @@ mod tests {
         let tris = grid_triangles(12);
         let bvh2 = build_bvh2_from_tris(&tris, BvhBuildParams::medium_build(), &mut Default::default());
         let bvh8 = Bvh8::from_bvh2(&bvh2);
-        let mut rand = crate::bake::sampling::test_stream(12345);
+        let mut rand = crate::sampling::test_stream(12345);
         for _ in 0..2000 {
             let o = Vec3::new(rand() * 14.0 - 1.0, rand() * 3.0 - 1.0, rand() * 14.0 - 1.0);
             let mut d = Vec3::new(rand() - 0.5, rand() - 0.5, rand() - 0.5).normalize();
