@@ -776,7 +776,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         threads: a.threads.unwrap_or(0),
         json: a.json,
         clean,
-        storage: cli::bake_cmd::StorageRequest { quantize, max_error: a.max_error },
+        storage: prtbake::bundle::StorageRequest { quantize, max_error: a.max_error },
         force: a.force,
         view_box: match &a.view_box {
             Some(text) => {

@@ -7,7 +7,7 @@ use serde_json::json;
 
 use crate::bake::{self, BakeParams, TransferResult};
 use crate::budget;
-use crate::bundle::{self, make_bundle_stored, storage_meta, Quantization};
+use crate::bundle::{bundle_meta, encode_transfer_bundle, storage_meta, Quantization, StorageRequest};
 use crate::files::Staged;
 use crate::mesh::{Mesh, UpAxis};
 
@@ -55,65 +55,6 @@ impl RefineRequest {
     pub fn params(&self, mesh: &Mesh) -> crate::refine::RefineParams {
         let params = crate::refine::RefineParams::for_mesh(mesh, self.error, self.max_vertices, self.min_edge);
         crate::refine::RefineParams { noise_sigmas: self.noise_sigmas.unwrap_or(params.noise_sigmas), ..params }
-    }
-}
-
-/// What the user asked about storage.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StorageRequest {
-    /// A fixed quantization, or `None` for the smallest within the budget.
-    pub quantize: Option<Quantization>,
-    /// Error budget (relative RMS in shaded radiance, see [`crate::budget`]):
-    /// order, channels and quantization are chosen to fit it.
-    pub max_error: Option<f64>,
-}
-
-impl Default for StorageRequest {
-    /// Store the bake as it is, in f32.
-    fn default() -> Self {
-        StorageRequest { quantize: Some(Quantization::F32), max_error: None }
-    }
-}
-
-/// Budget of `--quantize auto` without `--max-error`: quantization only, 0.1% shaded error.
-pub const AUTO_QUANTIZE_BUDGET: f64 = 1e-3;
-
-impl StorageRequest {
-    /// Chooses and measures the storage of `result` (order and channels only
-    /// shrink with a `max_error`). `None` when the bake is stored as it is.
-    pub fn choose(&self, result: &TransferResult) -> Option<budget::Choice> {
-        if *self == StorageRequest::default() {
-            return None;
-        }
-        let all = [Quantization::F16, Quantization::F16Tinted, Quantization::I16PerVertexScale, Quantization::F32];
-        let quantizations: Vec<Quantization> = match self.quantize {
-            Some(q) => vec![q],
-            None => all.to_vec(),
-        };
-        let (order, channels) = (result.order, result.channels);
-        let storages: Vec<budget::Storage> = match self.max_error {
-            Some(_) => budget::candidates(order, channels, &quantizations),
-            None => quantizations.iter().map(|&q| budget::Storage { order, channels, quantization: q }).collect(),
-        };
-        let limit = match (self.max_error, self.quantize) {
-            (Some(e), _) => e,
-            (None, None) => AUTO_QUANTIZE_BUDGET,
-            // A fixed quantization without a budget: always taken, but measured.
-            (None, Some(_)) => f64::INFINITY,
-        };
-        let lightings = budget::reference_lightings(order);
-        // --max-error counts the total error, the bake's own noise included
-        // (the definition `chart --real` measures); `--quantize auto` alone
-        // bounds what quantization loses.
-        let noise = match self.max_error {
-            Some(_) => budget::noise_errors(&result.total, order, channels, &result.noise, &lightings),
-            None => None,
-        };
-        let mut choice = budget::choose_within_total(&result.total, order, channels, &storages, limit, &lightings, noise.as_deref());
-        if limit.is_infinite() {
-            choice.budget = None;
-        }
-        Some(choice)
     }
 }
 
@@ -168,21 +109,6 @@ pub fn load_for_bake(config: &BakeConfig, outputs: &[Output]) -> anyhow::Result<
     Ok(LoadedMesh { mesh, meta, load_seconds, clean_seconds })
 }
 
-/// The metadata a bundle records beyond the bake: `base` (source, clean)
-/// with the window and one-sided patterns and the window materials found.
-pub fn bundle_meta(
-    base: serde_json::Value,
-    window_patterns: &[String],
-    one_sided_patterns: &[String],
-    surfaces: &bake::Surfaces,
-) -> serde_json::Value {
-    let mut meta = base;
-    meta["window_patterns"] = json!(window_patterns);
-    meta["one_sided_patterns"] = json!(one_sided_patterns);
-    meta["windows"] = json!(surfaces.window_names);
-    meta
-}
-
 /// The surfaces of `mesh` as a bake of `config` sees them.
 pub fn surfaces_of(mesh: &Mesh, config: &BakeConfig) -> Result<bake::Surfaces, bake::surfaces::PatternError> {
     bake::Surfaces::resolve(mesh, &config.window_patterns)?.with_one_sided(mesh, &config.one_sided_patterns)
@@ -198,22 +124,6 @@ pub fn check_windows(config: &BakeConfig, surfaces: &bake::Surfaces) -> anyhow::
         );
     }
     Ok(())
-}
-
-/// The bundle of a bake: stored as `storage` asks, measured, encoded. The
-/// one way whole bakes and merged shards make their bundle.
-pub fn encode_transfer_bundle(
-    mesh: &Mesh,
-    result: &TransferResult,
-    params: &BakeParams,
-    meta: serde_json::Value,
-    storage: &StorageRequest,
-    output: &std::path::Path,
-) -> anyhow::Result<(Vec<u8>, Option<budget::Choice>)> {
-    let choice = storage.choose(result);
-    let bundle = make_bundle_stored(mesh, result, params, meta, choice.as_ref());
-    let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
-    Ok((encoded, choice))
 }
 
 /// Says on stderr when `--max-error` cannot be met by any storage: the
@@ -300,7 +210,8 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         }
         None => (std::borrow::Cow::Borrowed(mesh), result),
     };
-    let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage, &config.output)?;
+    let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage)
+        .with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choice.as_ref(), &config.output);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
     let bundle_bytes = encoded.len() as u64;

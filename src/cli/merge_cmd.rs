@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde_json::json;
 
-use super::bake_cmd::{encode_transfer_bundle, StorageRequest};
+use crate::bundle::{encode_transfer_bundle, StorageRequest};
 use super::shard_cmd::{decode, read_shard_file};
 use super::sun_cmd::sun_stats_meta;
 use super::Output;
@@ -141,7 +141,8 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             }
             let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
             let (encoded, choice) =
-                super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage, output))??;
+                super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage))?
+                    .with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
             super::bake_cmd::warn_over_budget(choice.as_ref(), output);
             staged.stage_bytes(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
             let s = &result.stats;

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde_json::json;
 
-use super::bake_cmd::{bundle_meta, check_windows, load_for_bake, BakeConfig};
+use super::bake_cmd::{check_windows, load_for_bake, BakeConfig};
+use crate::bundle::bundle_meta;
 use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
 use super::Output;
 use crate::bake::SunStats;

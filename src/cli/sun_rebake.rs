@@ -81,7 +81,7 @@ impl TransferRecipe {
             choice.budget = None;
             choice
         });
-        let mut meta = super::bake_cmd::bundle_meta(self.mesh_meta.clone(), &self.window_patterns, &self.one_sided_patterns, &surfaces);
+        let mut meta = crate::bundle::bundle_meta(self.mesh_meta.clone(), &self.window_patterns, &self.one_sided_patterns, &surfaces);
         meta["transfer_rebaked"] =
             Value::String("by `sun --refine`: the transfer baked again on the sun-refined mesh with these params".into());
         Ok(make_bundle_stored(mesh, &result, &self.params, meta, choice.as_ref()))
