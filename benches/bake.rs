@@ -129,7 +129,7 @@ fn bench_bake(c: &mut Criterion, name: &str, mesh: &Mesh, window: &[String]) {
     group.finish();
 }
 
-/// Issue 3's whole bake: the Ferrari in window mode, order 3, 3 bounces, 64
+/// A whole bake: the Ferrari in window mode, order 3, 3 bounces, 64
 /// rays, 2 threads. Elements/s is the effective rate (rays traced / bake
 /// time), to set against `trace/ferrari/closest_hit/2t`
 /// (`benches/bake_rate.py` pairs the two run by run).

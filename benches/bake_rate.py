@@ -4,7 +4,7 @@
 usage: python3 benches/bake_rate.py [MESH] [--window Glass_Gray] [--order 3] [--rays 64]
                                     [--bounces 3] [--threads 2] [--pairs 5]
 
-Issue 3's must-show: a bake's effective rate (rays traced / bake seconds,
+Whether the bake keeps up with its tracer: a bake's effective rate (rays traced / bake seconds,
 from `prtbake bake --json`) within 20% of the raw closest-hit rate on the
 same mesh (`examples/trace_rate`, median of 3 runs). This VM's speed drifts
 by 10-20% over minutes, so each bake is paired with a raw run just before

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""prtbake against Cycles on the grey-white room: time against error (issue 17).
+"""prtbake against Cycles on the grey-white room: time against error.
 
     python3 benches/cycles_compare.py [--out DIR] [--quick]
 

@@ -1,5 +1,5 @@
-//! The viewer's first progressive panel image (issue 18: "the first progressive
-//! image in the viewer in ≤ 0.25 s of CPU on 2 cores"): one pass at the
+//! The viewer's first progressive panel image (target: the first
+//! progressive image in the viewer in ≤ 0.25 s of CPU on 2 cores): one pass at the
 //! viewer's first-pass settings (`view::panel`: 128 texels along the long side,
 //! 2 samples per texel) on the demo cabin's LCD from the driver's eye, on a
 //! 2-thread pool, as the viewer restarts it when the eye moves: the interior's

@@ -27,10 +27,10 @@ fn parse_round(text: &str) -> Result<RoundArg, String> {
 }
 
 /// `bake`'s adaptive allocation when `--adaptive` is not given (interior
-/// sampling). With the default 32 rays, issue 17's target: the Ferrari
-/// (window mode, 3 bounces) at 4.5% total error in about 13 s, where the
-/// code the issue measured gave 11.4% in 11 s; `--rays 128 --adaptive 1`
-/// is the final-quality setting (docs/speed-accuracy.md).
+/// sampling). With the default 32 rays it brings the Ferrari (window mode,
+/// 3 bounces) to 4.5% relative L2 total error in about 13 s, where the
+/// baseline centroid estimator gave 11.4% in about 13 s; `--rays 128 --adaptive 1` is the
+/// final-quality setting (docs/speed-accuracy.md).
 const DEFAULT_ADAPTIVE: f32 = 0.25;
 
 #[derive(Parser)]
@@ -739,7 +739,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         Some(QuantizeArg::Auto) => None,
     };
     let shard = match &a.shard {
-        Some(text) => Some(cli::shard_cmd::ShardRun {
+        Some(text) => Some(prtbake::shards::ShardRun {
             shard: prtbake::shards::Shard::parse(text)?,
             round: match a.round {
                 Some(RoundArg::Bounce(r)) => r,
@@ -1091,9 +1091,10 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
             let plan = args.plan_shards;
             let threads_given = args.threads.is_some();
             let config = bake_config(args)?;
-            match plan {
-                Some(n) => cli::shard_cmd::print_plan(n, &config.output, Some(&config.params), threads_given).map(|_| Outcome::Ok),
-                None => cli::bake_cmd::run(&config).map(|_| Outcome::Ok),
+            match (plan, &config.shard) {
+                (Some(n), _) => cli::shard_cmd::print_plan(n, &config.output, Some(&config.params), threads_given).map(|_| Outcome::Ok),
+                (None, Some(shard)) => cli::shard_cmd::run_transfer(&config, shard).map(|_| Outcome::Ok),
+                (None, None) => cli::bake_cmd::run(&config).map(|_| Outcome::Ok),
             }
         }
         Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
@@ -1101,9 +1102,10 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
             let plan = args.plan_shards;
             let threads_given = args.threads.is_some();
             let config = sun_config(args)?;
-            match plan {
-                Some(n) => cli::shard_cmd::print_plan(n, &config.output, None, threads_given).map(|_| Outcome::Ok),
-                None => cli::sun_cmd::run(&config).map(|_| Outcome::Ok),
+            match (plan, config.shard) {
+                (Some(n), _) => cli::shard_cmd::print_plan(n, &config.output, None, threads_given).map(|_| Outcome::Ok),
+                (None, Some(shard)) => cli::shard_cmd::run_sun(&config, shard).map(|_| Outcome::Ok),
+                (None, None) => cli::sun_cmd::run(&config).map(|_| Outcome::Ok),
             }
         }
         Command::Generate { scene, output, detail, copies, force } => {

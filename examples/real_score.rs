@@ -48,7 +48,7 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     let reference = real::reference(scene, cache)?;
-    let lightings = prtbake::budget::reference_lightings(reference.order);
+    let lightings = prtbake::bundle::budget::reference_lightings(reference.order);
     let n = prtbake::sh::coeff_count(reference.order);
     let print = |label: &str, s: &Score| println!("{name} {label}: {}", s.summary());
     match command {

@@ -1,5 +1,5 @@
 //! Total error of bundles of different refinements of one surface, as
-//! docs/refinement.md reports it (issue 20's (a) as cleaned, (b) uniform
+//! docs/refinement.md reports it ((a) as cleaned, (b) uniform
 //! `--max-edge`, (c) `--refine`).
 //!
 //! cargo run --release --example refine_error -- REFERENCE.prtb BUNDLE.prtb… [--points N]
@@ -45,7 +45,10 @@ fn shaded(bundle: &Bundle, located: &[Option<Located>]) -> Vec<Vec<[f64; 3]>> {
     let (order, channels) = (transfer.order as usize, transfer.channels as usize);
     let stride = transfer.values_per_vertex() as usize;
     let rows = interpolate(&bundle.mesh, &transfer.total(), stride, located);
-    prtbake::budget::reference_lightings(order).iter().map(|sky| prtbake::budget::shade(&rows, order, channels, &sky.sh)).collect()
+    prtbake::bundle::budget::reference_lightings(order)
+        .iter()
+        .map(|sky| prtbake::bundle::budget::shade(&rows, order, channels, &sky.sh))
+        .collect()
 }
 
 fn window_mode(bundle: &Bundle) -> bool {
@@ -118,7 +121,7 @@ fn main() {
                     .map(|(w, g)| {
                         let w: Vec<[f64; 3]> = both.iter().map(|&p| w[p]).collect();
                         let g: Vec<[f64; 3]> = both.iter().map(|&p| g[p]).collect();
-                        prtbake::budget::relative_rms(&w, &g)
+                        prtbake::bundle::budget::relative_rms(&w, &g)
                     })
                     .collect();
                 let mean = errors.iter().sum::<f64>() / errors.len() as f64;

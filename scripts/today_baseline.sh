@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 17's "today": the bake as it was when the issue was filed (commit
+# The baseline estimator the speed-accuracy chart compares with (commit
 # ea47cd5, estimator 1: centroid samples on small triangles, --samples-per-vertex 2),
 # swept over rays on chart --real's three scenes and scored against the same
 # converged references (docs/speed-accuracy.md, "Today's code").

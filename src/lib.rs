@@ -7,11 +7,11 @@
 
 pub mod bake;
 pub mod brdf;
-pub mod budget;
 pub mod bundle;
 pub mod chart;
 pub mod clean;
 pub mod cli;
+pub mod colour;
 pub mod files;
 pub mod fixtures;
 pub mod mesh;

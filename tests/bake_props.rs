@@ -254,7 +254,7 @@ fn window_mode_is_side_blind() {
     let _ = MaterialRole::Window;
 }
 
-/// Issue 20 item 3 (window halo): a closed 4 × 3 × 4 m room whose front wall
+/// The window halo: a closed 4 × 3 × 4 m room whose front wall
 /// (z = 0, one sheet of 0.25 m cells) has a 1 × 1 m opening, and a pane
 /// 0.19 m outside it, 5 cm larger than the opening on each side. Window mode
 /// is two-sided, so the wall's outer side saw the pane from behind and its
@@ -294,7 +294,7 @@ fn no_window_halo_on_the_outer_face_of_a_wall() {
     }
 }
 
-/// Issue 20 (cutting), the leak: a closed room of six separate inward patches
+/// The leak that cutting removes: a closed room of six separate inward patches
 /// whose floor runs 0.17 m and right wall 0.1 m past the back wall. Open mode,
 /// bounce 0: no sky is visible from inside a closed room, so the closed form
 /// is zero transfer at every vertex inside it. A vertex is inside when its

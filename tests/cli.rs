@@ -214,7 +214,7 @@ fn panel_gathers_the_ground_and_refuses_bad_input() {
     assert!(!out.exists() && !dir.path("behind.exr").exists(), "no output on error");
 }
 
-/// Issue 20 item 4: `bake --clean --max-edge` and `clean --max-edge` → OBJ or
+/// `bake --clean --max-edge` and `clean --max-edge` → OBJ or
 /// GLB → `bake` give the same vertices (positions, order) and the same
 /// transfer, bit for bit.
 #[test]
@@ -322,9 +322,9 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
     // parameters, stored as the input was (f16): nothing stale, nothing partial.
     let params: prtbake::bake::BakeParams = serde_json::from_value(both_bundle.meta["params"].clone()).unwrap();
     let (result, _, _) = prtbake::bake::bake_mesh(&both_bundle.mesh, &params, &[]).unwrap();
-    let f16 = prtbake::budget::Storage { order: 3, channels: result.channels, quantization: prtbake::bundle::Quantization::F16 };
-    let lightings = prtbake::budget::reference_lightings(3);
-    let choice = prtbake::budget::choose(&result.total, 3, result.channels, &[f16], f64::INFINITY, &lightings);
+    let f16 = prtbake::bundle::budget::Storage { order: 3, channels: result.channels, quantization: prtbake::bundle::Quantization::F16 };
+    let lightings = prtbake::bundle::budget::reference_lightings(3);
+    let choice = prtbake::bundle::budget::choose(&result.total, 3, result.channels, &[f16], f64::INFINITY, &lightings);
     let again = prtbake::bundle::make_bundle_stored(&both_bundle.mesh, &result, &params, serde_json::json!({}), Some(&choice));
     // Through the codec, which rounds the layers to f16 as stored.
     let again = prtbake::bundle::decode_bundle(&prtbake::bundle::encode_bundle(&again).unwrap()).unwrap();
@@ -385,7 +385,7 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
     assert!(!out.exists());
 }
 
-/// Issue 20 (cutting): `clean --cut-intersections` reports the segments and
+/// `clean --cut-intersections` reports the segments and
 /// triangles it cut (summary and JSON), `bake --clean --cut-intersections`
 /// bakes the same cleaned mesh as `clean --cut-intersections` to GLB then
 /// `bake`, an OBJ output warns that loading it welds the cut's sides back,
@@ -426,7 +426,7 @@ fn clean_and_bake_cut_intersections() {
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
-/// Issue 17: `bake --adaptive F` adds points after bounce 0 and records the
+/// `bake --adaptive F` adds points after bounce 0 and records the
 /// factor in META; it is on (0.25, at 32 rays) by default, off with `--sampling vertex`; a
 /// factor outside 0..=16, or one with `--sampling vertex`, is refused with
 /// exit 2 and nothing written, and so is an adaptive shard's round without

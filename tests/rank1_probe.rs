@@ -15,9 +15,9 @@ fn rank1_probe() {
             out.extend(g.iter().map(|x| k * half::f16::from_f32(*x).to_f32()));
         }
     }
-    let lights = prtbake::budget::reference_lightings(3);
+    let lights = prtbake::bundle::budget::reference_lightings(3);
     for l in &lights {
-        let e = prtbake::budget::relative_rms(&prtbake::budget::shade(data, 3, 3, &l.sh), &prtbake::budget::shade(&out, 3, 3, &l.sh));
+        let e = prtbake::bundle::budget::relative_rms(&prtbake::bundle::budget::shade(data, 3, 3, &l.sh), &prtbake::bundle::budget::shade(&out, 3, 3, &l.sh));
         eprintln!("{}: {e:.4e}", l.name);
     }
 }

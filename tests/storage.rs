@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 use prtbake::bake::{self, cull, BakeParams};
-use prtbake::budget;
+use prtbake::bundle::budget;
 use prtbake::bundle::read_bundle;
 
 use crate::util::{prtbake, shared_data, write_scene_obj, Scratch};

@@ -219,7 +219,7 @@ fn bad_directions_name_file_and_line() {
     assert_eq!(o.status.code(), Some(2));
 }
 
-/// Issue 17 item 6: the shadow where it runs off the mesh. Plane 8 × 8 m at
+/// The shadow where it runs off the mesh. Plane 8 × 8 m at
 /// 60, 100, 120 and 121 vertices a side under a level-4 icosphere (r 0.5 at
 /// height 1.5), the reported sun `(0.2868608, 0.4013245, 0.869856)` (its
 /// shadow crosses the z = −4 edge near x ≈ −1.3) and 99 random suns 6°–90°

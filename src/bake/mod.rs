@@ -2,10 +2,10 @@
 //! the CPU. `bake` does no I/O: it receives a mesh and parameters and returns
 //! arrays and statistics.
 
-pub(crate) mod adaptive;
 pub mod cull;
 pub(crate) mod enclosure;
 pub(crate) mod gather;
+pub(crate) mod noise;
 pub mod progress;
 pub mod sun;
 pub mod surfaces;
@@ -265,8 +265,8 @@ pub struct TransferResult {
     /// Each bounce (0 = direct) when `store_bounces`, else empty.
     pub bounces: Vec<Vec<f32>>,
     /// Per vertex, the standard error of its DC estimate (channel 0): each
-    /// bounce's from its points' spread (`bake::adaptive::Moments`), the
-    /// bounces added in quadrature (`adaptive::add_noise_in_quadrature`);
+    /// bounce's from its points' spread (`bake::noise::Moments`), the
+    /// bounces added in quadrature (`noise::add_noise_in_quadrature`);
     /// empty when not measured (vertex sampling). Not stored in bundles.
     pub noise: Vec<f32>,
     /// The back sides' layers (`bake::twins`), bounce by bounce, one row per

@@ -17,7 +17,7 @@
 use glam::{DVec3, Vec3};
 
 use super::surfaces::Surfaces;
-use super::transfer::triangle_area;
+use super::transfer::items::triangle_area;
 use crate::mesh::Mesh;
 use crate::sampling::square_to_triangle;
 

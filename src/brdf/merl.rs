@@ -21,6 +21,7 @@
 use super::frame::both_above;
 use super::merl_fit::fit_lobe;
 pub use super::merl_fit::FittedLobe;
+pub use super::merl_grid::cell_centre;
 use super::microfacet::{lobe_or_cosine_pdf, sample_lobe_or_cosine};
 use super::text_format::MAX_VALUE;
 use super::{read_brdf_file, Brdf, BrdfError, BrdfSample};
@@ -170,12 +171,6 @@ pub fn directions_from_half_diff(theta_h: f32, theta_d: f32, phi_d: f32) -> (Vec
     let h = Vec3::new(sin_t, 0.0, cos_t);
     let wi = Vec3::new(d.x * cos_t + d.z * sin_t, d.y, -d.x * sin_t + d.z * cos_t);
     (wi, super::frame::reflect(wi, h))
-}
-
-/// The angles `(θ_h, θ_d, φ_d)` of the centre of cell `(i_h, i_d, i_φ)`.
-pub fn cell_centre(i_h: usize, i_d: usize, i_phi: usize) -> (f32, f32, f32) {
-    let s = (i_h as f32 + 0.5) / 90.0;
-    (s * s * FRAC_PI_2, (i_d as f32 + 0.5) / 90.0 * FRAC_PI_2, (i_phi as f32 + 0.5) / 180.0 * PI)
 }
 
 impl Brdf for MerlBrdf {

@@ -21,7 +21,7 @@ pub struct FittedLobe {
 /// from 0.01 to 1. The mixture weight is the lobe's share of the albedo at
 /// normal incidence, clamped to [0.1, 0.9] so neither strategy starves.
 pub(crate) fn fit_lobe(values: &[[f32; 3]]) -> FittedLobe {
-    let theta_h: Vec<f64> = (0..90).map(|i| f64::from(super::merl::cell_centre(i, 0, 0).0)).collect();
+    let theta_h: Vec<f64> = (0..90).map(|i| f64::from(super::merl_grid::cell_centre(i, 0, 0).0)).collect();
     let width: Vec<f64> = (0..90).map(|i| ((i + 1) * (i + 1) - i * i) as f64 / 8100.0 * std::f64::consts::FRAC_PI_2).collect();
     let profile: Vec<f64> = (0..90)
         .map(|h| {

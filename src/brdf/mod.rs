@@ -1,4 +1,4 @@
-//! BRDFs of the LCD panel for the final gather (issue 18; docs/panel.md):
+//! BRDFs of the LCD panel for the final gather (docs/panel.md):
 //! an eye ray reaches a panel texel, and reflected rays are drawn from the
 //! panel's BRDF (seed 000, section 4.3).
 //!
@@ -20,6 +20,7 @@ pub mod error;
 pub mod frame;
 pub mod merl;
 mod merl_fit;
+mod merl_grid;
 pub mod microfacet;
 pub mod sampling;
 pub mod tabulated;

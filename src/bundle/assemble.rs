@@ -7,7 +7,7 @@ use serde_json::json;
 
 use super::{Bundle, LayerKind, Quantization, Transfer, TransferLayer};
 use crate::bake::{self, BakeParams, TransferResult};
-use crate::budget;
+use crate::bundle::budget;
 use crate::mesh::Mesh;
 
 /// The conventions every bundle's metadata records.
@@ -122,7 +122,7 @@ pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::
 pub struct StorageRequest {
     /// A fixed quantization, or `None` for the smallest within the budget.
     pub quantize: Option<Quantization>,
-    /// Error budget (relative RMS in shaded radiance, see [`crate::budget`]):
+    /// Error budget (relative RMS in shaded radiance, see [`crate::bundle::budget`]):
     /// order, channels and quantization are chosen to fit it.
     pub max_error: Option<f64>,
 }

@@ -37,6 +37,13 @@ pub const HEADER_LEN: usize = 32;
 pub const ENTRY_LEN: usize = 40;
 /// Alignment of every payload and of the file length.
 pub const ALIGN: u64 = 8;
+/// The sections' tags (docs/bundle-format.md, "Sections").
+pub(crate) const META: [u8; 4] = *b"META";
+pub(crate) const MESH: [u8; 4] = *b"MESH";
+pub(crate) const MATL: [u8; 4] = *b"MATL";
+pub(crate) const XFER: [u8; 4] = *b"XFER";
+pub(crate) const SUNM: [u8; 4] = *b"SUNM";
+pub(crate) const SUND: [u8; 4] = *b"SUND";
 /// Offset of the header CRC field; the CRC covers bytes `0..HEADER_CRC_AT` and the table.
 const HEADER_CRC_AT: usize = 28;
 

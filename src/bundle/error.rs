@@ -1,9 +1,8 @@
 //! The one error type of the bundle reader and writer.
 
+use std::borrow::Cow;
 use std::fmt;
 use std::path::PathBuf;
-
-use super::values::BadValue;
 
 /// A four-byte section tag (`b"MESH"`), shown as ASCII with escapes for other bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -97,5 +96,57 @@ impl BundleError {
             BundleError::InFile { source, .. } => source.kind(),
             other => other,
         }
+    }
+}
+
+/// What is wrong with one value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ValueProblem {
+    /// NaN or ±infinity.
+    NotFinite { value: f64 },
+    /// Finite, but outside the field's range (written as in the docs, e.g. `"[0, 1]"`).
+    OutOfRange { value: f64, range: &'static str },
+    /// A vector that must give a direction is (too close to) zero.
+    ZeroVector,
+    /// A vector stored unit length is not.
+    NotUnit { length: f64 },
+}
+
+/// The shortest text that reads back as `v`: as an f32 when it is one (most fields).
+fn shortest(v: f64) -> String {
+    let single = v as f32;
+    if single as f64 == v {
+        single.to_string()
+    } else {
+        v.to_string()
+    }
+}
+
+impl fmt::Display for ValueProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            ValueProblem::NotFinite { value } if value.is_nan() => write!(f, "is NaN"),
+            ValueProblem::NotFinite { value } => write!(f, "is {value}"),
+            ValueProblem::OutOfRange { value, range } => write!(f, "is {}, outside {range}", shortest(value)),
+            ValueProblem::ZeroVector => write!(f, "is the zero vector (no direction)"),
+            ValueProblem::NotUnit { length } => write!(f, "has length {}, not 1", shortest(length)),
+        }
+    }
+}
+
+/// A value outside its meaning range, and where it is: `material 2 albedo is NaN`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BadValue {
+    /// What is indexed: `vertex`, `material`, `layer`, `step`.
+    pub item: &'static str,
+    pub index: u64,
+    /// The field, e.g. `albedo`, `normal`, `value 17 (vertex 1)`.
+    pub field: Cow<'static, str>,
+    pub problem: ValueProblem,
+}
+
+impl fmt::Display for BadValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {} {} {}", self.item, self.index, self.field, self.problem)
     }
 }

@@ -16,11 +16,13 @@
 //! section and the problem.
 
 mod assemble;
+pub mod budget;
 mod container;
 mod cursor;
 mod error;
 mod export_gltf;
 mod quantize;
+pub mod recipe;
 mod sections;
 mod types;
 mod values;
@@ -32,7 +34,9 @@ mod tests;
 
 use std::path::Path;
 
-pub use assemble::{bundle_meta, conventions, encode_transfer_bundle, make_bundle, make_bundle_stored, storage_meta, StorageRequest, AUTO_QUANTIZE_BUDGET};
+pub use assemble::{
+    bundle_meta, conventions, encode_transfer_bundle, make_bundle, make_bundle_stored, storage_meta, StorageRequest, AUTO_QUANTIZE_BUDGET,
+};
 pub use container::{
     Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC, STORED_CRC_SINCE_MINOR,
 };

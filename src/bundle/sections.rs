@@ -14,12 +14,7 @@ use super::types::{LayerKind, Quantization, SunSeries, SunStep, Transfer, Transf
 use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
-pub(crate) const META: [u8; 4] = *b"META";
-pub(crate) const MESH: [u8; 4] = *b"MESH";
-pub(crate) const MATL: [u8; 4] = *b"MATL";
-pub(crate) const XFER: [u8; 4] = *b"XFER";
-pub(crate) const SUNM: [u8; 4] = *b"SUNM";
-pub(crate) const SUND: [u8; 4] = *b"SUND";
+pub(crate) use super::container::{MATL, MESH, META, SUND, SUNM, XFER};
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;

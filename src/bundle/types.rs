@@ -2,6 +2,7 @@
 //! [`super::decode_bundle`] returns.
 
 use crate::mesh::Mesh;
+pub use crate::sky::SunStep;
 
 /// Everything a `.prtb` file holds.
 #[derive(Clone, Debug, PartialEq)]
@@ -16,6 +17,19 @@ pub struct Bundle {
     pub transfer: Option<Transfer>,
     /// Sun masks and per-step sun/sky data, if baked.
     pub sun: Option<SunSeries>,
+}
+
+impl Bundle {
+    /// Whether META records a window-mode transfer bake (`params.mode`).
+    pub fn is_window_mode(&self) -> bool {
+        self.meta.pointer("/params/mode").and_then(|m| m.as_str()) == Some("window")
+    }
+
+    /// The bake's `--window` patterns META records (`window_patterns`); none when absent.
+    pub fn window_patterns(&self) -> Vec<String> {
+        let patterns = self.meta.get("window_patterns").and_then(|p| p.as_array());
+        patterns.map(|list| list.iter().filter_map(|p| p.as_str().map(str::to_string)).collect()).unwrap_or_default()
+    }
 }
 
 /// Per-vertex SH transfer vectors, one layer per stored bounce (and/or the total).
@@ -189,25 +203,6 @@ pub struct SunSeries {
     /// Vertex-major bits: vertex v, step k is bit `k % 32` of word
     /// `v · words_per_vertex + k / 32`; 1 = sunlit. Bits at steps ≥ `steps.len()` are 0.
     pub masks: Vec<u32>,
-}
-
-/// The sun and sky at one time step.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SunStep {
-    /// Seconds since 1970-01-01T00:00:00Z.
-    pub unix_time_utc: f64,
-    /// Unit vector in the world frame pointing toward the sun.
-    pub direction: [f32; 3],
-    /// Sun elevation above the horizon, degrees (negative below).
-    pub elevation_deg: f32,
-    /// Sun azimuth, degrees, as the sky module defines it (clockwise from north).
-    pub azimuth_deg: f32,
-    /// Sun irradiance on a surface facing it, linear RGB.
-    pub sun_rgb: [f32; 3],
-    /// The sun is below the horizon.
-    pub night: bool,
-    /// Sky radiance SH, `sky_order²` RGB coefficients, index `l(l+1)+m`.
-    pub sky_sh: Vec<[f32; 3]>,
 }
 
 impl SunSeries {

@@ -12,12 +12,12 @@
 //! [−90, 90] and azimuth in [0, 360] degrees; sun irradiance ≥ 0.
 
 use std::borrow::Cow;
-use std::fmt;
 
 use glam::{Vec2, Vec3};
 
+use super::container::{MATL, MESH, SUND, XFER};
 use super::error::BundleError;
-use super::sections::{MATL, MESH, SUND, XFER};
+pub use super::error::{BadValue, ValueProblem};
 use super::types::{Bundle, SunStep};
 use crate::mesh::{compute_vertex_normals, Material, Mesh};
 
@@ -28,58 +28,6 @@ pub(crate) const RANGES_CHECKED_SINCE_MINOR: u16 = 1;
 /// How far a stored sun direction's length may be from 1. Normalising in f32
 /// is good to ~1e-7; anything past 1e-3 is not a direction someone normalised.
 pub const UNIT_LENGTH_TOLERANCE: f32 = 1e-3;
-
-/// What is wrong with one value.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ValueProblem {
-    /// NaN or ±infinity.
-    NotFinite { value: f64 },
-    /// Finite, but outside the field's range (written as in the docs, e.g. `"[0, 1]"`).
-    OutOfRange { value: f64, range: &'static str },
-    /// A vector that must give a direction is (too close to) zero.
-    ZeroVector,
-    /// A vector stored unit length is not.
-    NotUnit { length: f64 },
-}
-
-/// The shortest text that reads back as `v`: as an f32 when it is one (most fields).
-fn shortest(v: f64) -> String {
-    let single = v as f32;
-    if single as f64 == v {
-        single.to_string()
-    } else {
-        v.to_string()
-    }
-}
-
-impl fmt::Display for ValueProblem {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match *self {
-            ValueProblem::NotFinite { value } if value.is_nan() => write!(f, "is NaN"),
-            ValueProblem::NotFinite { value } => write!(f, "is {value}"),
-            ValueProblem::OutOfRange { value, range } => write!(f, "is {}, outside {range}", shortest(value)),
-            ValueProblem::ZeroVector => write!(f, "is the zero vector (no direction)"),
-            ValueProblem::NotUnit { length } => write!(f, "has length {}, not 1", shortest(length)),
-        }
-    }
-}
-
-/// A value outside its meaning range, and where it is: `material 2 albedo is NaN`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BadValue {
-    /// What is indexed: `vertex`, `material`, `layer`, `step`.
-    pub item: &'static str,
-    pub index: u64,
-    /// The field, e.g. `albedo`, `normal`, `value 17 (vertex 1)`.
-    pub field: Cow<'static, str>,
-    pub problem: ValueProblem,
-}
-
-impl fmt::Display for BadValue {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} {} {} {}", self.item, self.index, self.field, self.problem)
-    }
-}
 
 /// Attaches a location to a problem: `.map_err(at("material", i, "albedo"))`.
 fn at(item: &'static str, index: usize, field: impl Into<Cow<'static, str>>) -> impl FnOnce(ValueProblem) -> BadValue {

@@ -2,7 +2,7 @@
 //! direction pattern, sampling, SH order, bounces) on scenes whose right
 //! answer is known and records, per bake, seconds and error.
 //!
-//! **Error** is the one `--max-error` budgets (see [`crate::budget`]): the
+//! **Error** is the one `--max-error` budgets (see [`crate::bundle::budget`]): the
 //! worst relative RMS of shaded radiance per unit albedo over 12 clear skies,
 //! against the exact transfer (analytic scenes) or a high-sample reference
 //! bake (the covered floor's leak-free twin, the demo cabin). Truncated SH

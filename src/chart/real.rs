@@ -18,7 +18,7 @@
 //! **Error** (total: sample positions, rays and bounces together), over the
 //! vertices the reference lights (DC > 0):
 //! - `dc_error`: relative RMS of DC, `sqrt(Σ (b − r)² / Σ r²)`, the figure of
-//!   issue 17's targets;
+//!   the error `--max-error` and the docs quote;
 //! - `shaded_error`: the worst over [`budget::reference_lightings`] of the
 //!   relative RMS of shaded radiance, the definition `--max-error` budgets
 //!   storage with (there against the bake itself);
@@ -34,7 +34,7 @@ use anyhow::Context;
 
 use super::scenes::Size;
 use crate::bake::{bake_mesh, BakeParams, Channels, Mode};
-use crate::budget::{self, Lighting};
+use crate::bundle::budget::{self, Lighting};
 use crate::mesh::Mesh;
 use crate::sh;
 

@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3};
 
 use super::{pattern_name, sampling_name, Row};
 use crate::bake::{bake_mesh, BakeError, BakeParams, DirectionPattern, Mode, Sampling, TransferResult};
-use crate::budget::{self, Lighting};
+use crate::bundle::budget::{self, Lighting};
 use crate::mesh::Mesh;
 use crate::sh;
 use crate::verify::{shapes, Y00};

@@ -6,7 +6,7 @@ use anyhow::Context;
 use serde_json::json;
 
 use crate::bake::{self, BakeParams, TransferResult};
-use crate::budget;
+use crate::bundle::budget;
 use crate::bundle::{bundle_meta, encode_transfer_bundle, storage_meta, Quantization, StorageRequest};
 use crate::files::Staged;
 use crate::mesh::{Mesh, UpAxis};
@@ -34,7 +34,7 @@ pub struct BakeConfig {
     /// Replace a read-only output (`--force`).
     pub force: bool,
     /// Bake one shard's part of one round instead of the bundle (`--shard`).
-    pub shard: Option<super::shard_cmd::ShardRun>,
+    pub shard: Option<crate::shards::ShardRun>,
     /// Refine the mesh where its light changes (`--refine`, `--max-vertices`).
     pub refine: Option<RefineRequest>,
 }
@@ -58,12 +58,10 @@ impl RefineRequest {
     }
 }
 
-/// Runs a bake end to end and prints its stats line (or JSON); with
-/// `--shard`, one shard's part of one round ([`super::shard_cmd`]).
+/// Runs a bake end to end and prints its stats line (or JSON). A shard's
+/// run (`config.shard`) is [`super::shard_cmd::run_transfer`]'s.
 pub fn run(config: &BakeConfig) -> anyhow::Result<()> {
-    if let Some(shard) = &config.shard {
-        return super::shard_cmd::run_transfer(config, shard);
-    }
+    anyhow::ensure!(config.shard.is_none(), "a shard's run is shard_cmd::run_transfer's");
     let outputs = [Output::new(&config.output, BUNDLE_FORMAT)];
     super::check_outputs(&[&config.input], &outputs, config.force)?;
     super::check_threads(config.threads)?;

@@ -21,7 +21,7 @@ use crate::mesh::UpAxis;
 /// per point: the per-vertex estimator puts at least three points on every
 /// triangle (873,645 points on the cleaned cabin, 5.2 per vertex), so a
 /// vertex averages ~1,000 ray evaluations, about what 512 rays on the
-/// former 291,913 points gave (~900), at the same cost; 512 rays now would
+/// centroid estimator's ~291k points gave (~900), at the same cost; 512 rays now would
 /// take 71 s and 3.7 GB of hit cache. Three bounces cost little (bounces ≥ 1 gather
 /// from bounce 0's cached hits) and matter: on the cabin, 1 bounce leaves an
 /// 18% shaded-radiance error against 3.7% for 3 (docs/speed-accuracy.md).

@@ -9,13 +9,13 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde_json::json;
 
-use crate::bundle::{encode_transfer_bundle, StorageRequest};
-use super::shard_cmd::{decode, read_shard_file};
 use super::sun_cmd::sun_stats_meta;
 use super::Output;
 use crate::bake::Surfaces;
 use crate::bundle;
+use crate::bundle::{encode_transfer_bundle, StorageRequest};
 use crate::files::Staged;
+use crate::shards::run::{decode, read_shard_file};
 use crate::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
 
 /// A checked `merge` configuration.

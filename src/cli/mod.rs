@@ -14,7 +14,6 @@ pub mod merge_cmd;
 pub mod panel_cmd;
 pub mod shard_cmd;
 pub mod sun_cmd;
-mod sun_rebake;
 pub mod verify_cmd;
 pub mod view_cmd;
 

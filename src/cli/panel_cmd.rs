@@ -124,17 +124,11 @@ pub fn gather_panel(
         }
         .into());
     }
-    let window_patterns: Vec<String> = bundle
-        .meta
-        .get("window_patterns")
-        .and_then(|p| p.as_array())
-        .map(|a| a.iter().filter_map(|s| s.as_str().map(String::from)).collect())
-        .unwrap_or_default();
-    let surfaces = Surfaces::resolve(mesh, &window_patterns)?;
+    let surfaces = Surfaces::resolve(mesh, &bundle.window_patterns())?;
     let scene = Scene::build(mesh, BuildQuality::Sah)?;
     let order = transfer.order as usize;
     let light = interior::vertex_light(&transfer.total(), order, transfer.channels as usize, &env.sh_lighting(order));
-    let two_sided = bundle.meta.pointer("/params/mode").and_then(|m| m.as_str()) == Some("window");
+    let two_sided = bundle.is_window_mode();
     let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: light, two_sided };
     let mut gather = PanelGather::new(&interior, env, brdf, &layout, eye, GatherOptions { seed, ..GatherOptions::default() });
     if !quiet {

@@ -6,20 +6,20 @@
 //! (and in round 0 its hit records) through `files::Staged`, so a failed or
 //! interrupted shard leaves nothing, and a re-run writes the same bytes.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::Context;
 use serde_json::json;
 
 use super::bake_cmd::{check_windows, load_for_bake, BakeConfig};
-use crate::bundle::bundle_meta;
 use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
 use super::Output;
 use crate::bake::SunStats;
+use crate::bundle::bundle_meta;
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
-use crate::files::read::{read_head, read_tail};
-use crate::files::{Limit, Staged};
-use crate::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
+use crate::files::Staged;
+use crate::shards::run::{decode, read_shard_file};
+use crate::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, ShardRun, Stage, SunKey, TransferKey};
 use crate::sky;
 use crate::trace::{BuildQuality, Scene};
 
@@ -28,50 +28,6 @@ pub const PART_FORMAT: &[&str] = &["prtp"];
 pub const HITS_FORMAT: &[&str] = &["prth"];
 pub const LAYER_FORMAT: &[&str] = &["prtl"];
 pub const PILOT_FORMAT: &[&str] = &["prta"];
-
-/// What `bake --shard` asks of one run.
-#[derive(Clone, Debug)]
-pub struct ShardRun {
-    pub shard: Shard,
-    /// The bounce this run bakes (0..=bounces).
-    pub round: u32,
-    /// `--round pilot`: adaptive allocation's pilot instead of a round.
-    pub pilot_stage: bool,
-    /// Rounds ≥ 1: the merged layer of the round before.
-    pub layer: Option<PathBuf>,
-    /// Every round of an adaptive bake: the merged pilot (`--pilot`).
-    pub pilot: Option<PathBuf>,
-    /// The folder of this shard's hit records (default: the part's).
-    pub shard_dir: Option<PathBuf>,
-}
-
-impl ShardRun {
-    /// Where shard `shard`'s hit records are written (round 0) and read (later rounds).
-    pub fn hits_path(&self, part: &Path) -> PathBuf {
-        let dir = match &self.shard_dir {
-            Some(dir) => dir.clone(),
-            None => part.parent().map(Path::to_path_buf).unwrap_or_default(),
-        };
-        dir.join(shards::hit_file_name(self.shard))
-    }
-}
-
-/// Reads a shard file whole (bounded), with the path in every error; its
-/// header and trailer are read and checked against the file's size first
-/// ([`shards::codec::check_frame`]), so a file of another size than its
-/// trailer gives is refused before its body is read.
-pub fn read_shard_file(path: &Path) -> anyhow::Result<Vec<u8>> {
-    let cannot_read = || format!("cannot read {}", path.display());
-    let head = read_head(path, Limit::Shard, shards::codec::HEADER_LEN as u64).with_context(cannot_read)?;
-    let (tail, size) = read_tail(path, Limit::Shard, shards::codec::TRAILER_LEN as u64).with_context(cannot_read)?;
-    shards::codec::check_frame(&head, &tail, size).map_err(|problem| shards::ShardError::malformed(path, problem))?;
-    read_head(path, Limit::Shard, size).with_context(cannot_read)
-}
-
-/// Decodes with the file named in the error.
-pub fn decode<T>(path: &Path, bytes: &[u8], decode: impl FnOnce(&[u8]) -> Result<T, String>) -> Result<T, shards::ShardError> {
-    decode(bytes).map_err(|problem| shards::ShardError::Malformed { path: path.to_path_buf(), problem })
-}
 
 /// Bakes one shard's part of one transfer round and prints what it wrote.
 pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {

@@ -5,7 +5,7 @@
 //! section (transfer included) is copied byte for byte; given a mesh file, a
 //! new bundle holds the mesh and the sun sections (no transfer). With
 //! `--refine` the mesh changes, so a bundle's transfer is baked again on the
-//! refined mesh as its META says (`sun_rebake`).
+//! refined mesh as its META says (`bundle::recipe`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -65,7 +65,7 @@ pub struct SunConfig {
     /// Trace one shard's samples into a part instead of the bundle (`--shard`).
     pub shard: Option<crate::shards::Shard>,
     /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`); a bundle's
-    /// transfer is then baked again on the refined mesh (`sun_rebake`).
+    /// transfer is then baked again on the refined mesh (`bundle::recipe`).
     pub refine: Option<super::bake_cmd::RefineRequest>,
 }
 
@@ -86,12 +86,10 @@ pub struct SunReport {
     pub refine: Option<crate::refine::RefineReport>,
 }
 
-/// Runs `sun` end to end and prints its report; with `--shard`, one
-/// shard's part ([`super::shard_cmd`]).
+/// Runs `sun` end to end and prints its report. A shard's run
+/// (`config.shard`) is [`super::shard_cmd::run_sun`]'s.
 pub fn run(config: &SunConfig) -> anyhow::Result<()> {
-    if let Some(shard) = config.shard {
-        return super::shard_cmd::run_sun(config, shard);
-    }
+    anyhow::ensure!(config.shard.is_none(), "a shard's run is shard_cmd::run_sun's");
     let report = sun_to_bundle(config)?;
     print_report(&report, config.json)
 }
@@ -321,7 +319,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     // read how before any work, so a bundle that cannot be re-baked stops here.
     let recipe = match (&config.refine, &input.original) {
         (Some(_), Some((_, meta))) if input.had_transfer => {
-            Some(super::sun_rebake::TransferRecipe::from_meta(&config.input, meta, config.params.quiet)?)
+            Some(crate::bundle::recipe::TransferRecipe::from_meta(&config.input, meta, config.params.quiet)?)
         }
         _ => None,
     };

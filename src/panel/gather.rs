@@ -140,7 +140,7 @@ impl<'a> PanelGather<'a> {
         let s = &self.sums[i];
         let n = f64::from(self.samples);
         let mean = s.total.map(|x| x / n);
-        let y = super::readability::luminance_f64(mean);
+        let y = crate::colour::luminance_f64(mean);
         let variance = (s.luminance_sq / n - y * y).max(0.0) * n / (n - 1.0).max(1.0);
         Some(TexelResult {
             radiance: mean.map(|x| x as f32),
@@ -230,7 +230,7 @@ impl<'a> PanelGather<'a> {
                 sums.window[c] += f64::from(through_window[c]);
                 sums.sky[c] += f64::from(from_sky[c]);
             }
-            let y = super::readability::luminance_f64(value.map(f64::from));
+            let y = crate::colour::luminance_f64(value.map(f64::from));
             sums.luminance_sq += y * y;
         }
     }

@@ -1,4 +1,4 @@
-//! The LCD panel's final gather (issue 18; seed 000 §3.1, §4.3; docs/panel.md):
+//! The LCD panel's final gather (seed 000 §3.1, §4.3; docs/panel.md):
 //! the panel is a grid of texels; per texel an eye ray gives the viewing
 //! direction, reflected rays are drawn from the panel's BRDF ([`crate::brdf`])
 //! and, for the sun disk, toward the sun (multiple importance sampling), and
@@ -10,10 +10,12 @@
 //! - `interior`: radiance of what a reflected ray meets (PRT at the hit, glass layers, the sun's direct light);
 //! - `gather`: the estimator, progressive (`PanelGather::refine`), deterministic at any thread count;
 //! - `readability`: luminance, contrast ratio and the statistics of a panel image;
+//! - `glare`: the morning time and car heading at which the sun glares most on the panel;
 //! - `images`: the EXR of reflected radiance and the PNG of the contrast ratio with its legend.
 
 pub mod environment;
 pub mod gather;
+pub mod glare;
 pub mod images;
 pub mod interior;
 pub mod layout;

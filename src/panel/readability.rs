@@ -6,14 +6,7 @@
 
 use super::gather::TexelResult;
 
-/// Rec. 709 luminance of linear RGB.
-pub fn luminance(rgb: [f32; 3]) -> f32 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
-}
-
-pub(crate) fn luminance_f64(rgb: [f64; 3]) -> f64 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
-}
+pub use crate::colour::{luminance, luminance_f64};
 
 /// The display's own luminances (cd/m²).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]

@@ -1,4 +1,4 @@
-//! Closed-form checks of the final gather (issue 18 deliverable B).
+//! Closed-form checks of the final gather: furnace, open sky, sun disk and reciprocity.
 
 use glam::{Vec2, Vec3};
 

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use super::EdgeError;
 use crate::bake::{Mode, SunMasks, TransferResult};
-use crate::budget;
+use crate::bundle::budget;
 use crate::mesh::Mesh;
 
 /// Rec. 709 luminance weights.

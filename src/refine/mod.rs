@@ -1,4 +1,4 @@
-//! Adaptive refinement driven by the bake (issue 20; D3DX's adaptive PRT
+//! Adaptive refinement driven by the bake (D3DX's adaptive PRT
 //! and seed 001's splitting of large triangles, done by error instead of by
 //! edge length): split edges where the baked light differs too much between
 //! an edge's two vertices, re-bake, and repeat until no edge is over the
@@ -7,7 +7,7 @@
 //! input (the surface does not move: new vertices are edge midpoints).
 //!
 //! **Edge error.** For the transfer ([`refine_transfer`]): each vertex is
-//! shaded (luminance) under [`crate::budget::reference_lightings`], twelve
+//! shaded (luminance) under [`crate::bundle::budget::reference_lightings`], twelve
 //! clear skies; an edge's error is the largest difference between its two
 //! vertices over the skies, divided by the larger of their mean and that
 //! sky's area-weighted mean shading of the input mesh. So `0.1` is a 10 %

@@ -53,8 +53,8 @@ fn shaded_at(mesh: &Mesh, result: &TransferResult, points: &[probe::SurfacePoint
     let stride = result.channels * crate::sh::coeff_count(result.order);
     let rows = interpolate(mesh, &result.total, stride, &located);
     let mut out = Vec::new();
-    for sky in crate::budget::reference_lightings(result.order) {
-        out.extend(crate::budget::shade(&rows, result.order, result.channels, &sky.sh));
+    for sky in crate::bundle::budget::reference_lightings(result.order) {
+        out.extend(crate::bundle::budget::shade(&rows, result.order, result.channels, &sky.sh));
     }
     out
 }
@@ -88,9 +88,9 @@ fn transfer_refinement_lowers_the_error_against_a_dense_reference() {
     let want = shaded_at(&dense, &reference, &points);
 
     let (coarse, _, _) = crate::bake::bake_mesh(&mesh, &bake_params(), &[]).expect("coarse");
-    let coarse_error = crate::budget::relative_rms(&want, &shaded_at(&mesh, &coarse, &points));
+    let coarse_error = crate::bundle::budget::relative_rms(&want, &shaded_at(&mesh, &coarse, &points));
     let (refined, result, report) = refine_with(&mesh, Some(0.05), 2000);
-    let refined_error = crate::budget::relative_rms(&want, &shaded_at(&refined, &result, &points));
+    let refined_error = crate::bundle::budget::relative_rms(&want, &shaded_at(&refined, &result, &points));
     assert!(refined.vertex_count() <= 2000 && refined.vertex_count() > 4 * mesh.vertex_count(), "{}", report.summary());
     assert!(report.rounds.len() >= 3, "{}", report.summary());
     assert!(refined_error < 0.5 * coarse_error, "error {coarse_error:.4} -> {refined_error:.4}; {}", report.summary());
@@ -134,8 +134,8 @@ fn noise_is_not_split_but_light_is() {
     let budget = mesh.vertex_count() + 3000;
     let (blind, blind_result, blind_report) = refine_noise(&mesh, &noisy, Some(0.05), budget, 0.0);
     let (aware, aware_result, aware_report) = refine_noise(&mesh, &noisy, Some(0.05), budget, DEFAULT_NOISE_SIGMAS);
-    let blind_error = crate::budget::relative_rms(&want, &shaded_at(&blind, &blind_result, &points));
-    let aware_error = crate::budget::relative_rms(&want, &shaded_at(&aware, &aware_result, &points));
+    let blind_error = crate::bundle::budget::relative_rms(&want, &shaded_at(&blind, &blind_result, &points));
+    let aware_error = crate::bundle::budget::relative_rms(&want, &shaded_at(&aware, &aware_result, &points));
     eprintln!(
         "noise-blind: {} floor vertices, error {blind_error:.4}, {}; noise-aware: {} floor vertices, error {aware_error:.4}, {}",
         floor_vertices(&blind),

@@ -80,7 +80,7 @@ pub struct VertexRows {
     /// One per vertex in round 0, else empty.
     pub weights: Vec<f32>,
     /// One `[Σ w², Σ w²x, Σ w²x²]` per vertex in round 0 of a bake that
-    /// tracks noise (`bake::adaptive::Moments`), else empty.
+    /// tracks noise (`bake::noise::Moments`), else empty.
     pub moments: Vec<[f64; 3]>,
 }
 
@@ -465,7 +465,7 @@ impl LayerFile {
 
 /// The merged pilot of adaptive allocation (`PRTA`, `.prta`): bounce 0's
 /// base points summed per vertex, what every shard needs to decide where
-/// the extra points go (`bake::adaptive::extra_counts`, the same in every
+/// the extra points go (`bake::transfer::adaptive::extra_counts`, the same in every
 /// shard and in a whole bake).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PilotFile {

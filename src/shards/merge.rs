@@ -9,7 +9,7 @@ use super::codec::FileKind;
 use super::files::{Identity, LayerFile, PilotFile, SunPart, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
-use crate::bake::adaptive::{add_noise_in_quadrature, Moments, VertexDc};
+use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
 use crate::bake::{BakeStats, TransferResult};
 

@@ -30,6 +30,7 @@ pub mod files;
 pub mod key;
 pub mod merge;
 pub mod round;
+pub mod run;
 
 use std::ops::Range;
 use std::path::PathBuf;
@@ -41,6 +42,7 @@ pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TransferPart};
 pub use key::{SunKey, TransferKey};
 pub use merge::{merge_sun_parts, merge_transfer, MergedSun, TransferMerge};
 pub use round::{bake_sun_shard, bake_transfer_shard, PilotInput, RoundInput, RoundOutput, Stage};
+pub use run::ShardRun;
 
 /// Most shards of one bake.
 pub const MAX_SHARDS: u32 = 100_000;

@@ -10,8 +10,8 @@ use super::files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TransferPar
 use super::key::{SunKey, TransferKey};
 use super::merge::identity_difference;
 use super::{split_by_cost, MeshId, Shard, ShardError};
-use crate::bake::adaptive::{Moments, VertexDc};
 use crate::bake::gather::RowBuffer;
+use crate::bake::noise::{Moments, VertexDc};
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
 use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};

@@ -12,7 +12,25 @@ use rayon::prelude::*;
 use super::sky_sh::{preetham_sky, SunSky};
 use super::solar::{solar_position, sun_direction, Site};
 use super::timeline::Timeline;
-use crate::bundle::SunStep;
+
+/// The sun and sky at one time step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SunStep {
+    /// Seconds since 1970-01-01T00:00:00Z.
+    pub unix_time_utc: f64,
+    /// Unit vector in the world frame pointing toward the sun.
+    pub direction: [f32; 3],
+    /// Sun elevation above the horizon, degrees (negative below).
+    pub elevation_deg: f32,
+    /// Sun azimuth, degrees, as the sky module defines it (clockwise from north).
+    pub azimuth_deg: f32,
+    /// Sun irradiance on a surface facing it, linear RGB.
+    pub sun_rgb: [f32; 3],
+    /// The sun is below the horizon.
+    pub night: bool,
+    /// Sky radiance SH, `sky_order²` RGB coefficients, index `l(l+1)+m`.
+    pub sky_sh: Vec<[f32; 3]>,
+}
 
 /// How the frame and sky of a day are set.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -33,7 +33,7 @@ pub mod sun_color;
 pub mod time;
 pub mod timeline;
 
-pub use day::{day_directions, day_steps, elevation_azimuth, parse_directions, steps_from_directions, DirectionsError, SkyFrame};
+pub use day::{day_directions, day_steps, elevation_azimuth, parse_directions, steps_from_directions, DirectionsError, SkyFrame, SunStep};
 pub use overcast::{CieOvercast, TYPICAL_OVERCAST_LUX};
 pub use preetham::{PreethamSky, DEFAULT_TURBIDITY};
 pub use sky_sh::{preetham_sky, SunSky};

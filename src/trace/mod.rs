@@ -5,6 +5,7 @@
 //! one ray or a batch. It knows triangles and rays, nothing of light: the
 //! estimators in `bake`, `panel` and `sun` ask it where rays go.
 
+pub mod build;
 pub mod bvh8;
 pub mod fans;
 pub mod hugepages;

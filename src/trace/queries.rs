@@ -18,9 +18,127 @@
 use glam::Vec3;
 use obvhs::ray::Ray;
 
+use super::bvh8::ScalarTest;
 use super::bvh8::{self, LeafResult, NodeTest, RayBoxes};
+use super::leaf_blocks::ScalarLeaf;
 use super::leaf_blocks::{LeafBlocks, LeafTest};
-use super::scene::{Hit, RayQuery, Scene};
+use super::scene::{BatchMode, Hit, RayQuery, Scene, Traversal};
+
+/// The queries, on the fastest node and leaf tests this CPU has.
+impl Scene {
+    /// Closest hit along a unit `direction` from `origin` within `(0, t_max]`.
+    pub fn closest_hit(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
+        let mut answer = [None];
+        self.run::<ClosestWalk>(&[RayQuery { origin, direction, t_max }], &mut answer, BatchMode::OneByOne);
+        answer[0]
+    }
+
+    /// [`Scene::closest_hit`] of every query, into `out` (same length), run
+    /// the scene's way ([`Scene::batching`]). Same answers, bit for bit.
+    pub fn closest_hits(&self, queries: &[RayQuery], out: &mut [Option<Hit>]) {
+        assert_eq!(queries.len(), out.len(), "one answer per query");
+        self.run::<ClosestWalk>(queries, out, self.batching.closest_hit);
+    }
+
+    /// True when anything lies along `direction` from `origin` within `(0, t_max]`.
+    pub fn occluded(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
+        self.occluder(&RayQuery { origin, direction, t_max }).is_some()
+    }
+
+    /// [`Scene::occluded`] of every query, into `out` (same length), run the
+    /// scene's way ([`Scene::batching`]).
+    pub fn occluded_each(&self, queries: &[RayQuery], out: &mut [bool]) {
+        assert_eq!(queries.len(), out.len(), "one answer per query");
+        let mut blockers = [None; 64];
+        for (queries, out) in queries.chunks(64).zip(out.chunks_mut(64)) {
+            let blockers = &mut blockers[..queries.len()];
+            self.run::<OcclusionWalk>(queries, blockers, self.batching.occlusion);
+            out.iter_mut().zip(blockers.iter()).for_each(|(o, b)| *o = b.is_some());
+        }
+    }
+
+    /// Leaf index of some triangle blocking the ray (not necessarily the nearest).
+    #[inline]
+    fn occluder(&self, query: &RayQuery) -> Option<u32> {
+        let mut answer = [None];
+        self.run::<OcclusionWalk>(std::slice::from_ref(query), &mut answer, BatchMode::OneByOne);
+        answer[0]
+    }
+
+    /// Answers `queries` with walk `W`, in `mode`, on the fastest node and leaf tests this CPU has.
+    #[inline]
+    pub(super) fn run<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        if self.nodes.is_empty() && self.fans.is_none() {
+            out.iter_mut().for_each(|o| *o = W::Answer::default());
+            return;
+        }
+        if !queries.iter().all(RayQuery::is_traceable) {
+            return self.run_traceable::<W>(queries, out, mode);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if self.traversal == Traversal::Avx2 {
+            // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
+            return unsafe { self.run_avx2::<W>(queries, out, mode) };
+        }
+        self.run_with::<W, ScalarTest, ScalarLeaf>(queries, out, mode)
+    }
+
+    /// [`Scene::run`] for a batch holding rays that cannot be traced: those
+    /// answer "no hit" (a NaN ray would enter every box, empty child slots
+    /// included, and index past the leaves); the others are walked one at a
+    /// time, which gives the same answers as a batch.
+    #[cold]
+    fn run_traceable<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        for (query, answer) in queries.iter().zip(out.iter_mut()) {
+            if query.is_traceable() {
+                self.run::<W>(std::slice::from_ref(query), std::slice::from_mut(answer), mode);
+            } else {
+                *answer = W::Answer::default();
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_avx2<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        self.run_with::<W, bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(queries, out, mode)
+    }
+
+    #[inline(always)]
+    fn run_with<W: QueryWalk, T: NodeTest, Lf: LeafTest>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
+        match mode {
+            BatchMode::OneByOne => one_by_one::<W, T, Lf>(self, queries, out),
+            BatchMode::Interleaved => interleaved::<W, T, Lf>(self, queries, out),
+        }
+    }
+
+    /// [`Scene::occluded`] with a shadow cache for coherent rays (Haines &
+    /// Greenberg's light buffer idea, one entry): the leaf triangle in `hint`
+    /// (from the previous call; `u32::MAX` = none) is tested first, and the
+    /// leaf that occludes this ray is stored back. Neighbouring rays toward
+    /// the same light are usually blocked by the same triangle, so a shadowed
+    /// ray often costs one triangle test instead of a walk. Same answer as
+    /// [`Scene::occluded`].
+    #[inline]
+    pub fn occluded_cached(&self, origin: Vec3, direction: Vec3, t_max: f32, hint: &mut u32) -> bool {
+        if !(RayQuery { origin, direction, t_max }).is_traceable() {
+            return false;
+        }
+        if (*hint as usize) < self.leaf_triangles.len() {
+            let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
+            if self.leaf_triangles.triangle(*hint).intersect(&ray).is_finite() {
+                return true;
+            }
+        }
+        match self.occluder(&RayQuery { origin, direction, t_max }) {
+            Some(leaf) => {
+                *hint = leaf;
+                true
+            }
+            None => false,
+        }
+    }
+}
 
 /// Rays walked at once when interleaving: enough that a node fetch is
 /// covered by the other walks' steps (2, 4, 8, 16 tried on the cabin: 8 best).

@@ -1,7 +1,8 @@
-//! The ray-tracing layer every pass shares: one 8-wide BVH over the mesh's
-//! triangles (built by obvhs, collapsed and walked by [`super::bvh8`]), with
-//! the queries the bake needs: closest hit with barycentrics and facing, and
-//! occlusion (first hit ends the walk), each with an AVX2 and a portable path.
+//! The scene every pass traces: one 8-wide BVH over the mesh's triangles
+//! (built in [`super::build`], walked by [`super::bvh8`]), its offsets and
+//! tie rules, and the types of a query and its hit. The queries themselves
+//! (closest hit with barycentrics and facing, occlusion, each with an AVX2
+//! and a portable path) are in [`super::queries`].
 //!
 //! Triangles are copied once into BVH leaf order, a struct-of-arrays block
 //! per leaf ([`super::leaf_blocks`]), so a leaf visit is one contiguous read
@@ -12,22 +13,14 @@
 //! surface; of those the one facing the ray wins, then the lower mesh index,
 //! so the result never depends on traversal order or thread count.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use glam::Vec3;
-use obvhs::{
-    bvh2::{builder::build_bvh2_from_tris, leaf_collapser::collapse},
-    ray::Ray,
-    rt_triangle::RtTriangle,
-    triangle::Triangle,
-    BvhBuildParams,
-};
+use obvhs::{ray::Ray, rt_triangle::RtTriangle};
 
-use super::bvh8::{self, Bvh8, Node8, NodeTest, ScalarTest};
-use super::fans::{find_fans, Fans};
-use super::leaf_blocks::{LeafBlocks, LeafTest, ScalarLeaf};
-use super::queries::{self, ClosestWalk, OcclusionWalk, QueryWalk};
-use crate::sampling;
+use super::bvh8::{self, Node8};
+use super::fans::Fans;
+use super::leaf_blocks::LeafBlocks;
 
 use crate::mesh::Mesh;
 
@@ -93,22 +86,6 @@ pub struct Batching {
     pub occlusion: BatchMode,
 }
 
-/// Trees smaller than this (nodes and leaf blocks) stay in cache and are
-/// never measured for interleaving.
-const INTERLEAVE_MIN_TREE_BYTES: usize = 4 << 20;
-/// Interleaving is kept only when its best probe time is below this
-/// fraction of one-by-one's: a near tie keeps the simpler way.
-const INTERLEAVE_MIN_GAIN: f64 = 0.95;
-
-/// Triangles per BVH leaf at most; the SAH leaf collapse picks smaller
-/// leaves where they pay. A leaf of up to eight is one AVX test
-/// ([`super::leaf_blocks`]), so 8 measured best on the Ferrari and the
-/// cabin (4, 8, 12, 15 tried; docs/performance.md).
-const LEAF_TRIANGLES: u32 = 8;
-/// Cost of a node visit relative to one triangle test, for the leaf
-/// collapse (3, 6, 10, 15 tried with 8-triangle leaves: 6–10 equal, 3 worse).
-const NODE_COST: f32 = 6.0;
-
 /// Largest bounding-box diagonal a scene may have. The bake works in f32,
 /// and the largest value it forms is the squared length of an edge cross
 /// product (normalised for face normals and areas), which grows as the
@@ -149,8 +126,8 @@ pub fn check_extent(mesh: &Mesh) -> Result<(), SceneError> {
 /// A built acceleration structure over a mesh.
 pub struct Scene {
     pub(super) nodes: Vec<Node8>,
-    traversal: Traversal,
-    batching: Batching,
+    pub(super) traversal: Traversal,
+    pub(super) batching: Batching,
     /// Triangles in BVH leaf order, one SoA block per leaf.
     pub(super) leaf_triangles: LeafBlocks,
     /// Leaf order → mesh triangle index (the box tree's leaves, then the fans').
@@ -158,7 +135,7 @@ pub struct Scene {
     /// The triangles around points of very high valence, traced apart ([`super::fans`]).
     pub(super) fans: Option<Fans>,
     /// Unit geometric normals per mesh triangle (zero for degenerate ones).
-    face_normals: Vec<Vec3>,
+    pub(super) face_normals: Vec<Vec3>,
     /// Bounding-box diagonal of the mesh: every epsilon is relative to it.
     pub diagonal: f32,
     /// Largest absolute coordinate, for offsets that must survive f32 rounding.
@@ -172,101 +149,6 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Builds the BVH over every triangle of `mesh` (degenerate ones included:
-    /// they never report a hit). Refuses meshes [`check_extent`] refuses.
-    pub fn build(mesh: &Mesh, quality: BuildQuality) -> Result<Scene, SceneError> {
-        check_extent(mesh)?;
-        let start = Instant::now();
-        let triangles: Vec<Triangle> = (0..mesh.triangle_count())
-            .map(|t| {
-                let [a, b, c] = mesh.triangle_positions(t);
-                Triangle { v0: a.into(), v1: b.into(), v2: c.into() }
-            })
-            .collect();
-        let face_normals = triangles.iter().map(|t| Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero()).collect();
-        let (lo, hi) = mesh.bounds();
-        let diagonal = (hi - lo).length().max(f32::MIN_POSITIVE);
-        let max_coordinate = lo.abs().max(hi.abs()).max_element();
-        // Triangles around a point of very high valence are traced as fans;
-        // the box tree holds the others (all of them in an ordinary mesh).
-        let fan_plan = find_fans(mesh);
-        let boxed: Vec<u32> = match &fan_plan {
-            Some(plan) => (0..triangles.len() as u32).filter(|&t| !plan.in_fan[t as usize]).collect(),
-            None => (0..triangles.len() as u32).collect(),
-        };
-        let (nodes, mut leaf_to_mesh, mut leaves) = if boxed.is_empty() {
-            (Vec::new(), Vec::new(), Vec::new())
-        } else {
-            let boxed_triangles: Vec<Triangle> = boxed.iter().map(|&t| triangles[t as usize]).collect();
-            let mut bvh2 = match quality {
-                BuildQuality::Sah => {
-                    let boxes: Vec<obvhs::aabb::Aabb> = boxed_triangles.iter().map(|t| t.aabb()).collect();
-                    super::sah::build_bvh2_sah(&boxes)
-                }
-                BuildQuality::Ploc => {
-                    let params = BvhBuildParams { max_prims_per_leaf: 1, ..BvhBuildParams::medium_build() };
-                    build_bvh2_from_tris(&boxed_triangles, params, &mut Duration::default())
-                }
-            };
-            collapse(&mut bvh2, LEAF_TRIANGLES, NODE_COST);
-            let bvh8 = Bvh8::from_bvh2(&bvh2);
-            let leaves: Vec<(u32, u32)> = bvh8.leaves().collect();
-            let leaf_to_mesh = bvh8.primitive_order.iter().map(|&i| boxed[i as usize]).collect();
-            // The array every ray walks first sits on huge pages (the blocks too, below).
-            (super::hugepages::copy_to_huge_pages(&bvh8.nodes), leaf_to_mesh, leaves)
-        };
-        let fans = fan_plan.map(|plan| Fans::build(plan, mesh, diagonal.max(max_coordinate), &mut leaf_to_mesh, &mut leaves));
-        let in_leaf_order: Vec<RtTriangle> = leaf_to_mesh.iter().map(|&t| RtTriangle::from(&triangles[t as usize])).collect();
-        let leaf_triangles = LeafBlocks::new(&in_leaf_order, leaves);
-        // Offsets: relative to scene size, and never below what f32 can resolve
-        // at the largest coordinate (64 ulps), so 1e-3 m and 1e4 m scenes behave alike.
-        let ulp_floor = max_coordinate * f32::EPSILON * 64.0;
-        let origin_offset = (diagonal * 1e-6).max(ulp_floor);
-        let mut scene = Scene {
-            nodes,
-            traversal: if bvh8::avx2_available() { Traversal::Avx2 } else { Traversal::Portable },
-            batching: Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne },
-            leaf_triangles,
-            leaf_to_mesh,
-            fans,
-            face_normals,
-            diagonal,
-            max_coordinate,
-            tie_distance: origin_offset,
-            origin_offset,
-            build_time: Duration::ZERO,
-        };
-        scene.batching = scene.measure_batching(mesh);
-        scene.build_time = start.elapsed();
-        Ok(scene)
-    }
-
-    /// The scene's geometry (face normals, diagonal, offsets) without a BVH,
-    /// for passes that only gather from recorded hits (a sharded bake's
-    /// rounds ≥ 1): building the BVH would be most of their time. A ray
-    /// traced in it hits nothing.
-    pub fn without_bvh(mesh: &Mesh) -> Result<Scene, SceneError> {
-        check_extent(mesh)?;
-        let empty = Mesh {
-            positions: mesh.positions.clone(),
-            indices: Vec::new(),
-            tri_material: Vec::new(),
-            tri_group: Vec::new(),
-            materials: mesh.materials.clone(),
-            ..Mesh::default()
-        };
-        let mut scene = Scene::build(&empty, BuildQuality::Sah)?;
-        // The same arithmetic as `build`'s, so gathers see the same bits.
-        scene.face_normals = (0..mesh.triangle_count())
-            .map(|t| {
-                let [a, b, c] = mesh.triangle_positions(t);
-                let t = Triangle { v0: a.into(), v1: b.into(), v2: c.into() };
-                Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero()
-            })
-            .collect();
-        Ok(scene)
-    }
-
     /// Unit geometric normal of mesh triangle `t` (counter-clockwise front).
     #[inline]
     pub fn face_normal(&self, t: u32) -> Vec3 {
@@ -304,179 +186,6 @@ impl Scene {
     /// answers are the same).
     pub fn set_batching(&mut self, batching: Batching) {
         self.batching = batching;
-    }
-
-    /// Closest hit along a unit `direction` from `origin` within `(0, t_max]`.
-    pub fn closest_hit(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Option<Hit> {
-        let mut answer = [None];
-        self.run::<ClosestWalk>(&[RayQuery { origin, direction, t_max }], &mut answer, BatchMode::OneByOne);
-        answer[0]
-    }
-
-    /// [`Scene::closest_hit`] of every query, into `out` (same length), run
-    /// the scene's way ([`Scene::batching`]). Same answers, bit for bit.
-    pub fn closest_hits(&self, queries: &[RayQuery], out: &mut [Option<Hit>]) {
-        assert_eq!(queries.len(), out.len(), "one answer per query");
-        self.run::<ClosestWalk>(queries, out, self.batching.closest_hit);
-    }
-
-    /// True when anything lies along `direction` from `origin` within `(0, t_max]`.
-    pub fn occluded(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
-        self.occluder(&RayQuery { origin, direction, t_max }).is_some()
-    }
-
-    /// [`Scene::occluded`] of every query, into `out` (same length), run the
-    /// scene's way ([`Scene::batching`]).
-    pub fn occluded_each(&self, queries: &[RayQuery], out: &mut [bool]) {
-        assert_eq!(queries.len(), out.len(), "one answer per query");
-        let mut blockers = [None; 64];
-        for (queries, out) in queries.chunks(64).zip(out.chunks_mut(64)) {
-            let blockers = &mut blockers[..queries.len()];
-            self.run::<OcclusionWalk>(queries, blockers, self.batching.occlusion);
-            out.iter_mut().zip(blockers.iter()).for_each(|(o, b)| *o = b.is_some());
-        }
-    }
-
-    /// Leaf index of some triangle blocking the ray (not necessarily the nearest).
-    #[inline]
-    fn occluder(&self, query: &RayQuery) -> Option<u32> {
-        let mut answer = [None];
-        self.run::<OcclusionWalk>(std::slice::from_ref(query), &mut answer, BatchMode::OneByOne);
-        answer[0]
-    }
-
-    /// Answers `queries` with walk `W`, in `mode`, on the fastest node and leaf tests this CPU has.
-    #[inline]
-    fn run<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
-        if self.nodes.is_empty() && self.fans.is_none() {
-            out.iter_mut().for_each(|o| *o = W::Answer::default());
-            return;
-        }
-        if !queries.iter().all(RayQuery::is_traceable) {
-            return self.run_traceable::<W>(queries, out, mode);
-        }
-        #[cfg(target_arch = "x86_64")]
-        if self.traversal == Traversal::Avx2 {
-            // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
-            return unsafe { self.run_avx2::<W>(queries, out, mode) };
-        }
-        self.run_with::<W, ScalarTest, ScalarLeaf>(queries, out, mode)
-    }
-
-    /// [`Scene::run`] for a batch holding rays that cannot be traced: those
-    /// answer "no hit" (a NaN ray would enter every box, empty child slots
-    /// included, and index past the leaves); the others are walked one at a
-    /// time, which gives the same answers as a batch.
-    #[cold]
-    fn run_traceable<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
-        for (query, answer) in queries.iter().zip(out.iter_mut()) {
-            if query.is_traceable() {
-                self.run::<W>(std::slice::from_ref(query), std::slice::from_mut(answer), mode);
-            } else {
-                *answer = W::Answer::default();
-            }
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn run_avx2<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
-        self.run_with::<W, bvh8::Avx2Test, super::leaf_blocks::AvxLeaf>(queries, out, mode)
-    }
-
-    #[inline(always)]
-    fn run_with<W: QueryWalk, T: NodeTest, Lf: LeafTest>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
-        match mode {
-            BatchMode::OneByOne => queries::one_by_one::<W, T, Lf>(self, queries, out),
-            BatchMode::Interleaved => queries::interleaved::<W, T, Lf>(self, queries, out),
-        }
-    }
-
-    /// Times both ways of running a batch on probe rays like the bake's (a
-    /// point's 64 rays over the sphere from triangles spread over the mesh),
-    /// the best of four alternating rounds each, and keeps interleaving only
-    /// where it is clearly faster. Trees under 4 MiB stay one by one: they
-    /// stay in cache, where nothing waits on memory.
-    fn measure_batching(&self, mesh: &Mesh) -> Batching {
-        // `PRTBAKE_BATCHING=one_by_one|interleaved` forces a way, for measurements.
-        match std::env::var("PRTBAKE_BATCHING").as_deref() {
-            Ok("one_by_one") => return Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne },
-            Ok("interleaved") => return Batching { closest_hit: BatchMode::Interleaved, occlusion: BatchMode::Interleaved },
-            _ => {}
-        }
-        let tree_bytes = std::mem::size_of_val(self.nodes.as_slice()) + self.leaf_triangles.len() * 4 * super::leaf_blocks::ROWS;
-        if tree_bytes < INTERLEAVE_MIN_TREE_BYTES {
-            return Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne };
-        }
-        const POINTS: u32 = 64;
-        const RAYS: u32 = 64;
-        let count = self.face_normals.len() as u32;
-        let mut queries = Vec::new();
-        for p in 0..POINTS {
-            let t = (u64::from(p) * u64::from(count) / u64::from(POINTS)) as u32;
-            let normal = self.face_normal(t);
-            if normal == Vec3::ZERO {
-                continue;
-            }
-            let [a, b, c] = mesh.triangle_positions(t as usize);
-            let centroid = (a + b + c) / 3.0;
-            for k in 0..RAYS {
-                let (u1, u2) = sampling::sample_2d(sampling::DirectionPattern::Sobol, k, 0, p);
-                let direction = sampling::cosine_sphere(normal, u1, u2);
-                queries.push(RayQuery { origin: self.offset_origin(centroid, normal, direction), direction, t_max: f32::INFINITY });
-            }
-        }
-        // Best of four alternating rounds each way, a point's rays per batch.
-        fn faster<W: QueryWalk>(scene: &Scene, queries: &[RayQuery]) -> BatchMode {
-            let mut best = [f64::INFINITY; 2];
-            let mut out: Vec<W::Answer> = (0..RAYS).map(|_| W::Answer::default()).collect();
-            for round in 0..4 {
-                for which in [round % 2, 1 - round % 2] {
-                    let mode = [BatchMode::OneByOne, BatchMode::Interleaved][which];
-                    let start = Instant::now();
-                    for chunk in queries.chunks(RAYS as usize) {
-                        scene.run::<W>(chunk, &mut out[..chunk.len()], mode);
-                    }
-                    std::hint::black_box(&out);
-                    best[which] = best[which].min(start.elapsed().as_secs_f64());
-                }
-            }
-            if best[1] < INTERLEAVE_MIN_GAIN * best[0] {
-                BatchMode::Interleaved
-            } else {
-                BatchMode::OneByOne
-            }
-        }
-        let closest_hit = faster::<ClosestWalk>(self, &queries);
-        let occlusion = faster::<OcclusionWalk>(self, &queries);
-        Batching { closest_hit, occlusion }
-    }
-
-    /// [`Scene::occluded`] with a shadow cache for coherent rays (Haines &
-    /// Greenberg's light buffer idea, one entry): the leaf triangle in `hint`
-    /// (from the previous call; `u32::MAX` = none) is tested first, and the
-    /// leaf that occludes this ray is stored back. Neighbouring rays toward
-    /// the same light are usually blocked by the same triangle, so a shadowed
-    /// ray often costs one triangle test instead of a walk. Same answer as
-    /// [`Scene::occluded`].
-    #[inline]
-    pub fn occluded_cached(&self, origin: Vec3, direction: Vec3, t_max: f32, hint: &mut u32) -> bool {
-        if !(RayQuery { origin, direction, t_max }).is_traceable() {
-            return false;
-        }
-        if (*hint as usize) < self.leaf_triangles.len() {
-            let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
-            if self.leaf_triangles.triangle(*hint).intersect(&ray).is_finite() {
-                return true;
-            }
-        }
-        match self.occluder(&RayQuery { origin, direction, t_max }) {
-            Some(leaf) => {
-                *hint = leaf;
-                true
-            }
-            None => false,
-        }
     }
 
     /// Number of triangles in the BVH.

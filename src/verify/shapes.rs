@@ -264,7 +264,7 @@ pub const PAST_ROOM_SIZE: [f32; 3] = [4.0, 3.0, 4.0];
 
 /// A closed 4 × 3 × 4 m room (x, y, z from 0) of six separate patches facing
 /// inward, not welded to each other, where geometry runs past the walls as
-/// in architectural models (issue 20, cutting): the floor runs 0.17 m past
+/// in architectural models, where cutting is needed: the floor runs 0.17 m past
 /// the back wall (z = 4) and the right wall (x = 4) 0.1 m past it. The floor
 /// (4 × 4 cells) and the right wall (4 × 3 cells) have triangles that span
 /// the back wall's plane, so their vertices inside the room share triangles

@@ -41,6 +41,7 @@ pub mod backdrop;
 pub mod camera;
 mod gpu;
 pub mod headless;
+pub mod layers;
 pub mod lighting;
 pub mod panel;
 pub mod panel_worker;
@@ -53,7 +54,8 @@ pub use backdrop::{Backdrop, SkyBackdrop};
 pub use camera::Camera;
 pub use gpu::{Gpu, GpuMemory, Renderer};
 pub use headless::{render_image, render_linear, time_frames, FrameTiming, Image, LinearImage};
-pub use scene::{LayerSelection, PreparedScene};
+pub use layers::LayerSelection;
+pub use scene::PreparedScene;
 pub use tonemap::{ToneMap, ToneOperator};
 
 use std::path::PathBuf;

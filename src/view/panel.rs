@@ -1,4 +1,4 @@
-//! The LCD panel's final-gathered texture in the viewer (issue 18; seed 000
+//! The LCD panel's final-gathered texture in the viewer (seed 000
 //! §3.1, §4.3; docs/viewer.md "The panel"): the panel's triangles are drawn
 //! with their PRT shading plus, per texel of the panel's [`PanelLayout`], the
 //! reflected radiance that [`crate::panel::PanelGather`] gathered from the
@@ -12,7 +12,7 @@
 use glam::{Vec2, Vec3};
 
 use super::backdrop::{Backdrop, SkyBackdrop};
-use super::scene::LayerSelection;
+use super::layers::LayerSelection;
 use super::FrameSettings;
 use crate::bake::Surfaces;
 use crate::brdf::PanelBrdf;
@@ -193,8 +193,7 @@ impl PanelSource {
     pub fn new(bundle: &Bundle, mapping: &PanelMapping, environment: Option<EquirectImage>) -> Result<PanelSource, String> {
         let transfer = bundle.transfer.clone().ok_or("the bundle has no transfer (bake it first)")?;
         let mesh = bundle.mesh.clone();
-        let surfaces =
-            Surfaces::resolve(&mesh, &super::scene::window_patterns(bundle)).map_err(|e| format!("META window_patterns: {e}"))?;
+        let surfaces = Surfaces::resolve(&mesh, &bundle.window_patterns()).map_err(|e| format!("META window_patterns: {e}"))?;
         let scene = Scene::build(&mesh, BuildQuality::Sah).map_err(|e| e.to_string())?;
         Ok(PanelSource {
             mesh,
@@ -203,7 +202,7 @@ impl PanelSource {
             layout: mapping.layout.clone(),
             brdf: PanelBrdf::default(),
             transfer,
-            two_sided: super::scene::is_window_mode(bundle),
+            two_sided: bundle.is_window_mode(),
             map: environment.map(|image| Environment::map(image, 0.0)),
             selected: None,
             seed: 1,

@@ -4,7 +4,8 @@
 
 use std::collections::HashMap;
 
-use crate::bundle::{Bundle, SunSeries, Transfer};
+use super::layers::LayerSelection;
+use crate::bundle::{Bundle, SunSeries};
 
 /// One GPU vertex: 40 bytes, `source` indexes the bundle's per-vertex data.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,58 +29,6 @@ impl GpuVertex {
             out.extend_from_slice(&x.to_le_bytes());
         }
         out.extend_from_slice(&self.source.to_le_bytes());
-    }
-}
-
-/// Which transfer layers are summed into the shaded transfer.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum LayerSelection {
-    /// All light: the `Total` layer (or the sum of the stored bounces).
-    Total,
-    /// The stored bounces whose index is listed (0 = direct); others are off.
-    Bounces(Vec<u32>),
-}
-
-impl LayerSelection {
-    /// Parses `total`, `direct` (bounce 0), `indirect` (bounces ≥ 1) or a
-    /// comma list of bounce indices such as `0,2`; `stored` are the bundle's bounce layers.
-    pub fn parse(text: &str, stored: &[u32]) -> Result<LayerSelection, String> {
-        let missing = || format!("layers {text:?}: the bundle stores no separate bounces (bake with --store-bounces)");
-        match text {
-            "total" | "all" => Ok(LayerSelection::Total),
-            _ if stored.is_empty() => Err(missing()),
-            "direct" => Ok(LayerSelection::Bounces(vec![0])),
-            "indirect" => Ok(LayerSelection::Bounces(stored.iter().copied().filter(|&b| b > 0).collect())),
-            _ => {
-                let list = text
-                    .split(',')
-                    .map(|s| {
-                        s.trim().parse::<u32>().map_err(|_| format!("layers {text:?}: expected total, direct, indirect or a list like 0,1"))
-                    })
-                    .collect::<Result<Vec<u32>, String>>()?;
-                match list.iter().find(|b| !stored.contains(b)) {
-                    Some(b) => Err(format!("layers {text:?}: bounce {b} is not stored (stored: {stored:?})")),
-                    None => Ok(LayerSelection::Bounces(list)),
-                }
-            }
-        }
-    }
-
-    /// The summed transfer (vertex-major `[vertex][channel][coeff]`).
-    pub fn combine(&self, transfer: &Transfer) -> Vec<f32> {
-        match self {
-            LayerSelection::Total => transfer.total(),
-            LayerSelection::Bounces(list) => transfer.sum_bounces(|b| list.contains(&b)),
-        }
-    }
-
-    /// Short description for the status line.
-    pub fn describe(&self) -> String {
-        match self {
-            LayerSelection::Total => "total".into(),
-            LayerSelection::Bounces(list) if list.is_empty() => "none".into(),
-            LayerSelection::Bounces(list) => format!("bounces {list:?}"),
-        }
     }
 }
 
@@ -147,17 +96,6 @@ pub struct PreparedScene {
     pub panel: Option<PanelDraws>,
 }
 
-/// Whether the bundle was baked in window mode (its META `params.mode`).
-pub fn is_window_mode(bundle: &Bundle) -> bool {
-    bundle.meta.pointer("/params/mode").and_then(|m| m.as_str()) == Some("window")
-}
-
-/// The bake's `--window` patterns kept in META `window_patterns`.
-pub fn window_patterns(bundle: &Bundle) -> Vec<String> {
-    let patterns = bundle.meta.get("window_patterns").and_then(|p| p.as_array());
-    patterns.map(|list| list.iter().filter_map(|p| p.as_str().map(str::to_string)).collect()).unwrap_or_default()
-}
-
 /// Prepares `bundle` for drawing.
 ///
 /// Windows (the window role, or the bake's `--window` patterns from META, by
@@ -196,7 +134,7 @@ pub fn prepare_scene_with_panel(
         .map(|p| glob::Pattern::new(p).map_err(|e| format!("invalid --hide pattern {p:?}: {e}")))
         .collect::<Result<Vec<_>, _>>()?;
     let mesh = &bundle.mesh;
-    let surfaces = crate::bake::Surfaces::resolve(mesh, &window_patterns(bundle)).map_err(|e| format!("META window_patterns: {e}"))?;
+    let surfaces = crate::bake::Surfaces::resolve(mesh, &bundle.window_patterns()).map_err(|e| format!("META window_patterns: {e}"))?;
     let hidden_material: Vec<bool> = mesh.materials.iter().map(|m| patterns.iter().any(|p| p.matches(&m.name))).collect();
     let hidden_group: Vec<bool> = mesh.groups.iter().map(|g| patterns.iter().any(|p| p.matches(g))).collect();
     let mut is_panel = vec![false; mesh.triangle_count()];
@@ -289,7 +227,7 @@ pub fn prepare_scene_with_panel(
         transfer: layers.combine(transfer),
         masks,
         words_per_vertex,
-        two_sided_sun: is_window_mode(bundle),
+        two_sided_sun: bundle.is_window_mode(),
         bounds: (lo, hi),
         environment: None,
         panel,

@@ -105,10 +105,7 @@ pub const LUMINANCE_GRID: u32 = 128;
 /// Dark pixels count as this fraction of the frame's maximum luminance.
 pub const LUMINANCE_FLOOR: f32 = 1e-4;
 
-/// Rec. 709 luminance of linear RGB.
-pub fn luminance(c: [f32; 3]) -> f32 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
-}
+pub use crate::colour::luminance;
 
 /// The linear operator on the CPU, exactly as tonemap.wgsl computes it.
 pub fn linear(c: [f32; 3], exposure_stops: f32, gamma: f32) -> [f32; 3] {

@@ -19,9 +19,10 @@ use winit::window::{Window, WindowId};
 
 use super::camera::{Camera, CameraControl};
 use super::gpu::{Gpu, Renderer};
+use super::layers::LayerSelection;
 use super::panel::{PanelRequest, PanelSource};
 use super::panel_worker::PanelWorker;
-use super::scene::{LayerSelection, PreparedScene};
+use super::scene::PreparedScene;
 use super::{lighting, LightingSource, ViewError, ViewState};
 use crate::bundle::Bundle;
 

@@ -14,7 +14,8 @@
 
 use glam::Vec3;
 
-use crate::bundle::{self, Quantization};
+use super::quantize;
+use super::types::Quantization;
 use crate::sh;
 
 /// A lighting to measure shaded error under: RGB SH, `order²` entries.
@@ -132,7 +133,7 @@ pub fn reduce(transfer: &[f32], order: usize, channels: usize, storage: &Storage
 /// What a reader gets back for `values` stored as `storage`.
 pub fn round_trip(values: &[f32], storage: &Storage) -> Vec<f32> {
     let stride = storage.channels * storage.order * storage.order;
-    bundle::round_trip(values, stride, storage.channels, storage.quantization)
+    quantize::round_trip(values, stride, storage.channels, storage.quantization)
 }
 
 /// One measured storage option.

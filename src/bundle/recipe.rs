@@ -1,18 +1,19 @@
-//! `sun BUNDLE --refine`: the sun refines the bundle's mesh, so the transfer
-//! the bundle holds no longer fits its vertices. It is baked again on the
-//! refined mesh with the parameters the bundle's META records, and stored as
-//! it was stored (order, channels, quantization), so one command leaves one
-//! mesh with both sections: the bytes of `export`, `bake` with the same
-//! parameters, then `sun` (tests/cli.rs).
+//! A bundle's transfer baked again from its META: the parameters, window and
+//! one-sided patterns and storage it records. `sun BUNDLE --refine` needs
+//! it: the sun refines the bundle's mesh, so the transfer the bundle holds
+//! no longer fits its vertices; it is baked again on the refined mesh and
+//! stored as it was stored (order, channels, quantization), so one command
+//! leaves one mesh with both sections: the bytes of `export`, `bake` with
+//! the same parameters, then `sun` (tests/cli.rs).
 
 use std::path::Path;
 
 use anyhow::Context;
 use serde_json::Value;
 
+use super::budget;
+use super::{bundle_meta, make_bundle_stored, Bundle, Quantization};
 use crate::bake::{self, BakeParams, Surfaces};
-use crate::budget;
-use crate::bundle::{make_bundle_stored, Bundle, Quantization};
 use crate::mesh::Mesh;
 use crate::trace::{BuildQuality, Scene};
 
@@ -81,7 +82,7 @@ impl TransferRecipe {
             choice.budget = None;
             choice
         });
-        let mut meta = crate::bundle::bundle_meta(self.mesh_meta.clone(), &self.window_patterns, &self.one_sided_patterns, &surfaces);
+        let mut meta = bundle_meta(self.mesh_meta.clone(), &self.window_patterns, &self.one_sided_patterns, &surfaces);
         meta["transfer_rebaked"] =
             Value::String("by `sun --refine`: the transfer baked again on the sun-refined mesh with these params".into());
         Ok(make_bundle_stored(mesh, &result, &self.params, meta, choice.as_ref()))
