@@ -2,7 +2,7 @@
 # The baseline estimator the speed-accuracy chart compares with (commit
 # ea47cd5, estimator 1: centroid samples on small triangles, --samples-per-vertex 2),
 # swept over rays on chart --real's three scenes and scored against the same
-# converged references (docs/speed-accuracy.md, "Today's code").
+# converged references (docs/speed-accuracy.md, "Baseline: the centroid estimator").
 #
 # usage: scripts/today_baseline.sh [DATA [CACHE [OUT]]]
 #   DATA  ../shared/data          (the Ferrari and the grey-white room)

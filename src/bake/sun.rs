@@ -253,7 +253,7 @@ pub(crate) fn bake_sun_masks_update(
 }
 
 /// The masks of a sharded sun bake from its shards' sample bits put end to
-/// end (`bake::shards::merge_sun_parts`): the vote a whole bake runs, with
+/// end (`shards::merge_sun_parts`): the vote a whole bake runs, with
 /// the stats of a bake that traced `rays`.
 pub fn sun_masks_from_bits(
     mesh: &Mesh,
@@ -267,7 +267,7 @@ pub fn sun_masks_from_bits(
 }
 
 /// What a sun bake's tracing and voting share: the checked day and where
-/// the samples go. A whole bake and each of its shards (`bake::shards`)
+/// the samples go. A whole bake and each of its shards (`shards`)
 /// build it the same way.
 pub(crate) struct SunPlan<'a> {
     mesh: &'a Mesh,

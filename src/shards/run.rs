@@ -53,3 +53,34 @@ pub fn read_shard_file(path: &Path) -> anyhow::Result<Vec<u8>> {
 pub fn decode<T>(path: &Path, bytes: &[u8], decode: impl FnOnce(&[u8]) -> Result<T, String>) -> Result<T, ShardError> {
     decode(bytes).map_err(|problem| ShardError::Malformed { path: path.to_path_buf(), problem })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::files::read::bytes_read;
+    use crate::shards::codec::FileKind;
+
+    /// A shard file of another size than its trailer gives (a layer
+    /// extended to a sparse 3 GiB, or cut short) is refused after its header
+    /// and trailer, naming the file and both sizes; the file itself reads whole.
+    #[test]
+    fn shard_files_are_checked_against_their_trailer_before_reading() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grown.prtl");
+        let bytes = codec::to_vec(FileKind::Layer, |w| w.f32s(&[1.0; 1000]));
+        std::fs::write(&path, &bytes).unwrap();
+        bytes_read::take();
+        assert_eq!(read_shard_file(&path).unwrap(), bytes);
+        let frame = (codec::HEADER_LEN + codec::TRAILER_LEN) as u64;
+        assert_eq!(bytes_read::take(), frame + bytes.len() as u64);
+        let big = 3u64 << 30;
+        for len in [big, bytes.len() as u64 - 4] {
+            std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(len).unwrap();
+            let message = format!("{:#}", read_shard_file(&path).unwrap_err());
+            assert_eq!(bytes_read::take(), frame);
+            // Extended with zeros or cut short, the last 12 bytes are not a trailer.
+            let says = format!("is {len} bytes and does not end in its own length and CRC-32");
+            assert!(message.contains("grown.prtl") && message.contains(&says) && message.contains("truncated or extended"), "{message}");
+        }
+    }
+}

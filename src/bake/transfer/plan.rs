@@ -17,7 +17,7 @@ use crate::trace::scene::Scene;
 
 /// What every pass of a bake shares: the items, sizes, the albedo bounces
 /// reflect with and the window lights. A whole bake and each of its shards
-/// (`bake::shards`) build it the same way, so they see the same items.
+/// (`shards`) build it the same way, so they see the same items.
 pub(crate) struct Plan<'a> {
     /// The mesh the bake's receivers lie on: the scene's mesh, with the
     /// twins of its back sides appended when it has any (`bake::twins`).
