@@ -559,3 +559,49 @@ fn inspect_lists_a_meshs_materials_and_groups() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("--window 'Window_Glass'"), "{text}");
 }
+
+/// `clean`, `bake` and `sun` end their text report with one line on where
+/// the time went: "time: T s: phase t s (p%), …", the phases largest first,
+/// their seconds adding up to T and their shares to 100%.
+#[test]
+fn step_reports_end_with_where_the_time_went() {
+    let dir = Scratch::new("time-line");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let (cleaned, baked, sunned) = (dir.path("clean.glb"), dir.path("s.prtb"), dir.path("sun.prtb"));
+    let runs: [(Vec<&str>, &[&str]); 3] = [
+        (vec!["clean", obj.to_str().unwrap(), "-o", cleaned.to_str().unwrap()], &["load", "clean", "write"]),
+        (
+            vec!["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "16", "--bounces", "1"],
+            &["bounce 0 (traced)", "write"],
+        ),
+        (vec!["sun", obj.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--quiet"], &["sun rays", "sky", "write"]),
+    ];
+    for (args, phases) in runs {
+        let o = prtbake(&args);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        let out = String::from_utf8(o.stdout).unwrap();
+        let last = out.lines().last().unwrap_or_default();
+        let rest = last.strip_prefix("time: ").unwrap_or_else(|| panic!("{}: last line {last:?}", args[0]));
+        let (total, parts) = rest.split_once(" s: ").unwrap();
+        let total: f64 = total.parse().unwrap();
+        let parsed: Vec<(String, f64, f64)> = parts
+            .split(", ")
+            .map(|p| {
+                // "bounce 0 (traced) 9.10 s (74%)"
+                let (head, share) = p.rsplit_once(" (").unwrap();
+                let (name, seconds) = head.strip_suffix(" s").unwrap().rsplit_once(' ').unwrap();
+                (name.to_string(), seconds.parse().unwrap(), share.trim_end_matches("%)").parse().unwrap())
+            })
+            .collect();
+        for phase in phases {
+            assert!(parsed.iter().any(|(n, _, _)| n == phase), "{}: no {phase:?} in {last:?}", args[0]);
+        }
+        assert!(parsed.windows(2).all(|w| w[0].1 >= w[1].1), "{}: not largest first: {last:?}", args[0]);
+        let sum: f64 = parsed.iter().map(|p| p.1).sum();
+        // Each figure is rounded to 0.01 s and 1%.
+        assert!((sum - total).abs() <= 0.006 * parsed.len() as f64 + 1e-9, "{}: {sum} != {total}", args[0]);
+        let shares: f64 = parsed.iter().map(|p| p.2).sum();
+        assert!((shares - 100.0).abs() <= 0.5 * parsed.len() as f64 + 0.5, "{}: shares {shares}", args[0]);
+    }
+}

@@ -308,16 +308,7 @@ pub fn time_line(report: &BakeReport) -> String {
         }
     }
     phases.push(("write".into(), report.write_seconds));
-    phase_line(&phases)
-}
-
-/// "time: 12.3 s: bounce 0 (traced) 9.1 s (74%), …", largest first.
-pub fn phase_line(phases: &[(String, f64)]) -> String {
-    let total: f64 = phases.iter().map(|p| p.1).sum();
-    let mut sorted: Vec<&(String, f64)> = phases.iter().filter(|p| p.1 > 0.0).collect();
-    sorted.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let parts: Vec<String> = sorted.iter().map(|(name, t)| format!("{name} {t:.2} s ({:.0}%)", 100.0 * t / total.max(1e-12))).collect();
-    format!("time: {total:.2} s: {}", parts.join(", "))
+    super::phase_line(&phases)
 }
 
 /// Prints the final stats line, or the JSON document with `--json`.

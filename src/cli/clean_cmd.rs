@@ -2,6 +2,7 @@
 //! for PRT and report every change.
 
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::Context;
 
@@ -64,8 +65,12 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
         outputs.push(Output::new(report, &["json"]));
     }
     super::check_outputs(&[&config.input], &outputs, config.force)?;
+    let start = Instant::now();
     let mesh = super::load_mesh(&config.input, config.up, config.quiet, &outputs, config.force)?;
+    let load_seconds = start.elapsed().as_secs_f64();
+    let start = Instant::now();
     let (cleaned, report) = clean_loaded(&mesh, &config.params, &config.input)?;
+    let clean_seconds = start.elapsed().as_secs_f64();
     if cleaned.triangle_count() == 0 {
         anyhow::bail!(
             "{}: cleaning left no triangle ({}): nothing to write; the input holds no surface with area",
@@ -82,6 +87,7 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
         );
     }
     // All outputs land together or none does.
+    let start = Instant::now();
     let mut staged = Staged::new();
     if mtl.is_some() {
         crate::mesh::stage_obj(&mut staged, &config.output, &cleaned)?;
@@ -94,14 +100,20 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
+    let phases =
+        [("load".to_string(), load_seconds), ("clean".to_string(), clean_seconds), ("write".to_string(), start.elapsed().as_secs_f64())];
     if config.json {
-        super::print_json(&serde_json::to_value(&report)?)?;
+        // Timings go to stdout only: the --report file stays the same for the same input.
+        let mut value = serde_json::to_value(&report)?;
+        value["seconds_per_phase"] = phases.iter().map(|(name, t)| (name.clone(), serde_json::json!(t))).collect();
+        super::print_json(&value)?;
     } else {
         println!("{}: {}", config.input.display(), report.summary());
         match &mtl {
             Some(mtl) => println!("wrote {} (materials in {})", config.output.display(), mtl.display()),
             None => println!("wrote {}", config.output.display()),
         }
+        println!("{}", super::phase_line(&phases));
     }
     Ok(())
 }

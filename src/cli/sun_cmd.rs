@@ -460,7 +460,6 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
     }
     let write = if report.transfer_rebaked { "transfer re-baked on the refined mesh, and write" } else { "write" };
     phases.push((write.to_string(), report.write_seconds));
-    println!("{}", super::bake_cmd::phase_line(&phases));
     println!(
         "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
         report.output.display(),
@@ -474,5 +473,7 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
         report.sky_seconds,
         report.bundle_bytes
     );
+    // Last, as `bake` and `clean` end: where the time went.
+    println!("{}", super::phase_line(&phases));
     Ok(())
 }
