@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo run --release --example probe_rings -- rings MESH OUT.csv [--random N] [--free SIZE] [--seed S]
-//! cargo run --release --example probe_rings -- compare BUNDLE.prtb REFERENCE.csv…
+//! cargo run --release --example probe_rings -- compare BUNDLE.prtb REFERENCE.csv… [--seed-pair OTHER.prtb]
 //! ```
 //!
 //! `rings` writes the one-ring file the probe reads (`--rings`), in
@@ -18,7 +18,8 @@
 //! bundle's total transfer (channel 0, DC), and prints per file: the
 //! vertices compared, the relative RMS difference `√(Σ(p−m)²/Σm²)`, the
 //! reference's own noise on the same scale `√(Σσ²/Σm²)`, and the mean ratio
-//! `Σp/Σm`.
+//! `Σp/Σm`. `--seed-pair OTHER.prtb` (the same bake at another seed) adds
+//! the bake's own noise on the same vertices and scale, `√(Σ(p−q)²/2/Σm²)`.
 
 use std::collections::HashSet;
 use std::path::Path;
@@ -108,16 +109,27 @@ fn rings(args: &[String]) -> Result<(), String> {
 }
 
 fn compare(args: &[String]) -> Result<(), String> {
-    let Some((bundle_path, references)) = args.split_first() else { return Err("compare BUNDLE REFERENCE.csv…".into()) };
-    let bundle = prtbake::bundle::read_bundle(Path::new(bundle_path)).map_err(|e| e.to_string())?;
-    let transfer = bundle.transfer.as_ref().ok_or("the bundle has no transfer")?;
-    let total = transfer.total();
-    let stride = (transfer.channels * transfer.order * transfer.order) as usize;
+    let Some((bundle_path, rest)) = args.split_first() else {
+        return Err("compare BUNDLE REFERENCE.csv… [--seed-pair OTHER.prtb]".into());
+    };
+    let (references, other) = match rest.iter().position(|a| a == "--seed-pair") {
+        Some(k) => (&rest[..k], Some(rest.get(k + 1).ok_or("--seed-pair needs a bundle")?)),
+        None => (rest, None),
+    };
+    let dc = |path: &str| -> Result<(Vec<f32>, usize), String> {
+        let bundle = prtbake::bundle::read_bundle(Path::new(path)).map_err(|e| format!("{path}: {e}"))?;
+        let transfer = bundle.transfer.as_ref().ok_or(format!("{path}: the bundle has no transfer"))?;
+        Ok((transfer.total(), (transfer.channels * transfer.order * transfer.order) as usize))
+    };
+    let (total, stride) = dc(bundle_path)?;
+    // The same bake at another seed: the two bundles differ by √2 × the bake's noise.
+    let other = other.map(|p| dc(p).map(|d| (p, d))).transpose()?;
     println!("| reference | vertices | relative RMS difference | reference noise | mean ratio prtbake/reference |");
     println!("|---|---:|---:|---:|---:|");
     for reference in references {
         let text = std::fs::read_to_string(reference).map_err(|e| format!("{reference}: {e}"))?;
         let (mut diff2, mut ref2, mut noise2, mut sum_p, mut sum_m, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
+        let mut pair2 = 0.0f64;
         for line in text.lines().filter(|l| !l.starts_with("id")) {
             let f: Vec<&str> = line.split(',').collect();
             let (Some(id), Some(m), Some(sigma), Some(used)) = (
@@ -133,6 +145,10 @@ fn compare(args: &[String]) -> Result<(), String> {
                 continue;
             }
             let p = f64::from(total[id * stride]);
+            if let Some((_, (other_total, other_stride))) = &other {
+                let q = f64::from(other_total[id * other_stride]);
+                pair2 += (p - q) * (p - q);
+            }
             diff2 += (p - m) * (p - m);
             ref2 += m * m;
             noise2 += sigma * sigma;
@@ -146,6 +162,9 @@ fn compare(args: &[String]) -> Result<(), String> {
             (noise2 / ref2.max(1e-30)).sqrt(),
             sum_p / sum_m.max(1e-30)
         );
+        if let Some((other_path, _)) = &other {
+            println!("| the bake's own noise (vs {other_path}, / √2) | {n} | {:.4} | | |", (pair2 / 2.0 / ref2.max(1e-30)).sqrt());
+        }
     }
     Ok(())
 }
