@@ -10,10 +10,11 @@
 //! ten images per case, 16 min in all on two shared cores (docs/panel.md "Speed").
 
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode, Throughput};
-use prtbake::bake::{BuildQuality, Scene, Surfaces};
+use prtbake::bake::Surfaces;
 use prtbake::brdf::PanelBrdf;
 use prtbake::fixtures::cabin::{generate_cabin, DRIVER_EYE};
 use prtbake::panel::{select_panel, Environment, GatherOptions, Interior, PanelGather, PanelLayout};
+use prtbake::trace::{BuildQuality, Scene};
 
 fn panel_gather(c: &mut Criterion) {
     let (raw, _) = generate_cabin(64.0);

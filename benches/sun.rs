@@ -8,9 +8,10 @@
 //! Run: `cargo bench --bench sun` (one configuration: `cargo bench --bench sun -- step_outer_cached`).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use prtbake::bake::{bake_sun_masks, BuildQuality, LoopOrder, Scene, SunParams, Surfaces};
+use prtbake::bake::{bake_sun_masks, LoopOrder, SunParams, Surfaces};
 use prtbake::fixtures::colonnade::{colonnade, ColonnadeParams};
 use prtbake::sky::{self, SkyFrame};
+use prtbake::trace::{BuildQuality, Scene};
 
 fn sun_masks(c: &mut Criterion) {
     let params = match std::env::var("PRTBAKE_BENCH_DETAIL").as_deref() {

@@ -34,7 +34,13 @@ fn parse_round(text: &str) -> Result<RoundArg, String> {
 const DEFAULT_ADAPTIVE: f32 = 0.25;
 
 #[derive(Parser)]
-#[command(name = "prtbake", version, about = "Precomputed radiance transfer, baked offline", propagate_version = true)]
+#[command(
+    name = "prtbake",
+    version,
+    about = "Precomputed radiance transfer, baked offline",
+    propagate_version = true,
+    args_override_self = true
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -85,9 +91,9 @@ struct BakeArgs {
     rays: u32,
     #[arg(long, default_value_t = 1)]
     seed: u32,
-    /// Worker threads (0 = all cores). The output does not depend on it.
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
+    /// Worker threads (0 = all cores) [default: 0]. The output does not depend on it.
+    #[arg(long, value_name = "T", value_parser = parse_threads)]
+    threads: Option<usize>,
     /// Up axis of OBJ files (glTF is always +Y up).
     #[arg(long, value_enum, default_value_t = Up::Y)]
     up: Up,
@@ -102,6 +108,11 @@ struct BakeArgs {
     /// Window mode even without --window (materials with the window role only).
     #[arg(long)]
     window_mode: bool,
+    /// Materials or groups (glob, repeatable) whose back side reflects nothing in bounces. By
+    /// default a diffuse surface reflects on whichever side light reaches it (open mode, as a
+    /// path tracer's two-sided diffuse; window mode reflects from both sides already).
+    #[arg(long = "one-sided", value_name = "PATTERN")]
+    one_sided: Vec<String>,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -155,12 +166,12 @@ struct BakeArgs {
     /// after --up), found by ray casting; occlusion and bounces still use the whole scene.
     #[arg(long, value_name = "BOX", allow_hyphen_values = true)]
     view_box: Option<String>,
-    /// Viewpoints sampled in the view box.
-    #[arg(long, default_value_t = 256)]
-    view_points: u32,
-    /// Rays per viewpoint (≤ 65536).
-    #[arg(long, default_value_t = 16384)]
-    view_rays: u32,
+    /// With --view-box: viewpoints sampled in the box [default: 256].
+    #[arg(long, requires = "view_box")]
+    view_points: Option<u32>,
+    /// With --view-box: rays per viewpoint (≤ 65536) [default: 16384].
+    #[arg(long, requires = "view_box")]
+    view_rays: Option<u32>,
     /// Clean the mesh first (CAD preset: weld, duplicates, overlaps, cracks, slivers, orientation).
     #[arg(long)]
     clean: bool,
@@ -193,6 +204,12 @@ struct BakeArgs {
     /// round 0 and read by later rounds [default: the part's folder].
     #[arg(long, value_name = "DIR", requires = "shard")]
     shard_dir: Option<PathBuf>,
+    /// Check these arguments as a bake of N shards would read them, print its plan on stdout
+    /// (`shards=N`, `bounces=B`, `pilot=0|1`, `threads_given=0|1`, one per line) and exit
+    /// without baking: what the launchers in scripts/ run, so they read every number as
+    /// prtbake does.
+    #[arg(long, value_name = "N", conflicts_with = "shard")]
+    plan_shards: Option<u32>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -247,8 +264,13 @@ impl RefineArgs {
                 anyhow::bail!("--refine-noise {k}: expected a finite number of standard errors ≥ 0 (e.g. 2)");
             }
         }
-        if self.max_vertices == Some(0) {
-            anyhow::bail!("--max-vertices 0: expected at least one vertex");
+        match self.max_vertices {
+            Some(0) => anyhow::bail!("--max-vertices 0: expected at least one vertex"),
+            Some(n) if n > prtbake::refine::MAX_VERTICES => anyhow::bail!(
+                "--max-vertices {n}: at most {} (the refined mesh, its samples and its transfer must fit in memory; refine a part of the scene, or shard the bake)",
+                prtbake::refine::MAX_VERTICES
+            ),
+            _ => {}
         }
         Ok(match (self.refine, self.max_vertices) {
             (None, None) if self.min_edge.is_some() => anyhow::bail!("--min-edge needs --refine or --max-vertices"),
@@ -383,9 +405,9 @@ struct SunArgs {
     /// Seed of the sample placement (the same seed as `bake` gives the same points).
     #[arg(long, default_value_t = 1)]
     seed: u32,
-    /// Worker threads (0 = all cores). The output does not depend on it.
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
+    /// Worker threads (0 = all cores) [default: 0]. The output does not depend on it.
+    #[arg(long, value_name = "T", value_parser = parse_threads)]
+    threads: Option<usize>,
     /// Tracing loop nesting (for measurement; the masks are the same).
     #[arg(long, value_enum, default_value_t = LoopOrderArg::StepOuter)]
     loop_order: LoopOrderArg,
@@ -397,6 +419,10 @@ struct SunArgs {
     /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
+    /// Check these arguments as a sun bake of N shards would read them, print its plan on
+    /// stdout (`shards=N`, `threads_given=0|1`) and exit: what scripts/slurm/submit-sun.sh runs.
+    #[arg(long, value_name = "N", conflicts_with = "shard")]
+    plan_shards: Option<u32>,
     /// Replace the output even if it is read-only.
     #[arg(long)]
     force: bool,
@@ -510,9 +536,11 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
-    /// Show what a bundle holds.
+    /// Show what a bundle holds, or what a mesh is made of before baking: its materials and
+    /// groups with triangles, areas and likely roles (glass, emitters), to choose --window.
     #[command(allow_negative_numbers = true)]
     Inspect {
+        /// A bundle (.prtb) or a mesh (.obj, .gltf, .glb).
         bundle: PathBuf,
         #[arg(long)]
         json: bool,
@@ -524,7 +552,7 @@ enum Command {
         rays: u32,
         #[arg(long, default_value_t = 1)]
         seed: u32,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         #[arg(long)]
         json: bool,
@@ -554,10 +582,13 @@ enum Command {
         /// [default: half the memory available at start]
         #[arg(long, requires = "real")]
         hit_cache_mib: Option<u64>,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         #[arg(long)]
         json: bool,
+        /// Replace read-only outputs.
+        #[arg(long)]
+        force: bool,
     },
     /// The LCD panel's reflections by final gather (measured BRDF, PRT-lit interior, sky through the windows) and its contrast ratio.
     #[command(allow_negative_numbers = true)]
@@ -568,7 +599,7 @@ enum Command {
         /// Output folder.
         #[arg(short, long, default_value = "demo-out")]
         output: PathBuf,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         #[arg(long)]
         json: bool,
@@ -591,7 +622,7 @@ enum Command {
         /// Rounds ≥ 1: the merged layer of the round before, which the parts gathered from.
         #[arg(long, value_name = "FILE.prtl")]
         layer: Option<PathBuf>,
-        #[arg(long, default_value_t = 0)]
+        #[arg(long, default_value_t = 0, value_parser = parse_threads)]
         threads: usize,
         /// Replace the output even if it is read-only.
         #[arg(long)]
@@ -615,6 +646,11 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+}
+
+/// `--threads T`: a count ≥ 0 (0 = every core), with a message that says so.
+fn parse_threads(text: &str) -> Result<usize, String> {
+    text.trim().parse::<usize>().map_err(|_| format!("expected a number of threads, 0 or more (0 uses every core), not {text:?}"))
 }
 
 /// A panel's texels `WxH` (each 1..=4096), named by `flag` in the error.
@@ -704,7 +740,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     };
     let shard = match &a.shard {
         Some(text) => Some(cli::shard_cmd::ShardRun {
-            shard: prtbake::bake::shards::Shard::parse(text)?,
+            shard: prtbake::shards::Shard::parse(text)?,
             round: match a.round {
                 Some(RoundArg::Bounce(r)) => r,
                 _ => 0,
@@ -736,23 +772,21 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         up: up_axis(a.up),
         params,
         window_patterns: a.windows,
-        threads: a.threads,
+        one_sided_patterns: a.one_sided,
+        threads: a.threads.unwrap_or(0),
         json: a.json,
         clean,
-        storage: cli::bake_cmd::StorageRequest { quantize, max_error: a.max_error },
+        storage: prtbake::bundle::StorageRequest { quantize, max_error: a.max_error },
         force: a.force,
         view_box: match &a.view_box {
             Some(text) => {
                 let view_box = prtbake::bake::cull::ViewBox::parse(text).map_err(anyhow::Error::msg)?;
-                if !(1..=MAX_VIEW_POINTS).contains(&a.view_points) || a.view_rays == 0 || a.view_rays > 65536 {
+                let (view_points, view_rays) = (a.view_points.unwrap_or(256), a.view_rays.unwrap_or(16384));
+                if !(1..=MAX_VIEW_POINTS).contains(&view_points) || view_rays == 0 || view_rays > 65536 {
                     anyhow::bail!("--view-points must be in 1..={MAX_VIEW_POINTS} and --view-rays in 1..=65536");
                 }
-                let params = prtbake::bake::cull::CullParams {
-                    points: a.view_points,
-                    rays_per_point: a.view_rays,
-                    seed: a.seed,
-                    ..Default::default()
-                };
+                let params =
+                    prtbake::bake::cull::CullParams { points: view_points, rays_per_point: view_rays, seed: a.seed, ..Default::default() };
                 Some((view_box, params))
             }
             None => None,
@@ -861,7 +895,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     params.check()?;
     Ok(cli::sun_cmd::SunConfig {
         refine: a.refine.request()?,
-        shard: a.shard.as_deref().map(prtbake::bake::shards::Shard::parse).transpose()?,
+        shard: a.shard.as_deref().map(prtbake::shards::Shard::parse).transpose()?,
         input: a.input,
         output: a.output,
         up,
@@ -871,7 +905,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         sky_order: a.sky_order,
         params,
         window_patterns: a.windows,
-        threads: a.threads,
+        threads: a.threads.unwrap_or(0),
         json: a.json,
         force: a.force,
     })
@@ -949,7 +983,7 @@ struct PanelArgs {
     #[arg(long)]
     contrast: Option<PathBuf>,
     /// Worker threads (0 = all cores). The output does not depend on it.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = parse_threads)]
     threads: usize,
     /// Statistics as JSON on stdout.
     #[arg(long)]
@@ -1053,18 +1087,36 @@ fn panel_config(a: PanelArgs) -> anyhow::Result<cli::panel_cmd::PanelConfig> {
 
 fn run(command: Command) -> anyhow::Result<Outcome> {
     match command {
-        Command::Bake(args) => cli::bake_cmd::run(&bake_config(args)?).map(|_| Outcome::Ok),
+        Command::Bake(args) => {
+            let plan = args.plan_shards;
+            let threads_given = args.threads.is_some();
+            let config = bake_config(args)?;
+            match plan {
+                Some(n) => cli::shard_cmd::print_plan(n, &config.output, Some(&config.params), threads_given).map(|_| Outcome::Ok),
+                None => cli::bake_cmd::run(&config).map(|_| Outcome::Ok),
+            }
+        }
         Command::Clean(args) => cli::clean_cmd::run(&clean_config(args)?).map(|_| Outcome::Ok),
-        Command::Sun(args) => cli::sun_cmd::run(&sun_config(args)?).map(|_| Outcome::Ok),
+        Command::Sun(args) => {
+            let plan = args.plan_shards;
+            let threads_given = args.threads.is_some();
+            let config = sun_config(args)?;
+            match plan {
+                Some(n) => cli::shard_cmd::print_plan(n, &config.output, None, threads_given).map(|_| Outcome::Ok),
+                None => cli::sun_cmd::run(&config).map(|_| Outcome::Ok),
+            }
+        }
         Command::Generate { scene, output, detail, copies, force } => {
             cli::generate_cmd::run(&scene, &output, detail.as_deref(), copies, force).map(|_| Outcome::Ok)
         }
         Command::Inspect { bundle, json } => cli::inspect_cmd::run(&bundle, json).map(|_| Outcome::Ok),
         Command::Verify { rays, seed, threads, json } => cli::verify_cmd::run(prtbake::verify::VerifyParams { rays, seed }, threads, json),
-        Command::Chart { output, quick, real: true, data, hit_cache_mib, threads, json } => {
-            cli::chart_cmd::run_real(&output, &data, hit_cache_bytes(hit_cache_mib), quick, threads, json)
+        Command::Chart { output, quick, real: true, data, hit_cache_mib, threads, json, force } => {
+            cli::chart_cmd::run_real(&output, &data, hit_cache_bytes(hit_cache_mib), quick, threads, json, force)
         }
-        Command::Chart { output, quick, real: false, threads, json, .. } => cli::chart_cmd::run(&output, quick, threads, json),
+        Command::Chart { output, quick, real: false, threads, json, force, .. } => {
+            cli::chart_cmd::run(&output, quick, threads, json, force)
+        }
         Command::Demo { output, threads, json, quiet } => cli::demo_cmd::run(&output, threads, json, quiet),
         Command::View(args) => cli::view_cmd::run(&view_config(args)?).map(|_| Outcome::Ok),
         Command::Panel(args) => cli::panel_cmd::run(&panel_config(args)?).map(|_| Outcome::Ok),

@@ -23,11 +23,12 @@
 //! the drawn and reference lit fractions) by the reference mesh's material.
 
 use glam::Vec3;
-use prtbake::bake::{BuildQuality, Scene, SunMasks, Surfaces};
+use prtbake::bake::{SunMasks, Surfaces};
 use prtbake::bundle::{read_bundle, Bundle};
 use prtbake::refine::probe::{
     interpolate, interpolate_masks, locate, outside_sides, reference_sun, reference_sun_window, Located, SurfacePoint,
 };
+use prtbake::trace::{BuildQuality, Scene};
 
 fn load(path: &str) -> Bundle {
     read_bundle(path.as_ref()).unwrap_or_else(|e| panic!("{path}: {e}"))

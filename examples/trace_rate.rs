@@ -17,9 +17,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::Vec3;
-use prtbake::bake::{sampling, BatchMode, Batching, BuildQuality, RayQuery, Scene};
 use prtbake::fixtures::cabin::generate_cabin;
 use prtbake::mesh::{load_mesh, LoadOptions, Mesh};
+use prtbake::sampling;
+use prtbake::trace::{BatchMode, Batching, BuildQuality, RayQuery, Scene};
 use rayon::prelude::*;
 
 fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
@@ -44,7 +45,7 @@ fn main() {
     let quality = if arg(&args, "--build", "sah".to_string()) == "ploc" { BuildQuality::Ploc } else { BuildQuality::Sah };
     let mut scene = Scene::build(&mesh, quality).unwrap();
     if args.iter().any(|a| a == "--portable") {
-        scene.set_traversal(prtbake::bake::Traversal::Portable);
+        scene.set_traversal(prtbake::trace::Traversal::Portable);
     }
     let build = start.elapsed().as_secs_f64();
 

@@ -1,49 +1,38 @@
 # Sourced by the sharded-bake launchers (shards-local.sh, slurm/submit.sh,
-# kubernetes/manifests.sh): what they all read from a bake's arguments.
+# slurm/submit-sun.sh, kubernetes/manifests.sh): the plan of a sharded bake,
+# read by prtbake itself from the launcher's operands and arguments, so every
+# number means what it means to prtbake (`--bounces 010` is 10, `N=08` is 8)
+# and a bad argument stops the launcher before any job.
 
-# Prints the bounce count the bake args "$@" ask for (the rounds are the
-# bounces, 0 … B; default 0).
-bounces_of() {
-    local bounces=0 prev= arg
-    for arg in "$@"; do
-        case $prev in --bounces) bounces=$arg ;; esac
-        case $arg in --bounces=*) bounces=${arg#--bounces=} ;; esac
-        prev=$arg
-    done
-    case $bounces in '' | *[!0-9]*) echo "$0: --bounces must be a number, not '$bounces'" >&2 && return 2 ;; esac
-    echo "$bounces"
+# read_plan PRTBAKE KIND INPUT OUT N [ARGS…]: runs
+# `PRTBAKE KIND INPUT -o OUT ARGS… --plan-shards N` (KIND bake or sun) and
+# sets shards, bounces (0 for sun), pilot (1 when the bake allocates
+# adaptively: a pilot stage before round 0) and threads_given; exits 2 with
+# prtbake's message when it refuses them.
+read_plan() {
+    local planner=$1 kind=$2 input=$3 plan_out=$4 plan_n=$5 text key value
+    shift 5
+    text=$("$planner" "$kind" "$input" -o "$plan_out" "$@" --plan-shards "$plan_n") || {
+        echo "$0: prtbake refused the $kind arguments (above)" >&2
+        exit 2
+    }
+    shards= bounces=0 pilot=0 threads_given=0
+    while IFS='=' read -r key value; do
+        case $key in
+            shards) shards=$value ;;
+            bounces) bounces=$value ;;
+            pilot) pilot=$value ;;
+            threads_given) threads_given=$value ;;
+        esac
+    done <<<"$text"
+    case $shards in '' | *[!0-9]*) echo "$0: $planner printed no plan (is it prtbake?)" >&2 && exit 2 ;; esac
 }
 
-# Succeeds when the bake args "$@" allocate adaptively: bake's default
-# (--adaptive 0.25) unless --adaptive 0 or, without --adaptive, --sampling
-# vertex. Such a bake has a pilot stage before round 0 (docs/scale.md).
-is_adaptive() {
-    local prev= arg adaptive= sampling=interior
-    for arg in "$@"; do
-        case $prev in --adaptive) adaptive=$arg ;; --sampling) sampling=$arg ;; esac
-        case $arg in --adaptive=*) adaptive=${arg#--adaptive=} ;; --sampling=*) sampling=${arg#--sampling=} ;; esac
-        prev=$arg
-    done
-    case $adaptive in
-        '') [ "$sampling" != vertex ] ;;
-        0 | 0.0 | 0.00 | .0) return 1 ;;
-        *) return 0 ;;
-    esac
-}
-
-# Succeeds when the bake args "$@" give --threads.
-gives_threads() {
-    local arg
-    for arg in "$@"; do
-        case $arg in --threads | --threads=*) return 0 ;; esac
-    done
-    return 1
-}
-
-# Checks the launchers' common operands: N a positive integer, OUT a .prtb.
-check_operands() {
-    local out=$1 n=$2
-    case $n in '' | *[!0-9]*) echo "$0: N must be a positive integer, not '$n'" >&2 && exit 2 ;; esac
-    [ "$n" -ge 1 ] || { echo "$0: N must be at least 1" >&2 && exit 2; }
-    case $out in *.prtb) ;; *) echo "$0: OUT must be a .prtb bundle, not '$out'" >&2 && exit 2 ;; esac
+# The prtbake on this machine that reads the plan where the jobs run another
+# (Kubernetes pods): PLANNER, else prtbake on PATH, else this checkout's
+# target/release/prtbake.
+planner_binary() {
+    local here
+    here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+    echo "${PLANNER:-$(command -v prtbake || echo "$here/target/release/prtbake")}"
 }

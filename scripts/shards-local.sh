@@ -25,11 +25,11 @@ mesh=$1 out=$2 n=$3
 shift 3
 bake_args=("$@")
 . "$(dirname "$0")/shard-args.sh"
-check_operands "$out" "$n"
-bounces=$(bounces_of "$@")
-gives_threads "$@" || bake_args+=(--threads 1)
-
 prtbake=${PRTBAKE:-$(command -v prtbake || echo target/release/prtbake)}
+read_plan "$prtbake" bake "$mesh" "$out" "$n" "$@"
+n=$shards
+[ "$threads_given" -eq 1 ] || bake_args+=(--threads 1)
+
 work=${WORK:-${out%.prtb}.shards}
 jobs=${JOBS:-$(nproc 2>/dev/null || echo 2)}
 runner=${RUNNER:-$(command -v parallel >/dev/null && echo parallel || echo xargs)}
@@ -45,7 +45,7 @@ run_all() {
 }
 
 pilot_args=()
-if is_adaptive "$@"; then
+if [ "$pilot" -eq 1 ]; then
     # Adaptive allocation's pilot: bounce 0 at the base points, merged into
     # the pilot that decides, the same in every shard, where extra points go.
     mkdir -p "$work/pilot"
@@ -86,3 +86,6 @@ for ((round = 0; round <= bounces; round++)); do
     fi
     "$prtbake" merge "${parts[@]}" ${layer_args[@]+"${layer_args[@]}"} -o "$target"
 done
+# A merge that exits 0 wrote the bundle; say so only when it is there.
+[ -s "$out" ] || { echo "$0: the last merge left no $out" >&2 && exit 1; }
+echo "wrote $out" >&2

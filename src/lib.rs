@@ -17,8 +17,11 @@ pub mod fixtures;
 pub mod mesh;
 pub mod panel;
 pub mod refine;
+pub mod sampling;
 pub mod sh;
+pub mod shards;
 pub mod sky;
+pub mod trace;
 pub mod verify;
 #[cfg(feature = "viewer")]
 pub mod view;

@@ -2,8 +2,9 @@
 //! side-blind window mode.
 
 use glam::Vec3;
-use prtbake::bake::{bake_mesh, scene, BakeParams, BatchMode, Batching, BuildQuality, Hit, Mode, RayQuery, Sampling, Scene, Traversal};
+use prtbake::bake::{bake_mesh, BakeParams, Mode, Sampling};
 use prtbake::mesh::{MaterialRole, Mesh};
+use prtbake::trace::{scene, BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, Traversal};
 use prtbake::verify::shapes;
 
 fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
@@ -176,8 +177,8 @@ fn bvh_rays_from_walls_match_brute_force() {
             let n = scene.face_normal(t as u32);
             let [a, b, c] = box_mesh.triangle_positions(t);
             for k in 0..8u32 {
-                let (u1, u2) = prtbake::bake::sampling::sample_2d(prtbake::bake::DirectionPattern::Sobol, k, 0, t as u32);
-                let d = prtbake::bake::sampling::cosine_sphere(n, u1, u2);
+                let (u1, u2) = prtbake::sampling::sample_2d(prtbake::bake::DirectionPattern::Sobol, k, 0, t as u32);
+                let d = prtbake::sampling::cosine_sphere(n, u1, u2);
                 let origin = scene.offset_origin((a + b + c) / 3.0, n, d);
                 let bvh = scene.closest_hit(origin, d, f32::INFINITY).map(|h| h.triangle);
                 let brute = scene::brute_force_closest(&box_mesh, origin, d, f32::INFINITY).map(|b| b.0);
@@ -340,4 +341,51 @@ fn cutting_where_walls_run_past_stops_the_leak_into_the_room() {
     for &v in &outside {
         assert!(dc[v] > 0.0, "outside vertex {v} at {} sees no sky", cut.positions[v]);
     }
+}
+
+/// A diffuse sheet reflects on the side light reaches it from: a wall seen
+/// by a ground patch, lit by the open sky on both sides, gives the ground
+/// the same first bounce whichever way the wall's triangles face (it was 0
+/// with the wall's back toward the ground); `--one-sided` gives back the
+/// old rule, a back face reflecting nothing.
+#[test]
+fn a_sheet_lit_from_behind_reflects_what_it_reflects_from_the_front() {
+    use prtbake::fixtures::builder::MeshBuilder;
+    use prtbake::mesh::Material;
+    let scene = |wall_faces_ground: bool| {
+        let mut b = MeshBuilder::new(vec![Material::opaque("ground", 0.5), Material::opaque("wall", 0.8)]);
+        let (ground, wall) = (b.material("ground"), b.material("wall"));
+        // Ground x ∈ [-3, 1], z ∈ [-2, 2], facing +Y; the wall stands on its edge x = 1.
+        b.grid("ground", Vec3::new(-3.0, 0.0, 2.0), Vec3::X * 4.0, Vec3::Z * -4.0, 16, 16, |_, _| ground);
+        let (origin, u, v) = if wall_faces_ground {
+            (Vec3::new(1.0, 0.0, -2.0), Vec3::Z * 4.0, Vec3::Y * 2.0) // normal −X, toward the ground
+        } else {
+            (Vec3::new(1.0, 0.0, -2.0), Vec3::Y * 2.0, Vec3::Z * 4.0) // normal +X, away from it
+        };
+        b.grid("wall", origin, u, v, 8, 4, |_, _| wall);
+        b.mesh.validate().unwrap();
+        b.mesh
+    };
+    let params = BakeParams { order: 2, rays: 512, bounces: 1, store_bounces: true, ..BakeParams::default() };
+    // Mean bounce-1 DC over the ground vertices within 1.5 of the wall (away from the ground's far edges).
+    let bounce1 = |mesh: &Mesh, one_sided: &[String]| {
+        let (r, _, _) = prtbake::bake::bake_mesh_with(mesh, &params, &[], one_sided).unwrap();
+        let stride = 4;
+        let near: Vec<usize> = (0..mesh.vertex_count())
+            .filter(|&v| {
+                mesh.positions[v].y == 0.0 && mesh.positions[v].x > -0.5 && mesh.positions[v].x < 0.75 && mesh.positions[v].z.abs() < 1.0
+            })
+            .collect();
+        assert!(near.len() > 20);
+        near.iter().map(|&v| r.bounces[1][v * stride] as f64).sum::<f64>() / near.len() as f64
+    };
+    let front = bounce1(&scene(true), &[]);
+    let behind = bounce1(&scene(false), &[]);
+    eprintln!("ground's bounce 1 from the wall: facing it {front:.5}, its back toward it {behind:.5}");
+    assert!(front > 0.01, "the wall reflects sky light onto the ground: {front}");
+    assert!((behind / front - 1.0).abs() < 0.03, "back {behind} against front {front}");
+    // One-sided: the back reflects nothing, and the flat ground sees no other surface.
+    let one_sided = bounce1(&scene(false), &["wall".to_string()]);
+    assert!(one_sided.abs() < 1e-6, "{one_sided}");
+    assert_eq!(bounce1(&scene(true), &["wall".to_string()]), front, "the front side is the same either way");
 }

@@ -116,3 +116,35 @@ fn quick_real_chart_scores_against_a_cached_two_seed_reference() {
     assert!(String::from_utf8_lossy(&refused.stderr).contains("cabin-reference-s12.prtb: exists and is not a reference"));
     assert_eq!(std::fs::read(&s12).unwrap(), foreign);
 }
+
+/// The chart's outputs are checked before the sweep, as every command's are:
+/// a directory where the SVG goes, or a read-only CSV, stops it at once and
+/// leaves the CSV as it was; `-o FILE` says the output is a folder.
+#[test]
+fn chart_outputs_are_checked_before_the_sweep() {
+    let dir = Scratch::new("chart-outputs");
+    let out = dir.path("out");
+    std::fs::create_dir_all(out.join("speed-accuracy.svg")).unwrap();
+    let csv = out.join("speed-accuracy.csv");
+    std::fs::write(&csv, "mine\n").unwrap();
+    let mut permissions = std::fs::metadata(&csv).unwrap().permissions();
+    permissions.set_readonly(true);
+    std::fs::set_permissions(&csv, permissions).unwrap();
+    let o = prtbake(&["chart", "--quick", "-o", out.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("speed-accuracy.csv") && e.contains("read-only"), "{e}");
+    std::fs::remove_dir(out.join("speed-accuracy.svg")).unwrap();
+    std::fs::create_dir(out.join("speed-accuracy-summary.json")).unwrap();
+    let o = prtbake(&["chart", "--quick", "-o", out.to_str().unwrap(), "--force"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("speed-accuracy-summary.json: is a directory"), "{e}");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), "mine\n");
+    assert!(!out.join("cabin-reference-quick.prtb").exists(), "refused before the sweep");
+    let file = dir.path("file.txt");
+    std::fs::write(&file, "x").unwrap();
+    let o = prtbake(&["chart", "--quick", "-o", file.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(2) && e.contains("file.txt: is not a folder"), "{e}");
+}

@@ -186,11 +186,20 @@ fn panel_gathers_the_ground_and_refuses_bad_input() {
     let r = &doc["readability"];
     assert!(r["min_contrast_ratio"].as_f64().unwrap() <= r["median_contrast_ratio"].as_f64().unwrap());
     assert_eq!(r["window_share"], 0.0, "no windows in the open scene");
+    // Open mode: the panel sees the sky itself, so not everything it reflects is the interior's.
+    let (sky, interior) = (r["sky_share"].as_f64().unwrap(), r["interior_share"].as_f64().unwrap());
+    assert!(sky > 0.05 && (sky + interior - 1.0).abs() < 1e-6, "{r}");
     let (two, exr2) = run("2", "two.exr", &["--eye=1,2,3"]);
     assert!(two.status.success());
     assert_eq!(std::fs::read(&exr1).unwrap(), std::fs::read(&exr2).unwrap(), "EXR differs between 1 and 2 threads");
     assert_eq!(std::fs::read(exr1.with_extension("cr.png")).unwrap(), std::fs::read(exr2.with_extension("cr.png")).unwrap());
 
+    // A light past f32 gives no statistic: exit 2, nothing written.
+    let (overflow, out) = run("1", "overflow.exr", &["--eye=1,2,3", "--lux", "1e39"]);
+    assert_eq!(overflow.status.code(), Some(2), "{}", String::from_utf8_lossy(&overflow.stdout));
+    let message = String::from_utf8_lossy(&overflow.stderr);
+    assert!(message.contains("scene.prtb") && message.contains("not finite"), "{message}");
+    assert!(!out.exists() && !out.with_extension("cr.png").exists());
     let (behind, _) = run("1", "behind.exr", &["--eye=0,-1,0"]);
     assert_eq!(behind.status.code(), Some(2));
     let message = String::from_utf8_lossy(&behind.stderr);
@@ -351,12 +360,22 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
         &["--refine-noise", "2"],
         &["--refine", "0.1", "--refine-noise", "-1"],
         &["--refine", "0.1", "--refine-noise", "inf"],
+        // Past what fits: refused at once (it ran for minutes, then aborted on allocation).
+        &["--max-vertices", "4294967295"],
     ];
     for bad in bad_requests {
         let out = dir.path("bad.prtb");
-        let o = prtbake(&[&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
-        assert_eq!(o.status.code(), Some(2), "{bad:?}");
-        assert!(!out.exists());
+        for command in ["bake", "sun"] {
+            if command == "sun" && bad.contains(&"--refine-noise") {
+                continue;
+            }
+            let o = prtbake(&[&[command, obj.to_str().unwrap(), "-o", out.to_str().unwrap()][..], bad].concat());
+            assert_eq!(o.status.code(), Some(2), "{command} {bad:?}");
+            assert!(!out.exists());
+            if bad[1] == "4294967295" {
+                assert!(String::from_utf8_lossy(&o.stderr).contains("at most 25000000"), "{}", String::from_utf8_lossy(&o.stderr));
+            }
+        }
     }
     // Sun masks have no noise estimate to discount: asking for it is refused, not ignored.
     let out = dir.path("bad.prtb");
@@ -466,4 +485,77 @@ fn bake_adaptive_records_its_factor_and_refuses_what_it_cannot_do() {
         assert_eq!(o.status.code(), Some(2), "{bad:?}: {}", String::from_utf8_lossy(&o.stderr));
         assert!(!out.exists());
     }
+}
+
+/// Flags that only mean something with another are refused without it
+/// (`--view-points` was ignored without `--view-box`); `export --layer
+/// direct` names bounce 0 as `view --layers direct` does; messages name
+/// layers and vectors as a user writes them.
+#[test]
+fn small_argument_rules() {
+    let dir = Scratch::new("cli-small");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let out = dir.path("s.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--view-points", "100000000"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--view-box"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.exists());
+    let o = prtbake(&[
+        "bake",
+        obj.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--rays",
+        "8",
+        "--bounces",
+        "1",
+        "--store-bounces",
+        "--quiet",
+    ]);
+    assert!(o.status.success());
+    let glb = dir.path("direct.glb");
+    let o = prtbake(&["export", out.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--layer", "direct", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["report"]["layer"], "bounce 0");
+    let o = prtbake(&["export", out.to_str().unwrap(), "-o", glb.to_str().unwrap(), "--layer", "5"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no bounce 5 layer"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = prtbake(&["inspect", out.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("layers total, bounce 0, bounce 1"), "{}", String::from_utf8_lossy(&o.stdout));
+    let o = prtbake(&["sun", obj.to_str().unwrap(), "-o", dir.path("n.prtb").to_str().unwrap(), "--north", "0,1,0"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(2) && e.contains("--north 0,1,0") && !e.contains("Vec3"), "{e}");
+}
+
+/// `inspect MESH` lists what a mesh is made of before a bake: materials and
+/// groups with exact triangle counts and areas, and their likely role.
+#[test]
+fn inspect_lists_a_meshs_materials_and_groups() {
+    let dir = Scratch::new("cli-inspect-mesh");
+    let obj = dir.path("room.obj");
+    // A 2 × 1 floor (two triangles), a 1 × 1 pane, a lamp triangle of area 0.5.
+    std::fs::write(dir.path("room.mtl"), "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl Window_Glass\nKd 0.9 0.9 0.9\nnewmtl lamp\nKd 1 1 1\n")
+        .unwrap();
+    std::fs::write(
+        &obj,
+        "mtllib room.mtl\nv 0 0 0\nv 2 0 0\nv 2 0 1\nv 0 0 1\nv 0 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\n\
+         o floor\nusemtl floor\nf 1 3 2\nf 1 4 3\no front\nusemtl Window_Glass\nf 5 6 7\nf 5 7 8\nusemtl lamp\nf 1 2 5\n",
+    )
+    .unwrap();
+    let o = prtbake(&["inspect", obj.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mesh = &doc["mesh"];
+    assert_eq!(mesh["triangles"], 5);
+    let row = |list: &str, name: &str| mesh[list].as_array().unwrap().iter().find(|e| e["name"] == name).unwrap().clone();
+    let (floor, glass, lamp) = (row("materials", "floor"), row("materials", "Window_Glass"), row("materials", "lamp"));
+    assert_eq!((floor["triangles"].as_u64(), floor["area"].as_f64()), (Some(2), Some(2.0)));
+    assert_eq!((glass["triangles"].as_u64(), glass["area"].as_f64(), glass["likely"].as_str()), (Some(2), Some(1.0), Some("glass?")));
+    assert_eq!((lamp["triangles"].as_u64(), lamp["likely"].as_str()), (Some(1), Some("emitter?")));
+    assert!(floor["likely"].is_null());
+    assert_eq!(row("groups", "front")["triangles"], 3);
+    let o = prtbake(&["inspect", obj.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("--window 'Window_Glass'"), "{text}");
 }

@@ -155,5 +155,56 @@ fn export_command_writes_a_glb() {
     // A bad layer is an error naming the problem, exit code 2.
     let bad = prtbake(&["export", input.to_str().unwrap(), "-o", output.to_str().unwrap(), "--layer", "9"]);
     assert_eq!(bad.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("Bounce(9)"));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("no bounce 9 layer"));
+}
+
+/// glTF wants unit normals and no empty primitive: a bundle whose normals are
+/// not unit (built in memory) exports them normalised, and one with no
+/// triangles is refused; `clean` that leaves no triangle writes nothing.
+#[test]
+fn exports_are_valid_gltf_and_empty_results_are_errors() {
+    let dir = Scratch::new("export-valid");
+    let export = |b: &Bundle, name: &str| {
+        let path = dir.path(&format!("{name}.prtb"));
+        bundle::write_bundle(&path, b).unwrap();
+        let out = dir.path(&format!("{name}.glb"));
+        (prtbake(&["export", path.to_str().unwrap(), "-o", out.to_str().unwrap()]), out)
+    };
+    let mut b = sample_bundle();
+    for (i, n) in b.mesh.normals.iter_mut().enumerate() {
+        *n *= 0.5 + (i % 3) as f32;
+    }
+    let (o, out) = export(&b, "scaled");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bytes = std::fs::read(&out).unwrap();
+    let gltf = gltf::Gltf::from_slice(&bytes).unwrap();
+    let blob = gltf.blob.as_deref().unwrap();
+    let mut normals = 0;
+    for mesh in gltf.meshes() {
+        for primitive in mesh.primitives() {
+            for n in primitive.reader(|_| Some(blob)).read_normals().unwrap() {
+                assert!((Vec3::from(n).length() - 1.0).abs() < 1e-6, "{n:?}");
+                normals += 1;
+            }
+        }
+    }
+    assert!(normals > 0);
+    let mut empty = sample_bundle();
+    empty.mesh.indices.clear();
+    empty.mesh.tri_material.clear();
+    empty.mesh.tri_group.clear();
+    let (o, out) = export(&empty, "empty");
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(2) && e.contains("no triangles"), "{e}");
+    assert!(!out.exists());
+    // Every triangle degenerate: clean removes them all, and says so.
+    let obj = dir.path("flat.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 2 3 4\nf 1 3 4\n").unwrap();
+    for out in ["c.obj", "c.glb"] {
+        let o = prtbake(&["clean", obj.to_str().unwrap(), "-o", dir.path(out).to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{e}");
+        assert!(e.contains("flat.obj") && e.contains("left no triangle"), "{e}");
+        assert!(!dir.path(out).exists() && !dir.path("c.mtl").exists());
+    }
 }

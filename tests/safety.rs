@@ -184,6 +184,40 @@ fn clean_outputs_land_together() {
     assert_ok(&prtbake(&["clean", s(&obj), "-o", s(&c), "--report", s(&dir.path("r.json")), "--quiet"]));
     assert!(c.exists() && dir.path("c.mtl").exists() && dir.path("r.json").exists());
     assert!(temporaries(&dir.0).is_empty());
+    // A name the folder cannot hold is refused before any work: the mesh and
+    // its .mtl that would have landed first are untouched.
+    let (obj_before, mtl_before) = (std::fs::read(&c).unwrap(), std::fs::read(dir.path("c.mtl")).unwrap());
+    let long_report = dir.path(&format!("{}.json", "r".repeat(251)));
+    let o = prtbake(&["clean", s(&obj), "-o", s(&c), "--report", s(&long_report), "--max-edge", "0.3", "--quiet"]);
+    assert_refused(&o, &["256 bytes", "more than the 255"]);
+    assert!(std::fs::read(&c).unwrap() == obj_before && std::fs::read(dir.path("c.mtl")).unwrap() == mtl_before);
+    let long_bundle = dir.path(&format!("{}.prtb", "b".repeat(251)));
+    let o = bake_quick(&obj, &long_bundle, &["--rays", "65536"]);
+    assert_refused(&o, &["256 bytes"]);
+    assert!(temporaries(&dir.0).is_empty());
+}
+
+/// Two OBJ names that differ only in bytes that are not UTF-8 must not share
+/// one `.mtl`: such a name cannot be written in the OBJ's `mtllib` line, so it
+/// is refused before any work.
+#[cfg(unix)]
+#[test]
+fn obj_names_that_are_not_utf8_are_refused() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = Scratch::new("safety-mtl-names");
+    let obj = tetra(&dir, "t.obj");
+    for byte in [0xffu8, 0xfe] {
+        let bytes = [b'o', b'u', b't', byte, b'.', b'o', b'b', b'j'];
+        let out = dir.0.join(std::ffi::OsStr::from_bytes(&bytes));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_prtbake")).arg("clean").arg(&obj).arg("-o").arg(&out).output().unwrap();
+        assert_refused(&o, &["must be UTF-8"]);
+        assert!(!out.exists());
+    }
+    assert_eq!(std::fs::read_dir(&dir.0).unwrap().count(), 1, "only the input is there");
+    // The .mtl beside a name is that name's, byte for byte.
+    let a = prtbake::mesh::mtl_path_for(&dir.0.join(std::ffi::OsStr::from_bytes(b"out\xff.obj")));
+    let b = prtbake::mesh::mtl_path_for(&dir.0.join(std::ffi::OsStr::from_bytes(b"out\xfe.obj")));
+    assert_ne!(a, b);
 }
 
 /// Item 4: Ctrl-C or SIGTERM during a bake exits 130/143 at once, says
@@ -299,6 +333,93 @@ fn reads_are_bounded() {
     let f = std::fs::File::create(&big).unwrap();
     f.set_len(3 << 30).unwrap();
     assert_refused(&prtbake(&["inspect", s(&big)]), &["big.prtb", "not a prtbake bundle"]);
+}
+
+/// Review item 10: a file whose header gives (or bounds) its size is
+/// checked against the file's size before its body is read. Each input is a
+/// valid file extended to a sparse 3 GiB: bundles (`inspect`, `sun`,
+/// `export`), a shard part (`merge`), a GLB and a glTF whose buffer declares
+/// a byteLength of 10¹⁵ (`bake`), an EXR and a Radiance HDR (`panel --env`).
+/// Each is refused with exit 2, the file named and what is wrong said, and
+/// the run's peak memory stays under 200 MB (reading the file whole took
+/// 3.1 GB).
+#[cfg(unix)]
+#[test]
+fn sizes_are_checked_against_headers_before_reading() {
+    const BIG: u64 = 3 << 30;
+    const PEAK_MAX: u64 = 200 << 20;
+    let dir = Scratch::new("safety-sizes");
+    let grow = |from: &Path, name: &str| {
+        let to = dir.path(name);
+        std::fs::copy(from, &to).unwrap();
+        std::fs::OpenOptions::new().write(true).open(&to).unwrap().set_len(BIG).unwrap();
+        to
+    };
+    let mesh = tetra(&dir, "t.obj");
+    let bundle = dir.path("t.prtb");
+    assert_ok(&bake_quick(&mesh, &bundle, &[]));
+    let part = dir.path("t.prtp");
+    assert_ok(&bake_quick(&mesh, &part, &["--shard", "0/1", "--adaptive", "0"]));
+    let glb = dir.path("t.glb");
+    assert_ok(&prtbake(&["export", s(&bundle), "-o", s(&glb)]));
+    let exr = dir.path("t.exr");
+    exr::prelude::write_rgb_file(&exr, 64, 32, |_, _| (1.0f32, 1.0f32, 1.0f32)).unwrap();
+    let hdr = dir.path("t.hdr");
+    let mut hdr_bytes = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 2\n".to_vec();
+    hdr_bytes.extend([128u8, 128, 128, 129].repeat(4));
+    std::fs::write(&hdr, hdr_bytes).unwrap();
+    // The small maps light a flat panel (a quad: the tetrahedron faces both ways).
+    let quad = dir.path("q.obj");
+    std::fs::write(&quad, "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3\nf 1 3 2\n").unwrap();
+    let quad_bundle = dir.path("q.prtb");
+    assert_ok(&bake_quick(&quad, &quad_bundle, &[]));
+    for small in [&exr, &hdr] {
+        let args =
+            ["panel", s(&quad_bundle), "--eye", "0.5,1,0.5", "--env", s(small), "--panel", "default", "--texels", "2x2", "--samples", "1"];
+        assert_ok(&prtbake(&[&args[..], &["-o", s(&dir.path("p.exr"))]].concat()));
+    }
+    let (big_bundle, big_part, big_glb) = (grow(&bundle, "big.prtb"), grow(&part, "big.prtp"), grow(&glb, "big.glb"));
+    let (big_exr, big_hdr) = (grow(&exr, "big.exr"), grow(&hdr, "big.hdr"));
+    let big_bin = dir.path("big.bin");
+    std::fs::File::create(&big_bin).unwrap().set_len(BIG).unwrap();
+    let gltf = dir.path("huge.gltf");
+    std::fs::write(&gltf, r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"big.bin","byteLength":1000000000000000}]}"#).unwrap();
+    let out = dir.path("o.prtb");
+    let trailing = format!("{} trailing bytes after the", BIG - std::fs::metadata(&bundle).unwrap().len());
+    let panel = |env: &Path| {
+        vec![
+            "panel".to_string(),
+            s(&bundle).into(),
+            "--eye".into(),
+            "0.2,0.2,0.2".into(),
+            "--env".into(),
+            s(env).into(),
+            "-o".into(),
+            s(&dir.path("p.exr")).into(),
+        ]
+    };
+    let cases: Vec<(Vec<String>, Vec<String>)> = vec![
+        (vec!["inspect".into(), s(&big_bundle).into()], vec!["big.prtb".into(), trailing.clone()]),
+        (vec!["sun".into(), s(&big_bundle).into(), "-o".into(), s(&out).into()], vec!["big.prtb".into(), trailing.clone()]),
+        (vec!["export".into(), s(&big_bundle).into(), "-o".into(), s(&dir.path("e.glb")).into()], vec!["big.prtb".into(), trailing]),
+        (
+            vec!["merge".into(), s(&big_part).into(), "-o".into(), s(&out).into()],
+            vec!["big.prtp".into(), format!("is {BIG} bytes and does not end in its own length and CRC-32")],
+        ),
+        (vec!["bake".into(), s(&big_glb).into(), "-o".into(), s(&out).into()], vec!["big.glb".into(), "bytes past its end".into()]),
+        (
+            vec!["bake".into(), s(&gltf).into(), "-o".into(), s(&out).into()],
+            vec!["huge.gltf".into(), "byteLength 1000000000000000".into(), format!("holds only {BIG} bytes")],
+        ),
+        (panel(&big_exr), vec!["big.exr".into(), format!("is {BIG} bytes"), "64×32 image".into()]),
+        (panel(&big_hdr), vec!["big.hdr".into(), format!("is {BIG} bytes"), "2×2 image".into()]),
+    ];
+    for (args, needles) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (output, peak) = crate::util::prtbake_peak_memory(&args);
+        assert_refused(&output, &needles.iter().map(String::as_str).collect::<Vec<_>>());
+        assert!(peak < PEAK_MAX, "prtbake {}: peak memory {} MB", args.join(" "), peak >> 20);
+    }
 }
 
 /// Item 12: OBJ polylines are not surfaces.

@@ -118,7 +118,54 @@ fn slurm_submit_chains_rounds_and_sun_into_the_single_process_bundles() {
     let (code, _, e) = script(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&bundle), "3", "--threads", "2"], &[]);
     assert!(code == Some(2) && e.contains("give CPUS=T, not --threads"), "{e}");
     let (code, _, e) = script(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&bundle), "three"], &[]);
-    assert!(code == Some(2) && e.contains("N must be a positive integer, not 'three'"), "{e}");
+    assert!(code == Some(2) && e.contains("'three'") && e.contains("--plan-shards"), "{e}");
+}
+
+/// The launchers read the bake's numbers as prtbake does, through `bake
+/// --plan-shards`: `--bounces 010` is ten bounces (bash alone read it as
+/// octal 8, left rounds 0–8 and no bundle, and exited 0), `N=08` is eight
+/// shards (a bash error before); shards-local.sh exits 0 only with the bundle.
+#[test]
+fn launchers_read_numbers_as_prtbake_does() {
+    let dir = Scratch::new("schedulers-numbers");
+    let mesh = crate::shards::write_box_with_pane(&dir);
+    for sub in ["bin", "slurm"] {
+        std::fs::create_dir(dir.path(sub)).unwrap();
+    }
+    let sbatch = dir.path("bin/sbatch");
+    std::fs::write(&sbatch, FAKE_SBATCH).unwrap();
+    std::fs::set_permissions(&sbatch, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let args = ["--window", "pane", "--rays", "4", "--bounces", "010", "--quiet"];
+    let single = dir.path("single.prtb");
+    let expected =
+        bake_alone(&["bake", s(&mesh), "-o", s(&single), "--window", "pane", "--rays", "4", "--bounces", "10", "--quiet"], &single);
+    let local = dir.path("local.prtb");
+    let (code, _, e) = script(&dir, "scripts/shards-local.sh", &[&[s(&mesh), s(&local), "08"], &args[..]].concat(), &[("JOBS", "2")]);
+    assert_eq!(code, Some(0), "{e}");
+    assert!(std::fs::read(&local).unwrap() == expected, "shards-local.sh, --bounces 010 on 08 shards: not the 10-bounce bundle");
+    assert!(dir.path("local.shards/r10").is_dir() && dir.path("local.shards/r9.prtl").exists(), "rounds 0..=10");
+    let slurm = dir.path("slurm.prtb");
+    let last = script_ok(&dir, "scripts/slurm/submit.sh", &[s(&mesh), s(&slurm), "08"], &args, &[]);
+    assert!(std::fs::read(&slurm).unwrap() == expected, "submit.sh, --bounces 010 on 08 shards: not the 10-bounce bundle");
+    // A pilot and 11 rounds, each an array of 8 and a merge.
+    assert_eq!(last, (100 + 2 * 12 - 1).to_string());
+    let jobs = std::fs::read_to_string(dir.path("slurm/jobs")).unwrap();
+    assert_eq!(jobs.lines().filter(|l| l.ends_with(" 0-7")).count(), 12, "{jobs}");
+    // Kubernetes: the same plan, and Job names past 63 characters refused before any manifest.
+    let planner = ("PLANNER", env!("CARGO_BIN_EXE_prtbake"));
+    let manifests = dir.path("k8s");
+    let env = [planner, ("DIR", s(&manifests))];
+    script_ok(&dir, "scripts/kubernetes/manifests.sh", &[s(&mesh), s(&dir.path("k.prtb")), "08"], &args, &env);
+    assert_eq!(std::fs::read_dir(&manifests).unwrap().count(), 2 * 12, "a pilot and 11 rounds, each with its merge");
+    let long = "x".repeat(60);
+    let env = [planner, ("DIR", s(&manifests)), ("NAME", &long)];
+    let (code, _, e) =
+        script(&dir, "scripts/kubernetes/manifests.sh", &[&[s(&mesh), s(&dir.path("k.prtb")), "2"], &args[..]].concat(), &env);
+    assert!(code == Some(2) && e.contains("over Kubernetes' 63"), "{e}");
+    // A bad number stops every launcher with prtbake's message, before any job.
+    let (code, _, e) = script(&dir, "scripts/shards-local.sh", &[s(&mesh), s(&dir.path("bad.prtb")), "2", "--bounces", "x"], &[]);
+    assert!(code == Some(2) && e.contains("--bounces"), "{e}");
+    assert!(!dir.path("bad.shards").exists());
 }
 
 /// Python 3 with PyYAML, or a skip notice.

@@ -278,3 +278,93 @@ fn shards_are_idempotent_and_merges_name_bad_parts() {
     let e = refused(&["merge", s(&layer), "-o", s(&dir.path("x.prtb"))]);
     assert!(e.contains("is a merged layer, not a part"), "{e}");
 }
+
+/// A closed box (12 triangles, one wall made of the material `pane`, not
+/// glass in the file), a seat block inside (`seat_leather`) and a ground
+/// triangle last whose area dwarfs the rest: most of the bake's cost sits in
+/// the last item, so several shards get no item at all.
+pub fn write_box_with_pane(dir: &Scratch) -> PathBuf {
+    let obj = dir.path("pane-box.obj");
+    let mut text = String::from("mtllib pane-box.mtl\n");
+    let corners = |x0: f32, y0: f32, z0: f32, x1: f32, y1: f32, z1: f32| -> Vec<[f32; 3]> {
+        (0..8).map(|i| [if i & 1 == 0 { x0 } else { x1 }, if i & 2 == 0 { y0 } else { y1 }, if i & 4 == 0 { z0 } else { z1 }]).collect()
+    };
+    // Faces of a box as quads of corner indices, wound outward.
+    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let mut base = 1;
+    for (name, (lo, hi), pane_face) in
+        [("wall", ([0.0, 0.0, 0.0], [2.0, 1.5, 3.0]), Some(5usize)), ("seat_leather", ([0.6, 0.0, 1.0], [1.4, 0.5, 1.8]), None)]
+    {
+        for c in corners(lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]) {
+            text += &format!("v {} {} {}\n", c[0], c[1], c[2]);
+        }
+        text += &format!("o {name}\n");
+        for (f, q) in quads.iter().enumerate() {
+            let material = if Some(f) == pane_face { "pane" } else { name };
+            let [a, b, c, d] = q.map(|i| i + base);
+            text += &format!("usemtl {material}\nf {a} {b} {c}\nf {a} {c} {d}\n");
+        }
+        base += 8;
+    }
+    text += "o ground\nv -40 -0.01 -40\nv 40 -0.01 -40\nv 0 -0.01 40\nusemtl ground\n";
+    text += &format!("f {} {} {}\n", base, base + 2, base + 1);
+    std::fs::write(&obj, text).unwrap();
+    let mtl =
+        "newmtl wall\nKd 0.7 0.7 0.7\nnewmtl pane\nKd 0.5 0.5 0.5\nnewmtl seat_leather\nKd 0.4 0.2 0.1\nnewmtl ground\nKd 0.3 0.3 0.3\n";
+    std::fs::write(dir.path("pane-box.mtl"), mtl).unwrap();
+    obj
+}
+
+/// `--window` that makes a window of a material the file does not mark
+/// (and `PATTERN=TAU` that sets its transmittance) changes the bundle's
+/// material section; every shard count, past the item count too (empty
+/// shards), merges into the single-process bytes.
+#[test]
+fn merges_keep_the_window_roles_and_shards_may_be_empty() {
+    let dir = Scratch::new("shards-roles");
+    let mesh = write_box_with_pane(&dir);
+    for window in ["pane", "pane=0.5"] {
+        for adaptive in ["0.25", "0"] {
+            let args = ["--window", window, "--bounces", "1", "--rays", "8", "--seed", "2", "--adaptive", adaptive, "--quiet"];
+            let single = dir.path("single.prtb");
+            let mut a = vec!["bake", s(&mesh), "-o", s(&single), "--force"];
+            a.extend(args);
+            run(&a);
+            let expected = std::fs::read(&single).unwrap();
+            let bundle = prtbake::bundle::decode_bundle(&expected).unwrap();
+            let pane = bundle.mesh.materials.iter().find(|m| m.name == "pane").unwrap();
+            assert_eq!(pane.role, prtbake::mesh::MaterialRole::Window, "the single bake marks the window");
+            assert_eq!(pane.transmittance, if window == "pane" { 1.0 } else { 0.5 });
+            let counts: Vec<u32> = if adaptive == "0" { vec![5, 40] } else { (1..=7).chain([40]).collect() };
+            for n in counts {
+                let work = dir.path(&format!("{window}-{adaptive}-{n}"));
+                std::fs::create_dir(&work).unwrap();
+                let merged = sharded_bake(&work, &mesh, &args, 1, n);
+                assert!(
+                    std::fs::read(&merged).unwrap() == expected,
+                    "--window {window} --adaptive {adaptive}, {n} shards: the merged bundle differs from the single-process bake"
+                );
+            }
+        }
+    }
+}
+
+/// A pilot part among round-0 parts is named as the other stage, and a
+/// truncated part as truncated (not by the garbage where its length was).
+#[test]
+fn merges_name_a_part_of_another_stage_and_a_truncated_part() {
+    let dir = Scratch::new("shards-stages");
+    let mesh = write_box_with_pane(&dir);
+    let args = ["--window", "pane", "--bounces", "1", "--rays", "4", "--quiet"];
+    let work = dir.path("w");
+    std::fs::create_dir(&work).unwrap();
+    sharded_bake(&work, &mesh, &args, 1, 2);
+    let (pilot_0, r0_1) = (work.join("pilot-0.prtp"), work.join("r0-1.prtp"));
+    let e = refused(&merge(&[&r0_1, &pilot_0], &dir.path("x.prtl")));
+    assert!(e.contains(&format!("{}: is a part of the pilot stage, but {} of round 0", pilot_0.display(), r0_1.display())), "{e}");
+    let bytes = std::fs::read(work.join("r0-0.prtp")).unwrap();
+    let cut = dir.path("cut.prtp");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let e = refused(&merge(&[&cut, &r0_1], &dir.path("x.prtl")));
+    assert!(e.contains(&format!("{}: is {} bytes and does not end in its own length", cut.display(), bytes.len() / 2)), "{e}");
+}

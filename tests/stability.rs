@@ -4,9 +4,10 @@
 //! (`interior_sampling_cures_covered_vertices`).
 
 use glam::{DVec3, Vec3};
-use prtbake::bake::{self, bake_mesh, BakeParams, BuildQuality, Scene};
+use prtbake::bake::{self, bake_mesh, BakeParams};
 use prtbake::mesh::Mesh;
 use prtbake::sh::{self, Window};
+use prtbake::trace::{BuildQuality, Scene};
 use prtbake::verify::{plane_point_reference, shapes, Y00};
 
 use crate::util::shared_data;
@@ -95,7 +96,7 @@ fn grazing_sun_self_shadowing() {
         for elevation_deg in [0.05f32, 0.5, 5.0] {
             let e = elevation_deg.to_radians();
             // Elevation above the sloped plane, sun toward +x.
-            let (t, _) = bake::sampling::tangent_frame(slope_normal);
+            let (t, _) = prtbake::sampling::tangent_frame(slope_normal);
             let sun = (t * e.cos() + slope_normal * e.sin()).normalize();
             let (mut raw_hits, mut offset_hits, mut n) = (0, 0, 0);
             for tri in 0..floor.triangle_count() {

@@ -128,7 +128,7 @@ fn view_box_culls_the_hidden_and_keeps_transfer() {
     let mesh = b.mesh;
     let params = BakeParams { order: 2, rays: 128, ..BakeParams::default() };
     let surfaces = bake::Surfaces::resolve(&mesh, &[]).unwrap();
-    let scene = bake::Scene::build(&mesh, bake::BuildQuality::Sah).unwrap();
+    let scene = prtbake::trace::Scene::build(&mesh, prtbake::trace::BuildQuality::Sah).unwrap();
     let view = cull::ViewBox { min: Vec3::new(-1.0, -0.5, -1.0), max: Vec3::new(0.0, 0.5, 0.0) };
     let (visible, report) = cull::visible_triangles(&mesh, &scene, &surfaces, &view, &cull::CullParams::default());
     assert!((hidden_start..mesh.triangle_count()).all(|t| !visible[t]));
@@ -172,7 +172,7 @@ fn grey_white_room_culling() {
     let Some(path) = shared_data("room-grey-white/grey_white_room_flat.obj") else { return };
     let mesh = prtbake::mesh::load_mesh(&path, &Default::default()).unwrap().mesh;
     let surfaces = bake::Surfaces::resolve(&mesh, &[]).unwrap();
-    let scene = bake::Scene::build(&mesh, bake::BuildQuality::Sah).unwrap();
+    let scene = prtbake::trace::Scene::build(&mesh, prtbake::trace::BuildQuality::Sah).unwrap();
     let view = cull::ViewBox::around_centre(&mesh, 0.5);
     let (visible, report) = cull::visible_triangles(&mesh, &scene, &surfaces, &view, &cull::CullParams::default());
     eprintln!(

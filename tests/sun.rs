@@ -2,8 +2,9 @@
 //! `sun` command on meshes and bundles, thread-count independence.
 
 use glam::Vec3;
-use prtbake::bake::{bake_sun_masks, BuildQuality, LoopOrder, Scene, SunParams, Surfaces};
+use prtbake::bake::{bake_sun_masks, LoopOrder, SunParams, Surfaces};
 use prtbake::bundle;
+use prtbake::trace::{BuildQuality, Scene};
 use prtbake::verify::shapes;
 
 use crate::util::{prtbake, write_scene_obj, Scratch};
@@ -272,4 +273,69 @@ fn sun_bits_match_the_analytic_shadow_up_to_the_plane_edges() {
         // The reported sun alone shades ~10 vertices of the z = -4 row.
         assert!(shadowed_edge_checks >= 10, "{side} a side: only {shadowed_edge_checks} shadowed edge vertices checked");
     }
+}
+
+/// A closed 4 × 3 × 5 m room whose one pane (`pane`, opaque in the file) is
+/// the wall at the lowest z: with the default north (−Z) it faces north.
+fn write_room_with_north_pane(path: &std::path::Path) {
+    let mut text = format!("mtllib {}\n", path.with_extension("mtl").file_name().unwrap().to_str().unwrap());
+    for i in 0..8 {
+        let c = [if i & 1 == 0 { 0.0 } else { 4.0 }, if i & 2 == 0 { 0.0 } else { 3.0 }, if i & 4 == 0 { 0.0 } else { 5.0 }];
+        text += &format!("v {} {} {}\n", c[0], c[1], c[2]);
+    }
+    let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    for (f, q) in quads.iter().enumerate() {
+        let [a, b, c, d] = q.map(|i| i + 1);
+        text += &format!("usemtl {}\nf {a} {b} {c}\nf {a} {c} {d}\n", if f == 0 { "pane" } else { "wall" });
+    }
+    std::fs::write(path, text).unwrap();
+    std::fs::write(path.with_extension("mtl"), "newmtl wall\nKd 0.6 0.6 0.6\nnewmtl pane\nKd 0.5 0.5 0.5\n").unwrap();
+}
+
+/// `sun BUNDLE` lights a window-mode bundle as its bake did (same masks as
+/// with its `--window` patterns given again), refuses other patterns, and
+/// warns, naming `--north`, when the sun lights nothing all day.
+#[test]
+fn sun_on_a_window_bundle_uses_its_windows_and_warns_when_nothing_is_lit() {
+    let dir = Scratch::new("sun-window-bundle");
+    let obj = dir.path("room.obj");
+    write_room_with_north_pane(&obj);
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let baked = dir.path("baked.prtb");
+    let o = prtbake(&["bake", &s(&obj), "-o", &s(&baked), "--window", "pane", "--rays", "8", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // South-facing pane once north is +Z: lit at some steps.
+    let (implicit, explicit) = (dir.path("implicit.prtb"), dir.path("explicit.prtb"));
+    let run = |out: &std::path::Path, extra: &[&str]| {
+        let mut a =
+            vec!["sun".to_string(), s(&baked), "-o".into(), s(out), "--steps".into(), "24".into(), "--north".into(), "0,0,1".into()];
+        a.extend(extra.iter().map(|e| e.to_string()));
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        prtbake(&a)
+    };
+    let o = run(&implicit, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("window mode with --window [\"pane\"]"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&explicit, &["--window", "pane", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (a, b) = (bundle::read_bundle(&implicit).unwrap(), bundle::read_bundle(&explicit).unwrap());
+    assert_eq!(a.sun, b.sun, "sun BUNDLE and sun BUNDLE --window pane give other masks");
+    assert_eq!(a.meta["sun"]["params"]["mode"], "window");
+    let lit: u64 = a.meta["sun"]["stats"]["lit_vertices"].as_array().unwrap().iter().map(|n| n.as_u64().unwrap()).sum();
+    assert!(lit > 0, "the south-facing pane lets the sun in at some step");
+    // Other patterns than the bake's: refused, nothing written.
+    let other = dir.path("other.prtb");
+    let o = run(&other, &["--window", "wall", "--quiet"]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("baked in window mode with --window [\"pane\"]") && e.contains("[\"wall\"]"), "{e}");
+    assert!(!other.exists());
+    // The default north: the pane faces north at 38° N on the equinox, so no vertex is ever lit.
+    let dark = dir.path("dark.prtb");
+    let o = prtbake(&["sun", &s(&baked), "-o", &s(&dark), "--steps", "24", "--quiet"]);
+    assert!(o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("no vertex is lit at any step") && e.contains("--north") && e.contains("--up"), "{e}");
+    let lit = bundle::read_bundle(&dark).unwrap().meta["sun"]["stats"]["lit_vertices"].clone();
+    assert!(lit.as_array().unwrap().iter().all(|n| n == 0), "{lit}");
 }

@@ -47,3 +47,39 @@ pub fn write_scene_obj(path: &Path) {
     std::fs::copy(fixtures.join("scene.obj"), path).unwrap();
     std::fs::copy(fixtures.join("scene.mtl"), path.with_file_name("scene.mtl")).unwrap();
 }
+
+/// Runs the prtbake binary with `args` and returns its output with its peak
+/// resident memory in bytes (`wait4`'s `ru_maxrss` of that child alone), so
+/// a test can bound what a run costs without timing it.
+#[cfg(unix)]
+pub fn prtbake_peak_memory(args: &[&str]) -> (Output, u64) {
+    use std::io::Read;
+    use std::process::Stdio;
+    // Reaped by wait4 below (std's wait would not report the memory).
+    #[allow(clippy::zombie_processes)]
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_prtbake"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cannot run prtbake");
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            let _ = pipe.read_to_end(&mut bytes);
+            bytes
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().unwrap()));
+    let stderr = drain(Box::new(child.stderr.take().unwrap()));
+    let (mut status, mut usage) = (0, unsafe { std::mem::zeroed::<libc::rusage>() });
+    // SAFETY: waits for our own child, whose pid is valid until reaped here; std's `Child` is not waited on after.
+    let pid = unsafe { libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage) };
+    assert_eq!(pid, child.id() as libc::pid_t, "wait4 failed");
+    use std::os::unix::process::ExitStatusExt;
+    let output =
+        Output { status: std::process::ExitStatus::from_raw(status), stdout: stdout.join().unwrap(), stderr: stderr.join().unwrap() };
+    // ru_maxrss is in KiB on Linux and the BSDs, in bytes on macOS.
+    let unit = if cfg!(target_os = "macos") { 1 } else { 1024 };
+    (output, usage.ru_maxrss as u64 * unit)
+}

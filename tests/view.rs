@@ -470,35 +470,131 @@ fn inner_panel_pixels(pixels: &[Option<(glam::Vec2, [f32; 3])>], texels: (u32, u
         .collect()
 }
 
+/// The panel shows what the gather reflects, and nothing else: its BRDF's
+/// diffuse haze is already in the gathered radiance, so adding the PRT
+/// shading albedo · E again would draw it twice.
 #[test]
-fn panel_texels_match_the_cpu_shading_plus_the_gathered_texture() {
-    let Some(gpu) = gpu_or_skip("panel_texels_match_the_cpu_shading_plus_the_gathered_texture") else { return };
+fn panel_texels_show_the_gathered_texture() {
+    let Some(gpu) = gpu_or_skip("panel_texels_show_the_gathered_texture") else { return };
     let (bundle, mapping, camera, settings) = panel_fixture();
     let texture = panel_texture(&bundle, &mapping, &settings, camera.eye, 4);
     let image = render_panel(&gpu, &bundle, &mapping, &camera, &settings, Some(4));
     let pixels = panel_pixels(&bundle, &mapping, &camera, &settings.lighting);
     let albedo = bundle.mesh.materials[0].albedo;
-    let (mut max_diff, mut reflected_share) = (0, 0.0f64);
+    let (mut max_diff, mut prt_share) = (0, 0.0f64);
     let inner = inner_panel_pixels(&pixels, (16, 8));
     for &i in &inner {
         let (texcoord, light) = pixels[i].unwrap();
         let prt = reference::radiance(albedo, light);
         let reflected = texture.at(texcoord);
-        let want = tonemap::linear(std::array::from_fn(|k| prt[k] + reflected[k]), -1.0, 2.2).map(tonemap::to_u8);
+        let want = tonemap::linear(reflected, -1.0, 2.2).map(tonemap::to_u8);
         let got = image.pixel(i as u32 % PANEL_SIZE.0, i as u32 / PANEL_SIZE.0);
         let diff = (0..3).map(|k| (got[k] as i32 - want[k] as i32).abs()).max().unwrap();
-        assert!(diff <= MAX_CODE_DIFF, "pixel {i}: GPU {got:?}, CPU {want:?} (PRT {prt:?} + texel {reflected:?})");
+        assert!(diff <= MAX_CODE_DIFF, "pixel {i}: GPU {got:?}, CPU {want:?} (texel {reflected:?})");
         max_diff = max_diff.max(diff);
-        reflected_share += f64::from(reflected[1] / (prt[1] + reflected[1])) / inner.len() as f64;
+        prt_share += f64::from(prt[1] / reflected[1].max(1e-6)) / inner.len() as f64;
     }
-    eprintln!(
-        "panel: {} pixels compared, max difference {max_diff} codes; the reflection is {:.0}% of their radiance",
-        inner.len(),
-        100.0 * reflected_share
-    );
+    eprintln!("panel: {} pixels compared, max difference {max_diff} codes; albedo·E would add {:.0}%", inner.len(), 100.0 * prt_share);
     assert!(inner.len() > 2000, "only {} panel pixels", inner.len());
-    // The texture matters: the reflection is a large part of what the panel shows.
-    assert!(reflected_share > 0.3, "{reflected_share}");
+    // The double count the shader no longer makes would have been visible.
+    assert!(prt_share > 0.05, "{prt_share}");
+}
+
+/// `view --screenshot OUT.exr` (linear, before tone mapping) shows on the
+/// panel the radiance `prtbake panel` writes for the same bundle, light and
+/// eye: the viewer's panel pixels against the panel command's EXR, texel by
+/// texel, within the gather's noise.
+#[test]
+fn viewer_panel_pixels_equal_the_panel_command_exr() {
+    if gpu_or_skip("viewer_panel_pixels_equal_the_panel_command_exr").is_none() {
+        return;
+    }
+    let dir = crate::util::Scratch::new("view-panel-exr");
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let (bundle, mapping) = panel_scene();
+    let bundle_path = dir.path("panel.prtb");
+    prtbake::bundle::write_bundle(&bundle_path, &bundle).unwrap();
+    // An environment brightest toward +Z and the zenith, with some colour.
+    let env = dir.path("env.exr");
+    {
+        use exr::prelude::*;
+        let (w, h) = (64usize, 32usize);
+        let pixel = |x: usize, y: usize| {
+            let d = prtbake::sh::equirect_direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+            let l = (0.5 + 1.5 * d.z.max(0.0) + d.y.max(0.0)) as f32;
+            (l, 0.9 * l, 0.8 * l)
+        };
+        write_rgb_file(&env, w, h, |x, y| pixel(x, y)).unwrap();
+    }
+    let (eye, samples) = ("0.25,0.15,1.6", 128u32);
+    let panel_exr = dir.path("panel.exr");
+    let o = crate::util::prtbake(&[
+        "panel",
+        &s(&bundle_path),
+        "--env",
+        &s(&env),
+        "--eye",
+        eye,
+        "--texels",
+        "16x8",
+        "--samples",
+        &samples.to_string(),
+        "-o",
+        &s(&panel_exr),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let noise = report["readability"]["max_relative_error"].as_f64().unwrap();
+    let view_exr = dir.path("view.exr");
+    let passes = prtbake::view::panel::passes_for(samples).to_string();
+    let size = format!("{}x{}", PANEL_SIZE.0, PANEL_SIZE.1);
+    let o = crate::util::prtbake(&[
+        "view",
+        &s(&bundle_path),
+        "--env",
+        &s(&env),
+        "--camera",
+        &format!("{eye},0,0,0"),
+        "--fov",
+        "45",
+        "--panel-texels",
+        "16x8",
+        "--panel-passes",
+        &passes,
+        "--size",
+        &size,
+        "--screenshot",
+        &s(&view_exr),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let panel_image = prtbake::sh::load_equirect(&panel_exr).unwrap();
+    let view_image = prtbake::sh::load_equirect(&view_exr).unwrap();
+    assert_eq!((view_image.width, view_image.height), PANEL_SIZE);
+    let bounds = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap().bounds;
+    let mut camera = Camera::look_at(Vec3::new(0.25, 0.15, 1.6), Vec3::ZERO, bounds);
+    camera.fov_y_deg = 45.0;
+    let pixels = panel_pixels(&bundle, &mapping, &camera, &panel_lighting());
+    let inner = inner_panel_pixels(&pixels, (16, 8));
+    assert!(inner.len() > 2000, "only {} panel pixels", inner.len());
+    let (mut worst, mut sum_view, mut sum_panel) = (0.0f64, 0.0f64, 0.0f64);
+    for &i in &inner {
+        let (texcoord, _) = pixels[i].unwrap();
+        let (tx, ty) = ((texcoord.x * 16.0) as usize, (texcoord.y * 8.0) as usize);
+        let want = panel_image.rgb[ty.min(7) * 16 + tx.min(15)];
+        let got = view_image.rgb[i];
+        for k in 0..3 {
+            let relative = f64::from((got[k] - want[k]).abs() / want[k].max(1e-6));
+            worst = worst.max(relative);
+        }
+        sum_view += f64::from(got[1]);
+        sum_panel += f64::from(want[1]);
+    }
+    let ratio = sum_view / sum_panel;
+    eprintln!("viewer panel / panel EXR: mean ratio {ratio:.4}, worst texel {worst:.4} (gather noise up to {noise:.4}, half floats 2^-11)");
+    // The two run the same gather: what is left is the viewer's half-float target.
+    assert!((ratio - 1.0).abs() < 0.01, "{ratio}");
+    assert!(worst < 3.0 * noise + 2e-3, "worst texel {worst} against the gather's noise {noise}");
 }
 
 #[test]
@@ -602,4 +698,83 @@ fn panel_worker_refines_to_the_screenshot_texture_and_restarts_on_a_new_eye() {
         assert!(texture == headless, "eye {k}: the window's texture differs from the screenshot's");
         eprintln!("worker, eye {k}: textures seen at {seen:?} samples per texel");
     }
+}
+
+/// A bundle of sun masks alone is shown (albedo × the sun term) instead of
+/// refused; steps from a list of directions have no time of day, so the
+/// report gives none and `--time` is refused in favour of `--step`.
+#[test]
+fn sun_only_and_direction_bundles_are_viewed() {
+    if gpu_or_skip("sun_only_and_direction_bundles_are_viewed").is_none() {
+        return;
+    }
+    let dir = crate::util::Scratch::new("view-sun-only");
+    let obj = dir.path("scene.obj");
+    crate::util::write_scene_obj(&obj);
+    let csv = dir.path("suns.csv");
+    std::fs::write(&csv, "0.3,1,0.2\n-0.5,0.8,0.4\n").unwrap();
+    let sun = dir.path("sun.prtb");
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let o = crate::util::prtbake(&["sun", &s(&obj), "-o", &s(&sun), "--directions", &s(&csv), "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let shot = dir.path("sun.png");
+    let o = crate::util::prtbake(&["view", &s(&sun), "--step", "0", "--screenshot", &s(&shot), "--size", "96x64", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(report["step_local_time"].is_null(), "{report}");
+    let image = Image::decode_png(&std::fs::read(&shot).unwrap()).unwrap();
+    let lit = (0..image.height)
+        .flat_map(|y| (0..image.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| image.pixel(x, y)[..3].iter().any(|&c| c > 8));
+    assert!(lit.count() > 100, "the sunlit ground shows");
+    let o = crate::util::prtbake(&["view", &s(&sun), "--time", "09:00", "--screenshot", &s(&shot), "--size", "96x64"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--step"), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// The photographic default keeps the sun patch of a dim scene from
+/// clipping (the highlight guard): a floor in skylight with a small patch
+/// of sun some 240 times brighter. Without the guard every pixel of the
+/// patch was white (code 255, measured); with it none is (253), and the
+/// patch stays far brighter than the shade (75).
+#[test]
+fn photographic_default_keeps_sun_patches_of_a_dim_scene() {
+    let Some(gpu) = gpu_or_skip("photographic_default_keeps_sun_patches_of_a_dim_scene") else { return };
+    let (mut bundle, _suns, plane_vertices) = plane_and_sphere_time_lapse();
+    // A dim room in daylight, in absolute units: 30 of skylight, a sun of
+    // 10,000 through a small opening: a 0.8 m square patch of the 4 m floor.
+    let series = bundle.sun.as_mut().unwrap();
+    series.steps.iter_mut().for_each(|s| s.sun_rgb = [1.0e4; 3]);
+    let positions = bundle.mesh.positions.clone();
+    let (words, masks) =
+        SunSeries::pack(2, positions.len(), |v, _| v < plane_vertices && positions[v].x.abs() < 0.4 && (positions[v].z - 1.2).abs() < 0.4);
+    (series.words_per_vertex, series.masks) = (words, masks);
+    let sun = bundle.sun.as_ref().unwrap();
+    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    let ambient = 30.0f32;
+    let lighting = vec![[ambient * (4.0 * std::f32::consts::PI).sqrt(); 3]];
+    let (width, height) = (160, 160);
+    let camera = Camera::look_at(Vec3::new(0.0, 6.0, 0.5), Vec3::ZERO, scene.bounds);
+    let tonemap = ToneMap { operator: ToneOperator::Photographic, ..ToneMap::default() };
+    let settings = FrameSettings { lighting, sun_step: Some(0), backdrop: Backdrop::Black, tonemap };
+    let image = render_image(&gpu, &scene, Some(sun), &camera, &settings, width, height).unwrap();
+    let n = 41usize;
+    let (mut lit, mut shade) = (Vec::new(), Vec::new());
+    for v in (0..plane_vertices).filter(|v| (v % n).abs_diff(n / 2) < 18 && (v / n).abs_diff(n / 2) < 18) {
+        let Some((x, y)) = camera.project(bundle.mesh.positions[v], width, height) else { continue };
+        let code = image.pixel(x.floor() as u32, y.floor() as u32)[1];
+        if sun.bit(v, 0) {
+            lit.push(code)
+        } else {
+            shade.push(code)
+        }
+    }
+    lit.sort_unstable();
+    shade.sort_unstable();
+    let clipped = lit.iter().filter(|&&c| c == 255).count() as f64 / lit.len() as f64;
+    let (lit_median, shade_median) = (lit[lit.len() / 2], shade[shade.len() / 2]);
+    eprintln!("sunlit {} pixels: {:.0}% clipped, median code {lit_median}; shade median {shade_median}", lit.len(), 100.0 * clipped);
+    assert!(lit.len() > 40 && shade.len() > 200, "{} lit, {} in shade", lit.len(), shade.len());
+    assert!(clipped < 0.1, "{:.0}% of the sunlit pixels clip", 100.0 * clipped);
+    assert!(f64::from(lit_median) > 1.5 * f64::from(shade_median).max(1.0), "sun {lit_median} against shade {shade_median}");
 }

@@ -15,6 +15,8 @@
 #   NAME      the Jobs' name prefix (default: OUT's file name, lower case, [a-z0-9-])
 #   IMAGE     a container image with prtbake and sh (default: prtbake:latest)
 #   PRTBAKE   the binary in the image (default: prtbake)
+#   PLANNER   a prtbake on this machine that reads the bake's arguments
+#             (default: prtbake on PATH, else target/release/prtbake)
 #   PVC       the PersistentVolumeClaim (ReadWriteMany when pods land on
 #             several nodes; default: prtbake-work)
 #   MOUNT     where the pods mount it (default: /data)
@@ -29,11 +31,18 @@ mesh=$1 out=$2 n=$3
 shift 3
 bake_args=("$@")
 . "$(dirname "$0")/../shard-args.sh"
-check_operands "$out" "$n"
-! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each pod's threads are its cores)" >&2 && exit 2; }
-bounces=$(bounces_of "$@")
+read_plan "$(planner_binary)" bake "$mesh" "$out" "$n" "$@"
+n=$shards
+[ "$threads_given" -eq 0 ] || { echo "$0: give CPUS=T, not --threads (each pod's threads are its cores)" >&2 && exit 2; }
 base=$(basename "${out%.prtb}" | tr 'A-Z_.' 'a-z--' | tr -cd 'a-z0-9-')
 name=${NAME:-${base:-bake}}
+# Job names are DNS labels: at most 63 characters, the longest being NAME-merge-pilot or NAME-merge-rB.
+longest="$name-merge-r$bounces"
+if [ "$pilot" -eq 1 ] && [ ${#longest} -lt $((${#name} + 12)) ]; then longest="$name-merge-pilot"; fi
+if [ ${#longest} -gt 63 ]; then
+    echo "$0: job name '$longest' is ${#longest} characters, over Kubernetes' 63: set NAME to a shorter prefix" >&2
+    exit 2
+fi
 dir=${DIR:-k8s-$name}
 image=${IMAGE:-prtbake:latest} prtbake=${PRTBAKE:-prtbake} pvc=${PVC:-prtbake-work} mount=${MOUNT:-/data}
 work=${WORK:-${out%.prtb}.shards}
@@ -100,7 +109,7 @@ for ((round = 0; round <= bounces; round++)); do folders+=" \"\$0/r$round\""; do
 
 step=0
 pilot_args=()
-if is_adaptive "$@"; then
+if [ "$pilot" -eq 1 ]; then
     # Adaptive allocation's pilot stage: an Indexed Job at the base points and
     # its merge into the pilot every round reads.
     folders+=' "$0/pilot"'

@@ -18,7 +18,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 [ "$(id -u)" -eq 0 ] || { echo "$0: run as root (it installs packages and starts daemons)" >&2 && exit 2; }
 command -v apt-get >/dev/null || { echo "$0: needs apt-get (Debian or Ubuntu)" >&2 && exit 2; }
-prtbake=$(realpath "${PRTBAKE:-target/release/prtbake}")
+prtbake=$(realpath -m "${PRTBAKE:-target/release/prtbake}")
 [ -x "$prtbake" ] || { echo "$0: no binary at $prtbake (cargo build --release, or set PRTBAKE)" >&2 && exit 2; }
 smoke=${SMOKE:-/tmp/prtbake-slurm-smoke} n=${N:-4} rays=${RAYS:-32} timeout=${TIMEOUT:-900}
 clock() { date +%s.%N; }
@@ -78,7 +78,12 @@ stop() {
         for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     done
 }
-trap stop EXIT
+passed=0
+finish() {
+    stop
+    if [ "$passed" -eq 1 ] && [ -z "${KEEP:-}" ]; then rm -rf "$smoke"; fi
+}
+trap finish EXIT
 pid_of() { local i; for i in $(seq 50); do [ -s "$1" ] && cat "$1" && return; sleep 0.1; done; echo "$0: $2 did not start" >&2 && exit 1; }
 if ! munge -n >/dev/null 2>&1; then
     rm -f /run/munge/munged.pid
@@ -116,4 +121,5 @@ single_s=$(since "$t3")
 bytes=$(stat -c %s "$smoke/single.prtb")
 if cmp "$smoke/slurm.prtb" "$smoke/single.prtb"; then same=identical; else same=DIFFERENT; fi
 echo "install ${install_s} s, slurm start-up ${startup_s} s, bake through slurm (N = $n, 3 bounces, $rays rays, adaptive: a pilot and 4 rounds, 5 arrays + 5 merges) ${slurm_s} s, single process ${single_s} s; bundles $same ($bytes bytes)"
-[ "$same" = identical ]
+[ "$same" = identical ] && passed=1
+[ "$passed" -eq 1 ]

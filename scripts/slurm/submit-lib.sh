@@ -15,7 +15,7 @@
 here=$(cd "$(dirname "$0")" && pwd)
 . "$here/../shard-args.sh"
 command -v sbatch >/dev/null || { echo "$0: sbatch not found (is Slurm installed?)" >&2 && exit 2; }
-prtbake=$(realpath "${PRTBAKE:-$(command -v prtbake || echo target/release/prtbake)}")
+prtbake=$(realpath -m "${PRTBAKE:-$(command -v prtbake || echo target/release/prtbake)}")
 [ -x "$prtbake" ] || { echo "$0: no prtbake binary at $prtbake (set PRTBAKE)" >&2 && exit 2; }
 cpus=${CPUS:-1}
 read -r -a sbatch_args <<<"${SBATCH_ARGS:-}"

@@ -16,8 +16,9 @@ set -euo pipefail
 input=$(realpath -m "$1") out=$(realpath -m "$2") n=$3
 shift 3
 . "$(dirname "$0")/submit-lib.sh"
-check_operands "$out" "$n"
-! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each job's threads are its cores)" >&2 && exit 2; }
+read_plan "$prtbake" sun "$input" "$out" "$n" "$@"
+n=$shards
+[ "$threads_given" -eq 0 ] || { echo "$0: give CPUS=T, not --threads (each job's threads are its cores)" >&2 && exit 2; }
 [ -f "$input" ] || [ -n "${AFTER:-}" ] || { echo "$0: no input at $input (or set AFTER to the job that writes it)" >&2 && exit 2; }
 work=$(work_dir "$out")
 mkdir -p "$work/sun"

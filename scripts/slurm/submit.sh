@@ -17,15 +17,15 @@ mesh=$(realpath -m "$1") out=$(realpath -m "$2") n=$3
 shift 3
 bake_args=("$@")
 . "$(dirname "$0")/submit-lib.sh"
-check_operands "$out" "$n"
-! gives_threads "$@" || { echo "$0: give CPUS=T, not --threads (each job's threads are its cores)" >&2 && exit 2; }
+read_plan "$prtbake" bake "$mesh" "$out" "$n" "$@"
+n=$shards
+[ "$threads_given" -eq 0 ] || { echo "$0: give CPUS=T, not --threads (each job's threads are its cores)" >&2 && exit 2; }
 [ -f "$mesh" ] || { echo "$0: no mesh at $mesh" >&2 && exit 2; }
-bounces=$(bounces_of "$@")
 work=$(work_dir "$out")
 mkdir -p "$work/hits"
 
 pilot_args=()
-if is_adaptive "$@"; then
+if [ "$pilot" -eq 1 ]; then
     # Adaptive allocation's pilot stage: an array at the base points, merged
     # into the pilot every round reads.
     mkdir -p "$work/pilot"

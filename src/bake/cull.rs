@@ -14,10 +14,10 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::sampling::{hash_seed, sample_2d, DirectionPattern};
-use super::scene::{RayQuery, Scene};
 use super::surfaces::Surfaces;
 use crate::mesh::{MaterialRole, Mesh};
+use crate::sampling::{hash_seed, sample_2d, DirectionPattern};
+use crate::trace::scene::{RayQuery, Scene};
 
 const TAG_VIEW_POINT: u32 = 0x4355_4c01;
 const TAG_VIEW_RAY: u32 = 0x4355_4c02;
@@ -109,7 +109,7 @@ pub fn visible_triangles(
             || mesh.materials[mesh.tri_material[t as usize] as usize].role == MaterialRole::Window
     };
     let extent = view_box.max - view_box.min;
-    let rays = params.rays_per_point.clamp(1, super::sampling::MAX_RAYS_PER_POINT);
+    let rays = params.rays_per_point.clamp(1, crate::sampling::MAX_RAYS_PER_POINT);
     let per_point: Vec<(Vec<u32>, u64)> = (0..params.points)
         .into_par_iter()
         .map(|p| {
@@ -221,9 +221,10 @@ pub fn compact_vertex_data(data: &[f32], stride: usize, map: &[u32], kept_vertic
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bake::{BuildQuality, Surfaces};
+    use crate::bake::Surfaces;
     use crate::fixtures::builder::MeshBuilder;
     use crate::mesh::Material;
+    use crate::trace::BuildQuality;
 
     /// A closed room (walls facing in) with a small closed box in the middle
     /// and, inside a second closed box, a hidden object.

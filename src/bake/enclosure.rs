@@ -10,10 +10,10 @@
 
 use glam::Vec3;
 
-use super::sampling::{cosine_hemisphere, sample_2d};
-use super::scene::Scene;
 use super::surfaces::Surfaces;
 use super::DirectionPattern;
+use crate::sampling::{cosine_hemisphere, sample_2d};
+use crate::trace::scene::Scene;
 
 /// Per side of a point (0 front, 1 back of its face), how many of its rays
 /// escaped to the sky without meeting glass and how many met an opaque surface first.

@@ -11,7 +11,7 @@
 //! without FMA rounds as the scalar code does, so the bytes never depend on
 //! the CPU or the order path.
 
-use super::bvh8::prefetch_bytes;
+use crate::trace::bvh8::prefetch_bytes;
 
 /// How many records ahead the gather asks for a record's triangle (corner
 /// indices, albedo) and, once those have arrived, its corner rows. Both are
@@ -49,7 +49,7 @@ pub(crate) struct RowBuffer {
 impl RowBuffer {
     pub(crate) fn zeroed(len: usize) -> RowBuffer {
         // Rows are read at random: huge pages spare most of those reads a TLB miss.
-        RowBuffer { lines: super::hugepages::filled_huge(len.div_ceil(16)), len }
+        RowBuffer { lines: crate::trace::hugepages::filled_huge(len.div_ceil(16)), len }
     }
     pub(crate) fn len(&self) -> usize {
         self.len
@@ -95,7 +95,7 @@ impl<'a> Gather<'a> {
         source_channels: usize,
         channels: usize,
     ) -> Gather<'a> {
-        Gather { indices, albedo, rows, coeffs, source_channels, channels, avx2: super::bvh8::avx2_available() }
+        Gather { indices, albedo, rows, coeffs, source_channels, channels, avx2: crate::trace::bvh8::avx2_available() }
     }
 }
 
@@ -307,7 +307,7 @@ mod tests {
             for (channels, source_channels) in [(1, 1), (3, 1), (3, 3)] {
                 let f = fixture(coeffs, source_channels, (coeffs * 10 + channels + source_channels) as u64);
                 let mut outputs = Vec::new();
-                for avx2 in [false, super::super::bvh8::avx2_available()] {
+                for avx2 in [false, crate::trace::bvh8::avx2_available()] {
                     let g = Gather { avx2, ..Gather::new(&f.indices, &f.albedo, f.rows.as_slice(), coeffs, source_channels, channels) };
                     let count = 64;
                     let weight = 2.0 / 64.0;

@@ -3,30 +3,23 @@
 //! arrays and statistics.
 
 pub(crate) mod adaptive;
-pub mod bvh8;
 pub mod cull;
 pub(crate) mod enclosure;
-mod gather;
-pub mod hugepages;
-pub mod leaf_blocks;
+pub(crate) mod gather;
 pub mod progress;
-pub mod queries;
-pub mod sah;
-pub mod sampling;
-pub mod scene;
-pub mod shards;
 pub mod sun;
 pub mod surfaces;
 pub mod transfer;
+pub(crate) mod twins;
 mod window_light;
 
-pub use sampling::DirectionPattern;
-pub use scene::{check_extent, BatchMode, Batching, BuildQuality, Hit, RayQuery, Scene, SceneError, Traversal, MAX_SCENE_EXTENT};
+pub use crate::sampling::DirectionPattern;
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
 pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 
 use crate::sh;
+use crate::trace::{Batching, BuildQuality, Scene, SceneError};
 
 /// Which light reaches a point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -116,6 +109,12 @@ pub struct BakeParams {
     /// A sample is inside geometry when most of its probe rays hit back faces
     /// closer than this fraction of the scene diagonal.
     pub inside_distance: f32,
+    /// Open mode with bounces: a diffuse surface reflects on the side light
+    /// reaches it from, back faces included (`bake::twins`), unless its
+    /// material is one-sided (`--one-sided`). Off, a ray that meets a back
+    /// face brings nothing back (bakes recorded before this field existed).
+    #[serde(default)]
+    pub two_sided: bool,
     /// No progress line on stderr (not part of the bake: never stored).
     #[serde(skip, default = "quiet_by_default")]
     pub quiet: bool,
@@ -153,6 +152,7 @@ impl Default for BakeParams {
             window_sampling: false,
             keep_outside_sides: false,
             inside_distance: 0.05,
+            two_sided: true,
             quiet: true,
             hit_cache_bytes: transfer::HIT_CACHE_BUDGET_BYTES,
         }
@@ -165,8 +165,8 @@ impl BakeParams {
         if self.order == 0 || self.order > sh::MAX_ORDER {
             return Err(BakeError::Params(format!("order {} is outside 1..={}", self.order, sh::MAX_ORDER)));
         }
-        if self.rays == 0 || self.rays > sampling::MAX_RAYS_PER_POINT {
-            return Err(BakeError::Params(format!("rays per sample {} is outside 1..={}", self.rays, sampling::MAX_RAYS_PER_POINT)));
+        if self.rays == 0 || self.rays > crate::sampling::MAX_RAYS_PER_POINT {
+            return Err(BakeError::Params(format!("rays per sample {} is outside 1..={}", self.rays, crate::sampling::MAX_RAYS_PER_POINT)));
         }
         if !(0.0..=16.0).contains(&self.adaptive) {
             return Err(BakeError::Params(format!(
@@ -232,6 +232,9 @@ pub struct BakeStats {
     pub points_added: u64,
     /// Vertices no sample reached (only on window or degenerate triangles): their transfer is zero.
     pub vertices_without_samples: u64,
+    /// Triangles whose back side reflects light with sample points of its own
+    /// (open mode with bounces, `bake::twins`); their points are in `points`.
+    pub back_sides: u64,
     /// Rays evaluated per bounce (bounces ≥ 1 reuse bounce 0's hits when they fit in memory).
     pub rays_per_bounce: Vec<u64>,
     pub seconds_per_bounce: Vec<f64>,
@@ -266,6 +269,11 @@ pub struct TransferResult {
     /// bounces added in quadrature (`adaptive::add_noise_in_quadrature`);
     /// empty when not measured (vertex sampling). Not stored in bundles.
     pub noise: Vec<f32>,
+    /// The back sides' layers (`bake::twins`), bounce by bounce, one row per
+    /// vertex (zero where a vertex has no back side of its own), when
+    /// `store_bounces` and the bake had back sides: what a partial re-bake
+    /// keeps (`crate::refine`). Not stored in bundles.
+    pub back: Vec<Vec<f32>>,
     pub stats: BakeStats,
 }
 
@@ -317,9 +325,20 @@ pub fn bake_mesh(
     params: &BakeParams,
     window_patterns: &[String],
 ) -> Result<(TransferResult, Surfaces, f64), BakeError> {
+    bake_mesh_with(mesh, params, window_patterns, &[])
+}
+
+/// [`bake_mesh`] with the materials or groups matching `one_sided_patterns`
+/// one-sided (their back reflects nothing in bounces; `Surfaces::with_one_sided`).
+pub fn bake_mesh_with(
+    mesh: &crate::mesh::Mesh,
+    params: &BakeParams,
+    window_patterns: &[String],
+    one_sided_patterns: &[String],
+) -> Result<(TransferResult, Surfaces, f64), BakeError> {
     params.check()?;
     check_mesh(mesh)?;
-    let surfaces = Surfaces::resolve(mesh, window_patterns)?;
+    let surfaces = Surfaces::resolve(mesh, window_patterns)?.with_one_sided(mesh, one_sided_patterns)?;
     let scene = Scene::build(mesh, BuildQuality::Sah)?;
     let build_seconds = scene.build_time.as_secs_f64();
     let result = bake_transfer(mesh, &scene, &surfaces, params)?;

@@ -35,11 +35,11 @@ use rayon::prelude::*;
 
 use super::enclosure::{side_is_outside, Sides, SIDE_PROBE_RAYS};
 use super::progress::Progress;
-use super::scene::Scene;
 use super::surfaces::Surfaces;
 use super::transfer::{interior_layout, sample_weights, sampled_triangles, triangle_area, triangle_sample, InteriorLayout};
 use super::{BakeError, DirectionPattern, Mode};
 use crate::mesh::Mesh;
+use crate::trace::scene::Scene;
 
 /// Largest step count (1,024 steps = 32 words per vertex), as [`crate::sky::MAX_STEPS`].
 pub const MAX_SUN_STEPS: usize = crate::sky::MAX_STEPS;
@@ -619,8 +619,8 @@ impl Tracer<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bake::{BuildQuality, Scene};
     use crate::mesh::Material;
+    use crate::trace::{BuildQuality, Scene};
 
     /// A unit-square grid in the XZ plane at height y, normal ±Y.
     fn floor(n: u32, y: f32, up: bool) -> Mesh {
@@ -757,10 +757,10 @@ mod tests {
         crate::verify::shapes::append(&mut mesh, &cover);
         let suns: Vec<Option<Vec3>> = (0..12).map(|k| Some(Vec3::new((k as f32 * 0.5).cos(), 0.4 + 0.1 * k as f32, 0.3))).collect();
         let unit = bake(&mesh, &suns, Mode::Open);
-        let scale = (2.0f32).powi((crate::bake::MAX_SCENE_EXTENT / mesh.diagonal()).log2().floor() as i32);
+        let scale = (2.0f32).powi((crate::trace::MAX_SCENE_EXTENT / mesh.diagonal()).log2().floor() as i32);
         let mut big = mesh.clone();
         crate::verify::shapes::transform(&mut big, scale, Vec3::ZERO);
-        assert!(big.diagonal() > crate::bake::MAX_SCENE_EXTENT / 2.0);
+        assert!(big.diagonal() > crate::trace::MAX_SCENE_EXTENT / 2.0);
         let at_limit = bake(&big, &suns, Mode::Open);
         assert!(unit.masks.iter().any(|&w| w != 0) && unit.masks.iter().any(|&w| w != (1 << 12) - 1));
         assert_eq!(unit.masks, at_limit.masks);

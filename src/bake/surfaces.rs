@@ -13,6 +13,9 @@ pub struct Surfaces {
     pub albedo: Vec<[f32; 3]>,
     /// Names of the materials and groups that became windows, for the report.
     pub window_names: Vec<String>,
+    /// Per triangle: its back side reflects nothing in bounces (`--one-sided`);
+    /// otherwise a diffuse surface reflects on whichever side light reaches it.
+    pub one_sided: Vec<bool>,
 }
 
 /// Error for a malformed `--window` pattern.
@@ -50,7 +53,23 @@ impl Surfaces {
             window_transmittance.push(is_window.then_some(tau.clamp(0.0, 1.0)));
             albedo.push(material.albedo.map(|a| a.clamp(0.0, 1.0)));
         }
-        Ok(Surfaces { window_transmittance, albedo, window_names })
+        Ok(Surfaces { window_transmittance, albedo, window_names, one_sided: vec![false; triangle_count] })
+    }
+
+    /// These surfaces with the triangles whose material or group name matches
+    /// a glob of `patterns` made one-sided (`--one-sided`).
+    pub fn with_one_sided(mut self, mesh: &Mesh, patterns: &[String]) -> Result<Surfaces, PatternError> {
+        let patterns = patterns.iter().map(|p| parse_pattern(p)).collect::<Result<Vec<_>, _>>()?;
+        if let Some((glob, Some(_))) = patterns.iter().find(|(_, tau)| tau.is_some()) {
+            return Err(PatternError { pattern: glob.as_str().into(), message: "a one-sided pattern takes no =TAU".into() });
+        }
+        let matches = |name: &str| patterns.iter().any(|(p, _)| p.matches(name));
+        let by_material: Vec<bool> = mesh.materials.iter().map(|m| matches(&m.name)).collect();
+        let by_group: Vec<bool> = mesh.groups.iter().map(|g| matches(g)).collect();
+        self.one_sided = (0..mesh.triangle_count())
+            .map(|t| by_material[mesh.tri_material[t] as usize] || by_group[mesh.tri_group[t] as usize])
+            .collect();
+        Ok(self)
     }
 
     /// `mesh` with the window role (and the pattern's transmittance) on every

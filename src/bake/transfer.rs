@@ -26,13 +26,14 @@ use super::adaptive::{add_noise_in_quadrature, Moments, VertexDc};
 use super::enclosure::Sides;
 use super::gather::{decode_hit, encode_hit, Gather, RowBuffer, NO_HIT};
 use super::progress::Progress;
-use super::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
-use super::scene::{Batching, RayQuery, Scene};
 use super::surfaces::Surfaces;
+use super::twins::{Twins, NO_TWIN};
 use super::window_light::WindowLights;
 use super::{BakeError, BakeParams, BakeStats, Mode, Sampling, TransferResult};
 use crate::mesh::Mesh;
+use crate::sampling::{cosine_hemisphere, cosine_sphere, hash_seed, sample_2d, square_to_triangle};
 use crate::sh;
+use crate::trace::scene::{Batching, RayQuery, Scene};
 
 /// What a vertex's transfer means, recorded in every bundle's META
 /// (`conventions.vertex_transfer`): bundles before it (no such key) averaged
@@ -82,7 +83,7 @@ struct Scratch {
     basis: Vec<f32>,
     /// The rays of the batch being traced, and their answers.
     queries: Vec<RayQuery>,
-    hits: Vec<Option<super::Hit>>,
+    hits: Vec<Option<crate::trace::Hit>>,
     occluded: Vec<bool>,
     /// Per window-light query: the window triangle aimed at and the light pdf of its direction.
     targets: Vec<(u32, f64)>,
@@ -218,9 +219,11 @@ impl Items {
 /// Shared read-only state of a pass.
 pub(crate) struct Pass<'a> {
     bounce: u32,
+    /// The plan's mesh (twins included); rays are traced in `scene`, built on the mesh's own triangles.
     mesh: &'a Mesh,
     scene: &'a Scene,
     surfaces: &'a Surfaces,
+    twins: &'a Twins,
     params: &'a BakeParams,
     items: &'a Items,
     coeffs: usize,
@@ -286,9 +289,13 @@ impl SourceRows {
 /// reflect with and the window lights. A whole bake and each of its shards
 /// (`bake::shards`) build it the same way, so they see the same items.
 pub(crate) struct Plan<'a> {
-    pub(crate) mesh: &'a Mesh,
+    /// The mesh the bake's receivers lie on: the scene's mesh, with the
+    /// twins of its back sides appended when it has any (`bake::twins`).
+    pub(crate) mesh: std::borrow::Cow<'a, Mesh>,
     scene: &'a Scene,
-    surfaces: &'a Surfaces,
+    surfaces: std::borrow::Cow<'a, Surfaces>,
+    /// Which triangles have a back side of their own, and where.
+    pub(crate) twins: Twins,
     pub(crate) params: &'a BakeParams,
     pub(crate) items: Items,
     pub(crate) coeffs: usize,
@@ -312,20 +319,26 @@ impl<'a> Plan<'a> {
         if receivers.is_some_and(|r| r.len() != mesh.triangle_count()) {
             return Err(BakeError::Params("receiver flags do not match the triangle count".into()));
         }
-        let items = build_items(mesh, sampled_triangles(mesh, surfaces)?, params, receivers);
+        let sampled = sampled_triangles(mesh, surfaces)?;
+        let (items, aug) = build_items_with_twins(mesh, surfaces, sampled, params, receivers);
         check_point_count(items.point_count())?;
-        let channels = params.channel_count(surfaces);
+        let (mesh, surfaces, twins) = match aug {
+            Some((m, s, t)) => (std::borrow::Cow::Owned(m), std::borrow::Cow::Owned(s), t),
+            None => (std::borrow::Cow::Borrowed(mesh), std::borrow::Cow::Borrowed(surfaces), Twins::none(mesh)),
+        };
+        let channels = params.channel_count(&surfaces);
         let bounce_albedo: Vec<[f32; 3]> =
             if channels == 1 { surfaces.albedo.iter().map(|a| [(a[0] + a[1] + a[2]) / 3.0; 3]).collect() } else { surfaces.albedo.clone() };
-        let windows = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(mesh, surfaces) } else { None };
-        Ok(Plan { mesh, scene, surfaces, params, items, coeffs: sh::coeff_count(params.order), channels, bounce_albedo, windows })
+        let windows = if params.mode == Mode::Window && params.window_sampling { WindowLights::new(&mesh, &surfaces) } else { None };
+        Ok(Plan { mesh, scene, surfaces, twins, params, items, coeffs: sh::coeff_count(params.order), channels, bounce_albedo, windows })
     }
 
     /// The counts every bake of this plan reports, before any ray.
     pub(crate) fn base_stats(&self) -> BakeStats {
         BakeStats {
-            triangles: self.mesh.triangle_count() as u64,
-            vertices: self.mesh.vertex_count() as u64,
+            triangles: self.twins.triangles as u64,
+            vertices: self.twins.vertices as u64,
+            back_sides: self.twins.source_triangle.len() as u64,
             window_triangles: self.surfaces.window_triangle_count() as u64,
             points: self.items.point_count(),
             batching: self.scene.batching(),
@@ -357,9 +370,10 @@ impl<'a> Plan<'a> {
         });
         Pass {
             bounce,
-            mesh: self.mesh,
+            mesh: &self.mesh,
             scene: self.scene,
-            surfaces: self.surfaces,
+            surfaces: &self.surfaces,
+            twins: &self.twins,
             params: self.params,
             items: &self.items,
             coeffs: self.coeffs,
@@ -631,6 +645,8 @@ pub fn bake_transfer_receivers(
 pub(crate) struct Kept<'a> {
     /// One widened layer per bounce 0..=B, `[vertex][channel][coeff]`.
     pub(crate) layers: &'a [Vec<f32>],
+    /// The same of the back sides ([`TransferResult::back`]; empty without).
+    pub(crate) back: &'a [Vec<f32>],
     pub(crate) vertices: &'a [bool],
 }
 
@@ -687,7 +703,11 @@ fn bake_layers(
     let mut noise: Vec<f32> = Vec::new();
     let mut source = SourceRows::empty();
     let mut layers: Vec<Vec<f32>> = Vec::new();
-    let mut total = vec![0.0f32; mesh.vertex_count() * channels * coeffs];
+    let mut back_layers: Vec<Vec<f32>> = Vec::new();
+    // The mesh's own vertices; the plan's rows past them are its back sides'.
+    let vertex_count = mesh.vertex_count();
+    let stride = channels * coeffs;
+    let mut total = vec![0.0f32; vertex_count * stride];
     for bounce in 0..=params.bounces {
         let phase_start = Instant::now();
         let points = if bounce == 0 { planned_points } else { plan.items.point_count() };
@@ -721,10 +741,20 @@ fn bake_layers(
         let mut layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
         match kept {
             Some(kept) => {
-                let stride = channels * coeffs;
                 let previous = &kept.layers[bounce as usize];
-                for v in (0..mesh.vertex_count()).filter(|&v| kept.vertices[v]) {
+                for v in (0..vertex_count).filter(|&v| kept.vertices[v]) {
                     layer[v * stride..(v + 1) * stride].copy_from_slice(&previous[v * stride..(v + 1) * stride]);
+                }
+                // A kept vertex keeps its back side too.
+                let previous_back = kept.back.get(bounce as usize);
+                for (k, &source) in plan.twins.source_vertex.iter().enumerate() {
+                    if kept.vertices[source as usize] {
+                        let row = &mut layer[(vertex_count + k) * stride..(vertex_count + k + 1) * stride];
+                        match previous_back {
+                            Some(back) => row.copy_from_slice(&back[source as usize * stride..(source as usize + 1) * stride]),
+                            None => row.fill(0.0),
+                        }
+                    }
                 }
                 if bounce < params.bounces {
                     source_from_layer(&mut source, &layer, pass_channels, channels, coeffs);
@@ -733,24 +763,41 @@ fn bake_layers(
             None if bounce < params.bounces => normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs),
             None => {}
         }
-        add_layer(&mut total, &layer);
+        add_layer(&mut total, &layer[..vertex_count * stride]);
         stats.rays_per_bounce.push(sums.rays);
         stats.rays_traced += sums.traced;
         stats.seconds_per_bounce.push(phase_start.elapsed().as_secs_f64());
         if params.store_bounces {
+            if !plan.twins.is_empty() {
+                back_layers.push(back_rows(&layer, &plan.twins, stride));
+            }
+            layer.truncate(vertex_count * stride);
             layers.push(layer);
         }
     }
+    noise.truncate(vertex_count);
 
     stats.points_rejected = rejected.iter().filter(|&&r| r).count() as u64;
     let re_baked = |v: usize| kept.is_none_or(|k| !k.vertices[v]);
-    stats.vertices_without_samples = vertex_weight.iter().enumerate().filter(|&(v, &w)| w <= 0.0 && re_baked(v)).count() as u64;
+    stats.vertices_without_samples =
+        vertex_weight[..vertex_count].iter().enumerate().filter(|&(v, &w)| w <= 0.0 && re_baked(v)).count() as u64;
     stats.rays = stats.rays_per_bounce.iter().sum();
     stats.seconds = started.elapsed().as_secs_f64();
     stats.rays_gathered = if use_cache { stats.rays_per_bounce.iter().skip(1).sum() } else { 0 };
     stats.rays_per_second = stats.rays_traced as f64 / stats.seconds.max(1e-9);
     stats.evaluations_per_second = stats.rays as f64 / stats.seconds.max(1e-9);
-    Ok(TransferResult { order: params.order, channels, total, bounces: layers, noise, stats })
+    Ok(TransferResult { order: params.order, channels, total, bounces: layers, noise, back: back_layers, stats })
+}
+
+/// The back sides' rows of a layer of the plan's mesh, one row per mesh
+/// vertex (zero where a vertex has none).
+fn back_rows(layer: &[f32], twins: &Twins, stride: usize) -> Vec<f32> {
+    let mut back = vec![0.0f32; twins.vertices * stride];
+    for (k, &source) in twins.source_vertex.iter().enumerate() {
+        let from = (twins.vertices + k) * stride;
+        back[source as usize * stride..][..stride].copy_from_slice(&layer[from..from + stride]);
+    }
+    back
 }
 
 /// Bounce 0 with adaptive allocation (`bake::adaptive`): the base points
@@ -785,7 +832,7 @@ impl Plan<'_> {
             Sampling::Interior { max_per_triangle, .. } => max_per_triangle,
             Sampling::Vertex => 0,
         };
-        super::adaptive::extra_counts(self.mesh, &self.items, pilot, budget, max_per_triangle)
+        super::adaptive::extra_counts(&self.mesh, &self.items, pilot, budget, max_per_triangle)
     }
 
     /// Makes the items the unified layout of `extra` and returns the base
@@ -826,6 +873,10 @@ pub(crate) fn adaptive_range(
     };
     let Items::Interior { first_sample: unified_first, .. } = &plan.items else { unreachable!("the unified layout is interior") };
     let pass = plan.pass(0, source, &[], None, record_hits);
+    if range.is_empty() {
+        // A shard with no items (more shards than the cost can split) adds nothing.
+        return RangeSums::empty(&pass);
+    }
     let rays = if pass.record_hits { plan.params.rays as usize } else { 0 };
     let stride = plan.coeffs;
     // Base records to their unified places, last item first: every block
@@ -942,7 +993,43 @@ fn trace_tasks_scattered(pass: &Pass, records: &mut [u64], records_start: usize,
 /// (before adaptive allocation adds any): a sharded bake's merge reports
 /// `BakeStats::points_added` against it, as a whole bake does.
 pub fn base_point_count(mesh: &Mesh, surfaces: &Surfaces, params: &BakeParams) -> Result<u64, BakeError> {
-    Ok(build_items(mesh, sampled_triangles(mesh, surfaces)?, params, None).point_count())
+    Ok(build_items_with_twins(mesh, surfaces, sampled_triangles(mesh, surfaces)?, params, None).0.point_count())
+}
+
+/// The items of a bake: [`build_items`] on the mesh, and in open mode
+/// with bounces (two-sided, interior sampling) the twins of the sampled
+/// triangles whose back can be lit, appended as items of their own with
+/// their triangle's sample count (the density is the mesh's), on the
+/// augmented mesh `bake::twins` makes. `None` when there are no twins.
+fn build_items_with_twins(
+    mesh: &Mesh,
+    surfaces: &Surfaces,
+    sampled: Vec<u32>,
+    params: &BakeParams,
+    receivers: Option<&[bool]>,
+) -> (Items, Option<(Mesh, Surfaces, Twins)>) {
+    let wants_twins = params.two_sided && params.mode == Mode::Open && params.bounces > 0 && params.sampling != Sampling::Vertex;
+    let twinned = if wants_twins { super::twins::twinned_triangles(mesh, surfaces, &sampled) } else { Vec::new() };
+    let items = build_items(mesh, sampled, params, receivers);
+    if !twinned.iter().any(|&t| t) {
+        return (items, None);
+    }
+    let (aug, aug_surfaces, twins) = super::twins::augment(mesh, surfaces, &twinned);
+    let Items::Interior { mut triangles, mut counts, mut first_sample, .. } = items else { unreachable!("twins need interior sampling") };
+    let count_of: std::collections::HashMap<u32, u32> = triangles.iter().copied().zip(counts.iter().copied()).collect();
+    let mut next = counts.iter().fold(0u32, |a, &c| a.saturating_add(c));
+    for (k, &source) in twins.source_triangle.iter().enumerate() {
+        // A twin receives where its triangle does (view-box culling, partial re-bakes).
+        let Some(&count) = count_of.get(&source) else { continue };
+        triangles.push((twins.triangles + k) as u32);
+        counts.push(count);
+        first_sample.push(next);
+        next = next.saturating_add(count);
+    }
+    (
+        Items::Interior { triangles, counts, first_sample, first_index: Vec::new(), weight_count: Vec::new() },
+        Some((aug, aug_surfaces, twins)),
+    )
 }
 
 /// Lists the work items: the `sampled` triangles (interior sampling), or
@@ -1176,7 +1263,7 @@ impl Pass<'_> {
                     let [ia, ib, ic] = self.mesh.triangle(t as usize);
                     let [pa, pb, pc] = self.mesh.triangle_positions(t as usize);
                     let [na, nb, nc] = [ia, ib, ic].map(|i| self.mesh.normals[i as usize]);
-                    let face_normal = self.scene.face_normal(t);
+                    let face_normal = self.face_normal(t);
                     let area = triangle_area(self.mesh, t);
                     for s in 0..counts[item] {
                         let global = first_sample[item] + s;
@@ -1319,9 +1406,10 @@ impl Pass<'_> {
                 let probe_only = batch.start + i as u32 >= ray_count;
                 if bounce > 0 {
                     if let (Some(hit), Some(gather)) = (scratch.hits[i], &self.gather) {
-                        if self.gathers_from(&hit) {
-                            // Through the cache's encoding, so the bytes do not depend on whether the cache fit.
-                            let (triangle, u, v) = decode_hit(encode_hit(hit.triangle, hit.u, hit.v));
+                        // Through the cache's encoding, so the bytes do not depend on whether the cache fit.
+                        let record = self.record_of(&hit);
+                        if record != NO_HIT {
+                            let (triangle, u, v) = decode_hit(record);
                             gather.add_hit(triangle, u, v, ray_weight, result);
                         }
                     }
@@ -1336,10 +1424,7 @@ impl Pass<'_> {
                         continue;
                     }
                     if self.record_hits {
-                        hits.push(match hit {
-                            Some(h) if self.gathers_from(&h) => encode_hit(h.triangle, h.u, h.v),
-                            _ => NO_HIT,
-                        });
+                        hits.push(hit.map_or(NO_HIT, |h| self.record_of(&h)));
                     }
                     if split_sides {
                         let side = Sides::of(point.face_normal, query.direction);
@@ -1461,11 +1546,31 @@ impl Pass<'_> {
         true
     }
 
-    /// Whether light of later bounces comes back from `hit`: only from opaque
-    /// surfaces, and in open mode only from their lit (front) side.
+    /// What later bounces gather at `hit`: the hit triangle's rows, or in
+    /// open mode, on a back face, its twin's (the twin's corners run the
+    /// other way: its barycentrics are (v, u)); `NO_HIT` where no light
+    /// comes back (a window, a back face without a twin).
     #[inline]
-    fn gathers_from(&self, hit: &super::Hit) -> bool {
-        self.surfaces.window_transmittance[hit.triangle as usize].is_none() && (self.params.mode == Mode::Window || !hit.back_face)
+    fn record_of(&self, hit: &crate::trace::Hit) -> u64 {
+        if self.surfaces.window_transmittance[hit.triangle as usize].is_some() {
+            return NO_HIT;
+        }
+        if self.params.mode == Mode::Window || !hit.back_face {
+            return encode_hit(hit.triangle, hit.u, hit.v);
+        }
+        match self.twins.twin_of[hit.triangle as usize] {
+            NO_TWIN => NO_HIT,
+            twin => encode_hit(twin, hit.v, hit.u),
+        }
+    }
+
+    /// Unit geometric normal of triangle `t` of the plan's mesh (a twin's is its triangle's, negated).
+    #[inline]
+    fn face_normal(&self, t: u32) -> Vec3 {
+        match self.twins.geometry_of(t) {
+            (t, false) => self.scene.face_normal(t),
+            (source, true) => -self.scene.face_normal(source),
+        }
     }
 
     #[inline]

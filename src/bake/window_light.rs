@@ -16,10 +16,10 @@
 
 use glam::{DVec3, Vec3};
 
-use super::sampling::square_to_triangle;
 use super::surfaces::Surfaces;
 use super::transfer::triangle_area;
 use crate::mesh::Mesh;
+use crate::sampling::square_to_triangle;
 
 /// Below this solid angle (sr) a pane is sampled by area: the spherical
 /// triangle's angles cancel to this many ulps of π in f64.

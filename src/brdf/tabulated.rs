@@ -260,6 +260,34 @@ mod tests {
         })
     }
 
+    /// Relative noise per sample of the albedo estimator `f cos / pdf` (the
+    /// gather's), green channel, mean over viewing angles.
+    fn relative_noise(brdf: &dyn Brdf) -> f64 {
+        let angles = [0.0f32, 20.0, 40.0, 60.0, 75.0];
+        let n = 20_000u32;
+        angles
+            .iter()
+            .enumerate()
+            .map(|(k, &deg)| {
+                let mc = mc_albedo(brdf, wo_at(deg), n, 77 + k as u32);
+                mc.sigma[1] * f64::from(n).sqrt() / mc.mean[1]
+            })
+            .sum::<f64>()
+            / angles.len() as f64
+    }
+
+    #[test]
+    fn a_table_samples_nearly_as_well_as_its_analytic_source() {
+        let analytic = tinted_coating();
+        for step in [2.0f32, 5.0] {
+            let table =
+                TabulatedBrdf::parse(table_text(&analytic, step, (0.0, 90.0), (0.0, 180.0)).as_bytes(), Path::new("t.brdf")).unwrap();
+            let (a, t) = (relative_noise(&analytic), relative_noise(&table));
+            println!("relative noise per sample: analytic {a:.3}, {step}° table {t:.3} ({:.2}x)", t / a);
+            assert!(t < 1.6 * a, "{step}° table: {t} against the analytic {a}");
+        }
+    }
+
     #[test]
     fn sampling_is_unbiased() {
         check_unbiased("tabulated 2°", coating_table(), &THETA_OUT_DEG);

@@ -3,7 +3,7 @@
 
 use super::frame::from_mu_phi;
 use super::{albedo_quadrature, pdf_quadrature, AntiGlare, Brdf};
-use crate::bake::sampling::hash_seed;
+use crate::sampling::hash_seed;
 use glam::Vec3;
 use std::f64::consts::TAU;
 

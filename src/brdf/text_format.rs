@@ -334,7 +334,7 @@ mod tests {
         let mut accepted = 0;
         for case in 0..20_000u32 {
             let mut bytes = base.to_vec();
-            let h = |k: u32| crate::bake::sampling::hash_seed(&[case, k]) as usize;
+            let h = |k: u32| crate::sampling::hash_seed(&[case, k]) as usize;
             for k in 0..1 + h(0) % 4 {
                 let at = h(10 + k as u32) % bytes.len().max(1);
                 match h(20 + k as u32) % 4 {

@@ -6,7 +6,7 @@
 use serde_json::json;
 
 use super::{Bundle, LayerKind, Quantization, Transfer, TransferLayer};
-use crate::bake::{BakeParams, TransferResult};
+use crate::bake::{self, BakeParams, TransferResult};
 use crate::budget;
 use crate::mesh::Mesh;
 
@@ -65,6 +65,9 @@ pub fn make_bundle_stored(
     if s.points_added > 0 {
         meta["stats"]["points_added"] = json!(s.points_added);
     }
+    if s.back_sides > 0 {
+        meta["stats"]["back_sides"] = json!(s.back_sides);
+    }
     if let (Some(m), serde_json::Value::Object(extra)) = (meta.as_object_mut(), extra_meta) {
         m.extend(extra);
     }
@@ -112,4 +115,92 @@ pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::
         );
     }
     meta
+}
+
+/// What the user asked about storage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StorageRequest {
+    /// A fixed quantization, or `None` for the smallest within the budget.
+    pub quantize: Option<Quantization>,
+    /// Error budget (relative RMS in shaded radiance, see [`crate::budget`]):
+    /// order, channels and quantization are chosen to fit it.
+    pub max_error: Option<f64>,
+}
+
+impl Default for StorageRequest {
+    /// Store the bake as it is, in f32.
+    fn default() -> Self {
+        StorageRequest { quantize: Some(Quantization::F32), max_error: None }
+    }
+}
+
+/// Budget of `--quantize auto` without `--max-error`: quantization only, 0.1% shaded error.
+pub const AUTO_QUANTIZE_BUDGET: f64 = 1e-3;
+
+impl StorageRequest {
+    /// Chooses and measures the storage of `result` (order and channels only
+    /// shrink with a `max_error`). `None` when the bake is stored as it is.
+    pub fn choose(&self, result: &TransferResult) -> Option<budget::Choice> {
+        if *self == StorageRequest::default() {
+            return None;
+        }
+        let all = [Quantization::F16, Quantization::F16Tinted, Quantization::I16PerVertexScale, Quantization::F32];
+        let quantizations: Vec<Quantization> = match self.quantize {
+            Some(q) => vec![q],
+            None => all.to_vec(),
+        };
+        let (order, channels) = (result.order, result.channels);
+        let storages: Vec<budget::Storage> = match self.max_error {
+            Some(_) => budget::candidates(order, channels, &quantizations),
+            None => quantizations.iter().map(|&q| budget::Storage { order, channels, quantization: q }).collect(),
+        };
+        let limit = match (self.max_error, self.quantize) {
+            (Some(e), _) => e,
+            (None, None) => AUTO_QUANTIZE_BUDGET,
+            // A fixed quantization without a budget: always taken, but measured.
+            (None, Some(_)) => f64::INFINITY,
+        };
+        let lightings = budget::reference_lightings(order);
+        // --max-error counts the total error, the bake's own noise included
+        // (the definition `chart --real` measures); `--quantize auto` alone
+        // bounds what quantization loses.
+        let noise = match self.max_error {
+            Some(_) => budget::noise_errors(&result.total, order, channels, &result.noise, &lightings),
+            None => None,
+        };
+        let mut choice = budget::choose_within_total(&result.total, order, channels, &storages, limit, &lightings, noise.as_deref());
+        if limit.is_infinite() {
+            choice.budget = None;
+        }
+        Some(choice)
+    }
+}
+
+/// The metadata a bundle records beyond the bake: `base` (source, clean)
+/// with the window and one-sided patterns and the window materials found.
+pub fn bundle_meta(
+    base: serde_json::Value,
+    window_patterns: &[String],
+    one_sided_patterns: &[String],
+    surfaces: &bake::Surfaces,
+) -> serde_json::Value {
+    let mut meta = base;
+    meta["window_patterns"] = json!(window_patterns);
+    meta["one_sided_patterns"] = json!(one_sided_patterns);
+    meta["windows"] = json!(surfaces.window_names);
+    meta
+}
+
+/// The bundle of a bake: stored as `storage` asks, measured, encoded. The
+/// one way whole bakes and merged shards make their bundle.
+pub fn encode_transfer_bundle(
+    mesh: &Mesh,
+    result: &TransferResult,
+    params: &BakeParams,
+    meta: serde_json::Value,
+    storage: &StorageRequest,
+) -> Result<(Vec<u8>, Option<budget::Choice>), super::BundleError> {
+    let choice = storage.choose(result);
+    let bundle = make_bundle_stored(mesh, result, params, meta, choice.as_ref());
+    Ok((super::encode_bundle(&bundle)?, choice))
 }

@@ -154,13 +154,67 @@ impl<'a> Container<'a> {
     /// total length, reserved fields, canonical offsets and zero padding.
     /// Payloads are not decompressed here (see [`Container::payload`]).
     pub(crate) fn parse(bytes: &'a [u8]) -> Result<Container<'a>, BundleError> {
+        Container::parse_in(bytes, bytes.len() as u64)
+    }
+
+    /// What the fixed header alone says of a file of `file_len` bytes whose
+    /// first bytes are `head` (at least [`HEADER_LEN`] of them, or the whole
+    /// file): magic, major version, and that the total length it gives is
+    /// the file's. Returns the length of the header and section table, which
+    /// [`Container::check_head`] checks next; nothing past them need be read
+    /// before the file's size is known to be right.
+    pub(crate) fn head_len(head: &[u8], file_len: u64) -> Result<u64, BundleError> {
+        let prefix = head.len().min(MAGIC.len());
+        if head[..prefix] != MAGIC[..prefix] {
+            return Err(BundleError::NotABundle { detail: describe_bad_magic(head) });
+        }
+        if file_len < HEADER_LEN as u64 || head.len() < HEADER_LEN {
+            return Err(BundleError::Truncated { what: "the file header".into(), needed: HEADER_LEN as u64, available: file_len });
+        }
+        let (major, minor) = (read_u16(head, 8), read_u16(head, 10));
+        if major != FORMAT_MAJOR {
+            return Err(BundleError::UnsupportedVersion { major, minor, known_major: FORMAT_MAJOR });
+        }
+        let declared_len = read_u64(head, 16);
+        if declared_len > file_len {
+            return Err(BundleError::Truncated {
+                what: "the bundle (header total length)".into(),
+                needed: declared_len,
+                available: file_len,
+            });
+        }
+        if declared_len < file_len {
+            return Err(BundleError::TrailingBytes { declared: declared_len, extra: file_len - declared_len });
+        }
+        let table_end = u64::from(read_u32(head, 12)) * ENTRY_LEN as u64 + HEADER_LEN as u64;
+        if table_end > file_len {
+            return Err(BundleError::Truncated {
+                what: format!("the section table ({} entries)", read_u32(head, 12)),
+                needed: table_end,
+                available: file_len,
+            });
+        }
+        Ok(table_end)
+    }
+
+    /// Every check of [`Container::parse`] that the header and section table
+    /// (`head`, the first [`Container::head_len`] bytes of a file of
+    /// `file_len` bytes) allow: header CRC, reserved fields, canonical
+    /// offsets, section lengths within the file, the total length the end of
+    /// the last section. Padding and payloads are checked once read.
+    pub(crate) fn check_head(head: &[u8], file_len: u64) -> Result<(), BundleError> {
+        Container::parse_in(head, file_len).map(|_| ())
+    }
+
+    /// [`Container::parse`] of the first bytes of a file of `available`
+    /// bytes; padding past `bytes` is not checked, nor can payloads be read.
+    fn parse_in(bytes: &'a [u8], available: u64) -> Result<Container<'a>, BundleError> {
         // Magic first, on however many bytes there are: a short text file is
         // "not a bundle", a short prefix of a bundle is "truncated".
         let prefix = bytes.len().min(MAGIC.len());
         if bytes[..prefix] != MAGIC[..prefix] {
             return Err(BundleError::NotABundle { detail: describe_bad_magic(bytes) });
         }
-        let available = bytes.len() as u64;
         if bytes.len() < HEADER_LEN {
             return Err(BundleError::Truncated { what: "the file header".into(), needed: HEADER_LEN as u64, available });
         }
@@ -176,7 +230,7 @@ impl<'a> Container<'a> {
 
         // Section table: bounded by the bytes present before anything is allocated.
         let table_end = (section_count as u64) * ENTRY_LEN as u64 + HEADER_LEN as u64;
-        if table_end > available {
+        if table_end > bytes.len() as u64 {
             return Err(BundleError::Truncated {
                 what: format!("the section table ({section_count} entries)"),
                 needed: table_end,

@@ -34,7 +34,7 @@ pub enum BundleError {
     #[error("header checksum mismatch: stored {stored:#010x}, computed {computed:#010x} (header or section table corrupted)")]
     HeaderChecksum { stored: u32, computed: u32 },
     /// More bytes than the header's total length.
-    #[error("{extra} trailing bytes after the {declared}-byte bundle")]
+    #[error("{extra} trailing bytes after the {declared}-byte bundle (the header's total length; the file has {} bytes)", declared.saturating_add(*extra))]
     TrailingBytes { declared: u64, extra: u64 },
     /// The header or section table breaks a layout rule (offsets, padding, reserved fields).
     #[error("bad layout: {0}")]

@@ -74,7 +74,10 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         let per_vertex = t.values_per_vertex() as usize;
         let values = match layer {
             None | Some(LayerKind::Total) => t.total(),
-            Some(kind) => t.layer(kind).map(|l| l.data.clone()).ok_or_else(|| invalid(format!("the bundle has no {kind:?} layer")))?,
+            Some(kind) => t
+                .layer(kind)
+                .map(|l| l.data.clone())
+                .ok_or_else(|| invalid(format!("the bundle stores no {kind} layer (bake with --store-bounces)")))?,
         };
         layer_name = match layer {
             Some(LayerKind::Bounce(b)) => format!("bounce {b}"),

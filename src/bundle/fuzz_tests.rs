@@ -64,6 +64,16 @@ unsafe impl GlobalAlloc for WatchingAllocator {
 #[global_allocator]
 static ALLOCATOR: WatchingAllocator = WatchingAllocator;
 
+/// Forgets the largest allocation this thread asked for (other fuzz tests in the crate share the watch).
+pub(crate) fn reset_largest_allocation() {
+    LARGEST_REQUEST.with(|l| l.set(0));
+}
+
+/// The largest allocation this thread asked for since [`reset_largest_allocation`].
+pub(crate) fn largest_allocation() -> usize {
+    LARGEST_REQUEST.with(Cell::get)
+}
+
 /// The most one allocation may take while decoding `input_len` bytes. Decoding
 /// legitimately expands data (zstd, f16 → f32, tinted → C·n² values), so the
 /// bound is generous (the largest seen is 18 KB, for inputs of at most 3.5 KB);

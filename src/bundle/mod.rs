@@ -26,13 +26,13 @@ mod types;
 mod values;
 
 #[cfg(test)]
-mod fuzz_tests;
+pub(crate) mod fuzz_tests;
 #[cfg(test)]
 mod tests;
 
 use std::path::Path;
 
-pub use assemble::{conventions, make_bundle, make_bundle_stored, storage_meta};
+pub use assemble::{bundle_meta, conventions, encode_transfer_bundle, make_bundle, make_bundle_stored, storage_meta, StorageRequest, AUTO_QUANTIZE_BUDGET};
 pub use container::{
     Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC, STORED_CRC_SINCE_MINOR,
 };
@@ -181,16 +181,19 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
 }
 
 /// A bundle file's bytes, read only from a regular file within
-/// [`Limit::Bundle`](crate::files::Limit), and only once its first bytes are
-/// the magic: a 3 GB file of something else is refused after 8 bytes.
+/// [`Limit::Bundle`](crate::files::Limit), and only once its header and
+/// section table agree with the file: its magic (a 3 GB file of something
+/// else is refused after 32 bytes), the total length the header gives
+/// against the file's size (a bundle with 3 GB appended likewise), then the
+/// header CRC and the table's layout, read before any payload.
 pub fn read_bundle_bytes(path: &Path) -> Result<Vec<u8>, BundleError> {
-    use crate::files::{read::read_head, read_limited, Limit};
+    use crate::files::{read::check_regular, read::read_head, Limit};
     let io = |source| BundleError::Io { path: path.to_path_buf(), source };
-    let head = read_head(path, Limit::Bundle, MAGIC.len() as u64).map_err(io)?;
-    if head != MAGIC {
-        if let Err(source) = Container::parse(&head) {
-            return Err(BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) });
-        }
-    }
-    read_limited(path, Limit::Bundle).map_err(io)
+    let in_file = |source| BundleError::InFile { path: path.to_path_buf(), source: Box::new(source) };
+    let size = check_regular(path, Limit::Bundle).map_err(io)?;
+    let head = read_head(path, Limit::Bundle, HEADER_LEN as u64).map_err(io)?;
+    let head_len = Container::head_len(&head, size).map_err(in_file)?;
+    let head = read_head(path, Limit::Bundle, head_len).map_err(io)?;
+    Container::check_head(&head, size).map_err(in_file)?;
+    read_head(path, Limit::Bundle, size).map_err(io)
 }

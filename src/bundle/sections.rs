@@ -306,7 +306,7 @@ pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules)
             return Err(cur.error(format!("layer {i}: reserved field is {reserved:#x}, must be 0")));
         }
         if layers.iter().any(|l| l.kind == kind) {
-            return Err(cur.error(format!("layer kind {kind:?} appears twice")));
+            return Err(cur.error(format!("layer {kind} appears twice")));
         }
         let data = decode_layer(&mut cur, v, stride, channels as u64, quantization, i as usize)?;
         values::check_layer(i as usize, &data, stride).map_err(BundleError::bad_value(XFER))?;

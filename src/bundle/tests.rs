@@ -527,6 +527,47 @@ fn trailing_bytes_are_refused() {
     }
 }
 
+/// A bundle file of another size than its header's total length is refused
+/// after its 32-byte header, and one of the right size whose section table
+/// is damaged after its header and table, before any payload is read: a
+/// bundle with 3 GiB appended (sparse) costs 32 bytes to refuse.
+#[test]
+fn file_sizes_are_checked_against_the_header_before_the_body_is_read() {
+    use crate::files::read::bytes_read;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("grown.prtb");
+    let bytes = small_bytes();
+    let table_end = HEADER_LEN as u64 + u64::from(u32::from_le_bytes(bytes[12..16].try_into().unwrap())) * ENTRY_LEN as u64;
+    let set_len = |len: u64| std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(len).unwrap();
+    std::fs::write(&path, &bytes).unwrap();
+    bytes_read::take();
+    assert_eq!(read_bundle_bytes(&path).unwrap(), bytes);
+    assert_eq!(bytes_read::take(), HEADER_LEN as u64 + table_end + bytes.len() as u64);
+
+    let big = 3u64 << 30;
+    set_len(big);
+    let err = read_bundle_bytes(&path).unwrap_err();
+    assert_eq!(bytes_read::take(), HEADER_LEN as u64);
+    assert!(matches!(err.kind(), BundleError::TrailingBytes { extra, .. } if *extra == big - bytes.len() as u64), "{err}");
+    let message = err.to_string();
+    assert!(
+        message.contains("grown.prtb") && message.contains("trailing bytes") && message.contains(&format!("the file has {big} bytes")),
+        "{message}"
+    );
+
+    set_len(bytes.len() as u64 - 8);
+    let err = read_bundle_bytes(&path).unwrap_err();
+    assert_eq!(bytes_read::take(), HEADER_LEN as u64);
+    assert!(matches!(err.kind(), BundleError::Truncated { .. }), "{err}");
+
+    let mut damaged = bytes.clone();
+    damaged[HEADER_LEN + ENTRY_LEN + 9] ^= 1;
+    std::fs::write(&path, &damaged).unwrap();
+    let err = read_bundle_bytes(&path).unwrap_err();
+    assert_eq!(bytes_read::take(), HEADER_LEN as u64 + table_end);
+    assert!(matches!(err.kind(), BundleError::HeaderChecksum { .. }), "{err}");
+}
+
 #[test]
 fn unknown_sections_are_skipped_and_later_minors_read() {
     let bundle = tiny_bundle();

@@ -32,6 +32,17 @@ pub struct Transfer {
 }
 
 impl Transfer {
+    /// Order 1, one channel, all zero: the stand-in a bundle of sun masks
+    /// alone is shaded with (the sun term only).
+    pub fn zero(vertex_count: usize) -> Transfer {
+        Transfer {
+            order: 1,
+            channels: 1,
+            quantization: Quantization::F32,
+            layers: vec![TransferLayer { kind: LayerKind::Total, data: vec![0.0; vertex_count] }],
+        }
+    }
+
     /// Values per vertex: `channels · order²` (saturating; absurd sizes fail later checks).
     pub fn values_per_vertex(&self) -> u64 {
         (self.channels as u64).saturating_mul((self.order as u64).saturating_mul(self.order as u64))
@@ -80,6 +91,15 @@ pub enum LayerKind {
     Total,
     /// Bounce b alone (0 = direct from the environment). On disk: kind 1 + b.
     Bounce(u32),
+}
+
+impl std::fmt::Display for LayerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LayerKind::Total => write!(f, "total"),
+            LayerKind::Bounce(b) => write!(f, "bounce {b}"),
+        }
+    }
 }
 
 impl LayerKind {

@@ -542,9 +542,14 @@ pub enum FanShape {
     /// One convex `n`-gon face on the unit circle triangulated as the OBJ loader
     /// does it, as a fan from its first corner: `n - 2` triangles.
     Polygon,
+    /// A closed cone: the side of [`FanShape::Cone`] and its base, a fan of `n`
+    /// triangles around the base's centre; outward normals from the faces
+    /// (the apex's faces +y). `2n` triangles, apex and base centre of valence `n`.
+    ClosedCone,
 }
 
-/// A fan of `n` rim points (see [`FanShape`]); every vertex normal faces +y.
+/// A fan of `n` rim points (see [`FanShape`]); every vertex normal faces +y
+/// (but the closed cone's).
 pub fn fan(shape: FanShape, n: usize) -> Mesh {
     let mut b = Builder::new(materials());
     let g = b.group("fan");
@@ -556,12 +561,17 @@ pub fn fan(shape: FanShape, n: usize) -> Mesh {
         .collect();
     let apex = match shape {
         FanShape::Disc => Some(b.vertex(Vec3::ZERO, Vec3::Y)),
-        FanShape::Cone => Some(b.vertex(Vec3::Y, Vec3::Y)),
+        FanShape::Cone | FanShape::ClosedCone => Some(b.vertex(Vec3::Y, Vec3::Y)),
         FanShape::Polygon => None,
     };
     match apex {
         Some(apex) => (0..n).for_each(|i| b.tri([apex, rim[i], rim[(i + 1) % n]], 0, g)),
         None => (1..n - 1).for_each(|i| b.tri([rim[0], rim[i], rim[i + 1]], 0, g)),
+    }
+    if shape == FanShape::ClosedCone {
+        let centre = b.vertex(Vec3::ZERO, Vec3::NEG_Y);
+        (0..n).for_each(|i| b.tri([centre, rim[(i + 1) % n], rim[i]], 0, g));
+        b.mesh.normals = crate::mesh::compute_vertex_normals(&b.mesh.positions, &b.mesh.indices);
     }
     b.mesh
 }

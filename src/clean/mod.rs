@@ -224,7 +224,7 @@ pub enum CleanError {
     TooLarge(usize),
     /// Coordinates so far apart that the f32 geometry overflows (the bake's limit).
     #[error("mesh clean-up: {0}")]
-    Extent(#[from] crate::bake::SceneError),
+    Extent(#[from] crate::trace::SceneError),
 }
 
 /// Cleans `mesh` (see the module doc for the steps) and reports every repair.
@@ -429,7 +429,7 @@ fn check_input(mesh: &Mesh) -> Result<(), CleanError> {
     mesh.validate().map_err(CleanError::InvalidMesh)?;
     // Areas and normals here are f32 like the bake's: past its limit a huge
     // triangle's area overflows and it would be removed as degenerate.
-    crate::bake::check_extent(mesh)?;
+    crate::trace::check_extent(mesh)?;
     if let Some(v) = mesh.normals.iter().position(|n| !n.is_finite()) {
         return Err(non_finite(v, "normal", format!("{:?}", mesh.normals[v])));
     }

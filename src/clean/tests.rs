@@ -187,7 +187,7 @@ fn a_mesh_past_the_extent_limit_is_refused_not_emptied() {
     let mut mesh = fixtures::fixture_slivers().mesh;
     mesh.positions.iter_mut().for_each(|p| *p *= 1e20);
     let err = clean_mesh(&mesh, &CleanParams::default()).unwrap_err();
-    assert!(matches!(err, CleanError::Extent(crate::bake::SceneError::ExtentTooLarge { .. })), "{err:?}");
+    assert!(matches!(err, CleanError::Extent(crate::trace::SceneError::ExtentTooLarge { .. })), "{err:?}");
     assert!(err.to_string().contains("rescale the model"), "{err}");
 }
 

@@ -7,7 +7,7 @@ use serde_json::json;
 
 use crate::bake::{self, BakeParams, TransferResult};
 use crate::budget;
-use crate::bundle::{self, make_bundle_stored, storage_meta, Quantization};
+use crate::bundle::{bundle_meta, encode_transfer_bundle, storage_meta, Quantization, StorageRequest};
 use crate::files::Staged;
 use crate::mesh::{Mesh, UpAxis};
 
@@ -21,6 +21,8 @@ pub struct BakeConfig {
     pub up: UpAxis,
     pub params: BakeParams,
     pub window_patterns: Vec<String>,
+    /// `--one-sided`: materials or groups whose back reflects nothing.
+    pub one_sided_patterns: Vec<String>,
     pub threads: usize,
     pub json: bool,
     /// Clean the mesh first with these parameters (`--clean`).
@@ -53,65 +55,6 @@ impl RefineRequest {
     pub fn params(&self, mesh: &Mesh) -> crate::refine::RefineParams {
         let params = crate::refine::RefineParams::for_mesh(mesh, self.error, self.max_vertices, self.min_edge);
         crate::refine::RefineParams { noise_sigmas: self.noise_sigmas.unwrap_or(params.noise_sigmas), ..params }
-    }
-}
-
-/// What the user asked about storage.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StorageRequest {
-    /// A fixed quantization, or `None` for the smallest within the budget.
-    pub quantize: Option<Quantization>,
-    /// Error budget (relative RMS in shaded radiance, see [`crate::budget`]):
-    /// order, channels and quantization are chosen to fit it.
-    pub max_error: Option<f64>,
-}
-
-impl Default for StorageRequest {
-    /// Store the bake as it is, in f32.
-    fn default() -> Self {
-        StorageRequest { quantize: Some(Quantization::F32), max_error: None }
-    }
-}
-
-/// Budget of `--quantize auto` without `--max-error`: quantization only, 0.1% shaded error.
-pub const AUTO_QUANTIZE_BUDGET: f64 = 1e-3;
-
-impl StorageRequest {
-    /// Chooses and measures the storage of `result` (order and channels only
-    /// shrink with a `max_error`). `None` when the bake is stored as it is.
-    pub fn choose(&self, result: &TransferResult) -> Option<budget::Choice> {
-        if *self == StorageRequest::default() {
-            return None;
-        }
-        let all = [Quantization::F16, Quantization::F16Tinted, Quantization::I16PerVertexScale, Quantization::F32];
-        let quantizations: Vec<Quantization> = match self.quantize {
-            Some(q) => vec![q],
-            None => all.to_vec(),
-        };
-        let (order, channels) = (result.order, result.channels);
-        let storages: Vec<budget::Storage> = match self.max_error {
-            Some(_) => budget::candidates(order, channels, &quantizations),
-            None => quantizations.iter().map(|&q| budget::Storage { order, channels, quantization: q }).collect(),
-        };
-        let limit = match (self.max_error, self.quantize) {
-            (Some(e), _) => e,
-            (None, None) => AUTO_QUANTIZE_BUDGET,
-            // A fixed quantization without a budget: always taken, but measured.
-            (None, Some(_)) => f64::INFINITY,
-        };
-        let lightings = budget::reference_lightings(order);
-        // --max-error counts the total error, the bake's own noise included
-        // (the definition `chart --real` measures); `--quantize auto` alone
-        // bounds what quantization loses.
-        let noise = match self.max_error {
-            Some(_) => budget::noise_errors(&result.total, order, channels, &result.noise, &lightings),
-            None => None,
-        };
-        let mut choice = budget::choose_within_total(&result.total, order, channels, &storages, limit, &lightings, noise.as_deref());
-        if limit.is_infinite() {
-            choice.budget = None;
-        }
-        Some(choice)
     }
 }
 
@@ -159,16 +102,16 @@ pub fn load_for_bake(config: &BakeConfig, outputs: &[Output]) -> anyhow::Result<
         mesh = cleaned;
     }
     let clean_seconds = config.clean.is_some().then(|| clean_start.elapsed().as_secs_f64());
+    // The bundle says which glass was a window (the viewer, the panel,
+    // `inspect`): marked once here, so whole bakes, shards and their merge
+    // all store the same material section.
+    let mesh = bake::Surfaces::with_window_roles(&mesh, &config.window_patterns)?;
     Ok(LoadedMesh { mesh, meta, load_seconds, clean_seconds })
 }
 
-/// The metadata a bundle records beyond the bake: `base` (source, clean)
-/// with the window patterns and the window materials found.
-pub fn bundle_meta(base: serde_json::Value, window_patterns: &[String], surfaces: &bake::Surfaces) -> serde_json::Value {
-    let mut meta = base;
-    meta["window_patterns"] = json!(window_patterns);
-    meta["windows"] = json!(surfaces.window_names);
-    meta
+/// The surfaces of `mesh` as a bake of `config` sees them.
+pub fn surfaces_of(mesh: &Mesh, config: &BakeConfig) -> Result<bake::Surfaces, bake::surfaces::PatternError> {
+    bake::Surfaces::resolve(mesh, &config.window_patterns)?.with_one_sided(mesh, &config.one_sided_patterns)
 }
 
 /// Refuses window mode without a window.
@@ -181,22 +124,6 @@ pub fn check_windows(config: &BakeConfig, surfaces: &bake::Surfaces) -> anyhow::
         );
     }
     Ok(())
-}
-
-/// The bundle of a bake: stored as `storage` asks, measured, encoded. The
-/// one way whole bakes and merged shards make their bundle.
-pub fn encode_transfer_bundle(
-    mesh: &Mesh,
-    result: &TransferResult,
-    params: &BakeParams,
-    meta: serde_json::Value,
-    storage: &StorageRequest,
-    output: &std::path::Path,
-) -> anyhow::Result<(Vec<u8>, Option<budget::Choice>)> {
-    let choice = storage.choose(result);
-    let bundle = make_bundle_stored(mesh, result, params, meta, choice.as_ref());
-    let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
-    Ok((encoded, choice))
 }
 
 /// Says on stderr when `--max-error` cannot be met by any storage: the
@@ -242,7 +169,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         super::with_threads(config.threads, || bake_maybe_refined(mesh, config))?.with_context(|| config.input.display().to_string())?;
     check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
-    let mut extra_meta = bundle_meta(extra_meta, &config.window_patterns, &surfaces);
+    let mut extra_meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
     let (mesh, refine) = match refined {
         Some((refined_mesh, report)) => {
             extra_meta["refine"] = report.meta();
@@ -271,6 +198,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
             let compacted = TransferResult {
                 total: move_layer(&result.total),
                 bounces: result.bounces.iter().map(|l| move_layer(l)).collect(),
+                back: Vec::new(),
                 noise: if result.noise.is_empty() {
                     Vec::new()
                 } else {
@@ -282,8 +210,8 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         }
         None => (std::borrow::Cow::Borrowed(mesh), result),
     };
-    let stored_mesh = bake::Surfaces::with_window_roles(&stored_mesh, &config.window_patterns)?;
-    let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage, &config.output)?;
+    let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage)
+        .with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choice.as_ref(), &config.output);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
     let bundle_bytes = encoded.len() as u64;
@@ -313,8 +241,13 @@ fn bake_maybe_refined(mesh: &Mesh, config: &BakeConfig) -> Result<RefinedBake, b
         let (r, s, b, c) = bake_maybe_culled(mesh, config)?;
         return Ok((r, s, b, c, None));
     };
-    let (refined, result, surfaces, report) =
-        crate::refine::refine_transfer(mesh.clone(), &config.params, &config.window_patterns, &request.params(mesh))?;
+    let (refined, result, surfaces, report) = crate::refine::refine_transfer(
+        mesh.clone(),
+        &config.params,
+        &config.window_patterns,
+        &config.one_sided_patterns,
+        &request.params(mesh),
+    )?;
     // The rounds' BVH builds are inside the refinement's time.
     Ok((result, surfaces, 0.0, None, Some((refined, report))))
 }
@@ -323,17 +256,70 @@ fn bake_maybe_refined(mesh: &Mesh, config: &BakeConfig) -> Result<RefinedBake, b
 /// (without bounces) shoots rays only from them, every triangle still occluding.
 fn bake_maybe_culled(mesh: &Mesh, config: &BakeConfig) -> Result<CulledBake, bake::BakeError> {
     let Some((view_box, cull_params)) = &config.view_box else {
-        let (r, s, b) = bake::bake_mesh(mesh, &config.params, &config.window_patterns)?;
+        let (r, s, b) = bake::bake_mesh_with(mesh, &config.params, &config.window_patterns, &config.one_sided_patterns)?;
         return Ok((r, s, b, None));
     };
     config.params.check()?;
-    let surfaces = bake::Surfaces::resolve(mesh, &config.window_patterns)?;
-    let scene = bake::Scene::build(mesh, bake::BuildQuality::Sah)?;
+    let surfaces = surfaces_of(mesh, config)?;
+    let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah)?;
     let (visible, report) = bake::cull::visible_triangles(mesh, &scene, &surfaces, view_box, cull_params);
     // Bounces gather from every triangle's previous bounce, so they need the full bake.
     let receivers = (config.params.bounces == 0).then_some(visible.as_slice());
     let result = bake::bake_transfer_receivers(mesh, &scene, &surfaces, &config.params, receivers)?;
     Ok((result, surfaces, scene.build_time.as_secs_f64(), Some((visible, report))))
+}
+
+/// Share of sample points inside geometry past which a bake says so.
+pub const REJECTED_WARNING_SHARE: f64 = 0.1;
+
+/// Says on stderr when many sample points were inside geometry: they are
+/// dropped, so the surfaces they stood for are estimated from fewer points
+/// (or none: black vertices), and the mesh likely has interpenetrating parts.
+pub fn warn_rejected(s: &bake::BakeStats, output: &std::path::Path) {
+    if s.points == 0 || (s.points_rejected as f64) < REJECTED_WARNING_SHARE * s.points as f64 {
+        return;
+    }
+    eprintln!(
+        "warning: {}: {} of {} sample points ({:.0}%) lie inside geometry and were dropped: the mesh has solids passing through each other or overlapping shells (clean --cut-intersections cuts where surfaces cross; inspect MESH lists its parts); {} vertices got no sample",
+        output.display(),
+        s.points_rejected,
+        s.points,
+        100.0 * s.points_rejected as f64 / s.points as f64,
+        s.vertices_without_samples
+    );
+}
+
+/// Where a bake's time went, one line: the phases and their seconds,
+/// the largest first named as such.
+pub fn time_line(report: &BakeReport) -> String {
+    let s = &report.result.stats;
+    let mut phases: Vec<(String, f64)> = vec![("load".into(), report.load_seconds)];
+    if let Some(c) = report.clean_seconds {
+        phases.push(("clean".into(), c));
+    }
+    match &report.refine {
+        None => {
+            phases.push(("BVH build".into(), report.build_seconds));
+            for (b, seconds) in s.seconds_per_bounce.iter().enumerate() {
+                phases.push((if b == 0 { "bounce 0 (traced)".into() } else { format!("bounce {b}") }, *seconds));
+            }
+        }
+        Some(r) => {
+            phases.push((format!("{} BVH builds", r.rounds.len()), r.bvh_build_seconds));
+            phases.push((format!("refinement's bakes and splits ({} rounds)", r.rounds.len()), (r.seconds - r.bvh_build_seconds).max(0.0)));
+        }
+    }
+    phases.push(("write".into(), report.write_seconds));
+    phase_line(&phases)
+}
+
+/// "time: 12.3 s: bounce 0 (traced) 9.1 s (74%), …", largest first.
+pub fn phase_line(phases: &[(String, f64)]) -> String {
+    let total: f64 = phases.iter().map(|p| p.1).sum();
+    let mut sorted: Vec<&(String, f64)> = phases.iter().filter(|p| p.1 > 0.0).collect();
+    sorted.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let parts: Vec<String> = sorted.iter().map(|(name, t)| format!("{name} {t:.2} s ({:.0}%)", 100.0 * t / total.max(1e-12))).collect();
+    format!("time: {total:.2} s: {}", parts.join(", "))
 }
 
 /// Prints the final stats line, or the JSON document with `--json`.
@@ -382,6 +368,14 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
     }
+    if s.back_sides > 0 {
+        println!(
+            "two-sided: {} of {} triangles reflect on their back side too (open surfaces; --one-sided PATTERN turns it off)",
+            s.back_sides, s.triangles
+        );
+    }
+    warn_rejected(s, &report.output);
+    println!("{}", time_line(report));
     if let Some(c) = &report.storage {
         let s = &c.chosen;
         println!(

@@ -5,12 +5,14 @@
 //! `real-scenes.csv`, `real-scenes.svg` and `real-scenes-summary.json`, with
 //! their reference bakes cached in DIR.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use serde_json::json;
 
+use super::Output;
 use crate::chart::{self, pareto, scenes::Size};
+use crate::files::Staged;
 
 /// Equal-time comparisons the summary reports: (scene, a, b).
 const COMPARISONS: &[(&str, &str, &str)] = &[
@@ -26,17 +28,30 @@ const COMPARISONS: &[(&str, &str, &str)] = &[
     ("cabin", "sobol interior order 3 bounces 3", "sobol vertex order 3 bounces 3"),
 ];
 
-/// Runs the sweep on `threads` threads (0 = all) and writes the outputs into `dir`.
-pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool) -> anyhow::Result<super::Outcome> {
+/// The folder `dir` (made if missing) and its three outputs `<stem>.csv`,
+/// `<stem>.svg`, `<stem>-summary.json`, checked before the sweep as every
+/// command's outputs are.
+fn prepare_outputs(dir: &Path, stem: &str, force: bool) -> anyhow::Result<[PathBuf; 3]> {
+    if dir.exists() && !dir.is_dir() {
+        anyhow::bail!("{}: is not a folder: chart -o names the folder its outputs and cached references go in", dir.display());
+    }
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let paths = [dir.join(format!("{stem}.csv")), dir.join(format!("{stem}.svg")), dir.join(format!("{stem}-summary.json"))];
+    let outputs = [Output::new(&paths[0], &["csv"]), Output::new(&paths[1], &["svg"]), Output::new(&paths[2], &["json"])];
+    super::check_outputs(&[], &outputs, force)?;
+    Ok(paths)
+}
+
+/// Runs the sweep on `threads` threads (0 = all) and writes the outputs into `dir`.
+pub fn run(dir: &Path, quick: bool, threads: usize, as_json: bool, force: bool) -> anyhow::Result<super::Outcome> {
+    let paths = prepare_outputs(dir, "speed-accuracy", force)?;
     let size = if quick { Size::Quick } else { Size::Full };
     let started = std::time::Instant::now();
     let rows = super::with_threads(threads, || chart::scenes::sweep(size, dir))??;
     let comparisons: Vec<pareto::Comparison> = COMPARISONS.iter().map(|(s, a, b)| pareto::compare(&rows, s, a, b)).collect();
     let front: Vec<_> = rows.iter().filter(|r| r.pareto).collect();
     let extra = json!({ "equal_time": comparisons, "pareto_front": front });
-    let (csv_path, svg_path, summary) =
-        write_outputs(dir, "speed-accuracy", &chart::to_csv(&rows), &rows, rows.len(), started, quick, extra)?;
+    let (csv_path, svg_path, summary) = write_outputs(&paths, &chart::to_csv(&rows), &rows, rows.len(), started, quick, extra)?;
     if as_json {
         super::print_json(&summary)?;
     } else {
@@ -68,9 +83,10 @@ pub fn run_real(
     quick: bool,
     threads: usize,
     as_json: bool,
+    force: bool,
 ) -> anyhow::Result<super::Outcome> {
     use crate::chart::real::{self, Reach};
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let paths = prepare_outputs(dir, "real-scenes", force)?;
     let size = if quick { Size::Quick } else { Size::Full };
     let started = std::time::Instant::now();
     let sweeps = super::with_threads(threads, || -> anyhow::Result<Vec<real::SceneSweep>> {
@@ -127,8 +143,7 @@ pub fn run_real(
         })
         .collect();
     let extra = json!({ "scenes": scenes, "rows": rows });
-    let (csv_path, svg_path, summary) =
-        write_outputs(dir, "real-scenes", &real::to_csv(&rows), &plotted, rows.len(), started, quick, extra)?;
+    let (csv_path, svg_path, summary) = write_outputs(&paths, &real::to_csv(&rows), &plotted, rows.len(), started, quick, extra)?;
     if as_json {
         super::print_json(&summary)?;
     } else {
@@ -143,32 +158,25 @@ pub fn run_real(
     Ok(super::Outcome::Ok)
 }
 
-/// Writes `<stem>.csv`, `<stem>.svg` (of `plotted`, its Pareto fronts
-/// marked here) and `<stem>-summary.json` (the common fields plus `extra`'s)
-/// into `dir`, each atomically; returns the first two paths and the summary.
-#[allow(clippy::too_many_arguments)]
+/// Writes `paths` (the CSV, the SVG of `plotted`, its Pareto fronts marked
+/// here, and the summary: the common fields plus `extra`'s), all landing
+/// together; returns the first two paths and the summary.
 fn write_outputs(
-    dir: &Path,
-    stem: &str,
+    paths: &[PathBuf; 3],
     csv: &str,
     plotted: &[chart::Row],
     bakes: usize,
     started: std::time::Instant,
     quick: bool,
     extra: serde_json::Value,
-) -> anyhow::Result<(std::path::PathBuf, std::path::PathBuf, serde_json::Value)> {
-    let write =
-        |path: &Path, bytes: &[u8]| crate::files::write_atomic(path, bytes).with_context(|| format!("cannot write {}", path.display()));
-    let csv_path = dir.join(format!("{stem}.csv"));
-    write(&csv_path, csv.as_bytes())?;
+) -> anyhow::Result<(PathBuf, PathBuf, serde_json::Value)> {
+    let [csv_path, svg_path, summary_path] = paths;
     let mut plotted = plotted.to_vec();
     pareto::mark_fronts(&mut plotted);
     let svg = chart::plot::render_svg(&plotted).map_err(anyhow::Error::msg).context("cannot draw the chart")?;
-    let svg_path = dir.join(format!("{stem}.svg"));
-    write(&svg_path, svg.as_bytes())?;
     let mut summary = json!({
-        "csv": super::json_path(&csv_path),
-        "svg": super::json_path(&svg_path),
+        "csv": super::json_path(csv_path),
+        "svg": super::json_path(svg_path),
         "bakes": bakes,
         "sweep_seconds": started.elapsed().as_secs_f64(),
         "quick": quick,
@@ -176,6 +184,12 @@ fn write_outputs(
     if let (Some(fields), serde_json::Value::Object(more)) = (summary.as_object_mut(), extra) {
         fields.extend(more);
     }
-    write(&dir.join(format!("{stem}-summary.json")), serde_json::to_string_pretty(&summary)?.as_bytes())?;
-    Ok((csv_path, svg_path, summary))
+    let mut staged = Staged::new();
+    for (path, bytes) in
+        [(csv_path, csv.as_bytes().to_vec()), (svg_path, svg.into_bytes()), (summary_path, serde_json::to_vec_pretty(&summary)?)]
+    {
+        staged.stage_bytes(path, &bytes).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    staged.commit().with_context(|| format!("cannot write {}", csv_path.display()))?;
+    Ok((csv_path.clone(), svg_path.clone(), summary))
 }

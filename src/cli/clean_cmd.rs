@@ -49,6 +49,15 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
     // Check every output before spending time on the clean-up.
     let (mut outputs, mtl) = outputs(config);
     if let Some(mtl) = &mtl {
+        // The OBJ names its .mtl inside the file (`mtllib`), as text.
+        if mtl.file_name().and_then(|n| n.to_str()).is_none() {
+            anyhow::bail!(
+                "{}: an OBJ names its material library inside the file as text, so the name must be UTF-8: choose another name or write .glb",
+                config.output.display()
+            );
+        }
+    }
+    if let Some(mtl) = &mtl {
         outputs.push(Output { own_marker: Some(crate::mesh::MTL_HEADER.as_bytes()), ..Output::new(mtl, &["mtl"]) });
     }
     if let Some(report) = &config.report {
@@ -57,6 +66,13 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
     super::check_outputs(&[&config.input], &outputs, config.force)?;
     let mesh = super::load_mesh(&config.input, config.up, config.quiet, &outputs, config.force)?;
     let (cleaned, report) = clean_loaded(&mesh, &config.params, &config.input)?;
+    if cleaned.triangle_count() == 0 {
+        anyhow::bail!(
+            "{}: cleaning left no triangle ({}): nothing to write; the input holds no surface with area",
+            config.input.display(),
+            report.summary()
+        );
+    }
     if mtl.is_some() && report.seam_vertices_split > 0 {
         // The OBJ loader welds vertices alike in every attribute: the two sides
         // of a cut line, written as two vertices, would be one again.

@@ -59,6 +59,7 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         up: UpAxis::Y,
         params: demo_params(quiet || as_json),
         window_patterns: Vec::new(),
+        one_sided_patterns: Vec::new(),
         threads,
         json: as_json,
         clean: None,

@@ -11,7 +11,7 @@ use serde_json::json;
 
 use super::bake_cmd::BakeReport;
 use super::panel_cmd::{gather_panel, run_json, stage_images};
-use crate::bake::{BuildQuality, Scene, Surfaces};
+use crate::bake::Surfaces;
 use crate::brdf::{Brdf, PanelBrdf};
 use crate::bundle::{Bundle, LayerKind, Quantization, Transfer, TransferLayer};
 use crate::files::Staged;
@@ -19,6 +19,7 @@ use crate::fixtures::cabin::DRIVER_EYE;
 use crate::mesh::Mesh;
 use crate::panel::{Display, Environment, Interior, PanelLayout};
 use crate::sky::{Site, TYPICAL_OVERCAST_LUX};
+use crate::trace::{BuildQuality, Scene};
 
 /// Texels and samples of the demo's panel images: 128 × 64 texels at 256 samples each.
 const TEXELS: (u32, u32) = (128, 64);
@@ -80,7 +81,7 @@ fn glare_heading(interior: &Interior, probes: &PanelLayout, brdf: &PanelBrdf) ->
         .filter(|&i| probes.triangle[i] != crate::panel::layout::NO_TRIANGLE)
         .map(|i| {
             let (p, n) = (probes.point[i], probes.normal[i]);
-            let (t, b) = crate::bake::sampling::tangent_frame(n);
+            let (t, b) = crate::sampling::tangent_frame(n);
             (p, n, t, b, (DRIVER_EYE - p).normalize())
         })
         .collect();

@@ -7,14 +7,16 @@ use anyhow::Context;
 
 use crate::bundle::{self, LayerKind};
 
-/// Parses `--layer`: `total` or a bounce index.
+/// Parses `--layer`: `total`, `direct` (bounce 0, as `view --layers direct`)
+/// or a bounce index.
 pub fn parse_layer(text: &str) -> anyhow::Result<Option<LayerKind>> {
     match text {
         "total" => Ok(None),
+        "direct" => Ok(Some(LayerKind::Bounce(0))),
         n => n
             .parse::<u32>()
             .map(|b| Some(LayerKind::Bounce(b)))
-            .map_err(|_| anyhow::anyhow!("--layer {text:?}: expected total or a bounce index")),
+            .map_err(|_| anyhow::anyhow!("--layer {text:?}: expected total, direct or a bounce index")),
     }
 }
 

@@ -1,4 +1,6 @@
-//! `prtbake inspect BUNDLE`: what a bundle holds.
+//! `prtbake inspect BUNDLE`: what a bundle holds; `prtbake inspect MESH`:
+//! what a mesh is made of before baking (materials and groups with their
+//! triangles, areas and likely roles).
 
 use std::path::Path;
 
@@ -7,15 +9,21 @@ use serde_json::json;
 
 use crate::bundle;
 
-/// Describes the bundle at `path` on stdout (JSON with `as_json`).
+/// Describes the bundle or mesh at `path` on stdout (JSON with `as_json`).
 pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
+    let head =
+        crate::files::read::read_head(path, crate::files::Limit::Bundle, 8).with_context(|| format!("cannot read {}", path.display()))?;
+    let is_bundle = head == bundle::MAGIC || path.extension().is_some_and(|e| e.eq_ignore_ascii_case("prtb"));
+    if !is_bundle {
+        return inspect_mesh(path, as_json);
+    }
     let bytes = bundle::read_bundle_bytes(path)?;
     let sections = bundle::list_sections(&bytes).with_context(|| format!("{}: not a valid bundle", path.display()))?;
     let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", path.display()))?;
     let transfer = b.transfer.as_ref().map(|t| {
         json!({
             "order": t.order, "channels": t.channels, "quantization": t.quantization.name(),
-            "layers": t.layers.iter().map(|l| format!("{:?}", l.kind)).collect::<Vec<_>>(),
+            "layers": t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
         })
     });
     let lapse = b.sun.as_ref().map(|s| time_lapse(s, b.mesh.vertex_count(), &b.meta));
@@ -49,12 +57,12 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
     println!("  mesh: {} vertices, {} triangles, {} materials", b.mesh.vertex_count(), b.mesh.triangle_count(), b.mesh.materials.len());
     if let Some(t) = &b.transfer {
         println!(
-            "  transfer: order {} ({} coefficients), {} channel(s), {}, layers {:?}",
+            "  transfer: order {} ({} coefficients), {} channel(s), {}, layers {}",
             t.order,
             t.order * t.order,
             t.channels,
             t.quantization.name(),
-            t.layers.iter().map(|l| l.kind).collect::<Vec<_>>()
+            t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ")
         );
     }
     if let Some(s) = &b.sun {
@@ -97,6 +105,42 @@ struct LapseRow {
 }
 
 /// Per step: time, sun angles and the fraction of lit vertices.
+/// The materials and groups of the mesh file at `path`.
+fn inspect_mesh(path: &Path, as_json: bool) -> anyhow::Result<()> {
+    let mesh = super::load_mesh(path, crate::mesh::UpAxis::Y, as_json, &[], false)?;
+    let inv = crate::mesh::inventory::inventory(&mesh);
+    if as_json {
+        return super::print_json(&json!({ "file": super::json_path(path), "mesh": inv }));
+    }
+    println!("{}: {} vertices, {} triangles, area {}", path.display(), inv.vertices, inv.triangles, super::significant(inv.area, 4));
+    let role = |e: &crate::mesh::inventory::Entry| match e.role {
+        Some(crate::mesh::MaterialRole::Window) => "window",
+        Some(crate::mesh::MaterialRole::Panel) => "panel",
+        Some(crate::mesh::MaterialRole::Opaque) => "opaque",
+        None => "",
+    };
+    for (title, entries) in [("materials", &inv.materials), ("groups", &inv.groups)] {
+        println!("  {title} ({}), largest area first:", entries.len());
+        for e in entries.iter() {
+            let albedo = e.albedo.map_or(String::new(), |a| format!("  albedo {:.2} {:.2} {:.2}", a[0], a[1], a[2]));
+            println!(
+                "    {:<28} {:>9} triangles  area {:>10}  {:<7}{albedo}{}",
+                e.name,
+                e.triangles,
+                super::significant(e.area, 4),
+                role(e),
+                e.likely.map(|l| format!("  likely {l}")).unwrap_or_default()
+            );
+        }
+    }
+    let glass: Vec<&str> =
+        inv.materials.iter().chain(&inv.groups).filter(|e| e.likely == Some("glass?")).map(|e| e.name.as_str()).collect();
+    if !glass.is_empty() {
+        println!("  window mode: bake … --window '{}' (if that is the glass light enters through)", glass[0]);
+    }
+    Ok(())
+}
+
 fn time_lapse(sun: &bundle::SunSeries, vertex_count: usize, meta: &serde_json::Value) -> Vec<LapseRow> {
     let source = &meta["sun"]["source"];
     let tz_minutes = (source["kind"] == "spa").then(|| source["tz_minutes"].as_i64()).flatten();

@@ -9,14 +9,14 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde_json::json;
 
-use super::bake_cmd::{encode_transfer_bundle, StorageRequest};
+use crate::bundle::{encode_transfer_bundle, StorageRequest};
 use super::shard_cmd::{decode, read_shard_file};
 use super::sun_cmd::sun_stats_meta;
 use super::Output;
-use crate::bake::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
 use crate::bake::Surfaces;
 use crate::bundle;
 use crate::files::Staged;
+use crate::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
 
 /// A checked `merge` configuration.
 #[derive(Clone, Debug)]
@@ -134,13 +134,15 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             // Adaptive allocation's extra points, counted as a whole bake counts them.
             let mut result = result;
             if key.params.adaptive > 0.0 {
-                let surfaces = crate::bake::Surfaces::resolve(&b.mesh, &key.window_patterns)?;
+                let surfaces =
+                    crate::bake::Surfaces::resolve(&b.mesh, &key.window_patterns)?.with_one_sided(&b.mesh, &key.one_sided_patterns)?;
                 let base = crate::bake::transfer::base_point_count(&b.mesh, &surfaces, &key.params)?;
                 result.stats.points_added = result.stats.points.saturating_sub(base);
             }
             let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
             let (encoded, choice) =
-                super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage, output))??;
+                super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage))?
+                    .with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
             super::bake_cmd::warn_over_budget(choice.as_ref(), output);
             staged.stage_bytes(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
             let s = &result.stats;
@@ -176,6 +178,7 @@ fn merge_sun(config: &MergeConfig, parts: &[(PathBuf, SunPart)]) -> anyhow::Resu
     let masks = super::with_threads(config.threads, || {
         crate::bake::sun::sun_masks_from_bits(&b.mesh, &surfaces, &suns, &merged.key.params, &merged.bits, merged.rays)
     })??;
+    super::sun_cmd::warn_if_never_lit(output, merged.key.params.mode, &merged.key.window_patterns, &masks.stats);
     let mut meta = b.meta;
     let sun_meta =
         meta.get_mut("sun").and_then(|s| s.as_object_mut()).ok_or_else(|| frame_error("its frame's META has no sun object".into()))?;

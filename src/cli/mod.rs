@@ -57,6 +57,20 @@ pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> an
     Ok(pool.install(f))
 }
 
+/// `x` with `digits` significant digits (`0.00123`, `45.6`, `1.23e6`), so a
+/// small value does not print as 0.0.
+pub fn significant(x: f64, digits: usize) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor() as i32;
+    if !(-4..6).contains(&magnitude) {
+        return format!("{:.*e}", digits.saturating_sub(1), x);
+    }
+    let decimals = (digits as i32 - 1 - magnitude).max(0) as usize;
+    format!("{x:.decimals$}")
+}
+
 /// Prints `value` as pretty JSON on stdout.
 pub fn print_json(value: &serde_json::Value) -> anyhow::Result<()> {
     println!("{}", serde_json::to_string_pretty(value)?);
@@ -91,4 +105,16 @@ pub fn check_outputs(inputs: &[&Path], outputs: &[Output], force: bool) -> anyho
 /// paths, and a report must not fail on a file name).
 pub fn json_path(path: &Path) -> serde_json::Value {
     serde_json::Value::String(path.to_string_lossy().into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn significant_digits_keep_small_values() {
+        assert_eq!(super::significant(0.0012345, 3), "0.00123");
+        assert_eq!(super::significant(45.67, 3), "45.7");
+        assert_eq!(super::significant(1234567.0, 3), "1.23e6");
+        assert_eq!(super::significant(0.0, 3), "0");
+        assert_eq!(super::significant(2.5e-7, 2), "2.5e-7");
+    }
 }

@@ -11,7 +11,7 @@ use glam::Vec3;
 use serde_json::json;
 
 use super::Output;
-use crate::bake::{BuildQuality, Scene, Surfaces};
+use crate::bake::Surfaces;
 use crate::brdf::{EnergyReport, PanelBrdf};
 use crate::bundle::Bundle;
 use crate::files::Staged;
@@ -20,6 +20,7 @@ use crate::panel::{
     TexelResult,
 };
 use crate::sky::{LocalDate, Site};
+use crate::trace::{BuildQuality, Scene};
 
 /// The light outside.
 #[derive(Clone, Debug)]
@@ -159,6 +160,7 @@ pub fn gather_panel(
         eprintln!();
     }
     let results = gather.results();
+    crate::panel::check_finite(&results, path, &env.describe())?;
     let rays = gather.rays();
     let readability = Readability::of(&results, display, threshold).ok_or_else(|| PanelError::NoTexels {
         path: path.to_path_buf(),
@@ -259,14 +261,16 @@ pub fn run(config: &PanelConfig) -> anyhow::Result<()> {
     } else {
         let r = &run.readability;
         println!(
-            "contrast ratio: min {:.2}, median {:.2}; {:.1}% of texels below {}:1; reflected luminance mean {:.1}, max {:.1} cd/m²; {:.0}% through windows",
-            r.min_contrast_ratio,
-            r.median_contrast_ratio,
+            "contrast ratio: min {}, median {}; {:.1}% of texels below {}:1; reflected luminance mean {}, max {} cd/m²; {:.0}% straight from the sky ({:.0}% through windows), {:.0}% from the interior",
+            super::significant(r.min_contrast_ratio.into(), 3),
+            super::significant(r.median_contrast_ratio.into(), 3),
             100.0 * r.fraction_below_threshold,
             r.threshold,
-            r.mean_reflected_luminance,
-            r.max_reflected_luminance,
-            100.0 * r.window_share
+            super::significant(r.mean_reflected_luminance.into(), 3),
+            super::significant(r.max_reflected_luminance.into(), 3),
+            100.0 * r.sky_share,
+            100.0 * r.window_share,
+            100.0 * r.interior_share
         );
         println!(
             "wrote {} and {} ({:.1} s, {:.2e} rays/s)",

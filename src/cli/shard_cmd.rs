@@ -11,14 +11,17 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use serde_json::json;
 
-use super::bake_cmd::{bundle_meta, check_windows, load_for_bake, BakeConfig};
+use super::bake_cmd::{check_windows, load_for_bake, BakeConfig};
+use crate::bundle::bundle_meta;
 use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
 use super::Output;
-use crate::bake::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
-use crate::bake::{BuildQuality, Scene, SunStats};
+use crate::bake::SunStats;
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
-use crate::files::{read_limited, Limit, Staged};
+use crate::files::read::{read_head, read_tail};
+use crate::files::{Limit, Staged};
+use crate::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, Stage, SunKey, TransferKey};
 use crate::sky;
+use crate::trace::{BuildQuality, Scene};
 
 /// Extensions of a part, a hit-record file and a merged layer.
 pub const PART_FORMAT: &[&str] = &["prtp"];
@@ -53,9 +56,16 @@ impl ShardRun {
     }
 }
 
-/// Reads a shard file of `kind` whole (bounded), with the path in every error.
+/// Reads a shard file whole (bounded), with the path in every error; its
+/// header and trailer are read and checked against the file's size first
+/// ([`shards::codec::check_frame`]), so a file of another size than its
+/// trailer gives is refused before its body is read.
 pub fn read_shard_file(path: &Path) -> anyhow::Result<Vec<u8>> {
-    read_limited(path, Limit::Shard).with_context(|| format!("cannot read {}", path.display()))
+    let cannot_read = || format!("cannot read {}", path.display());
+    let head = read_head(path, Limit::Shard, shards::codec::HEADER_LEN as u64).with_context(cannot_read)?;
+    let (tail, size) = read_tail(path, Limit::Shard, shards::codec::TRAILER_LEN as u64).with_context(cannot_read)?;
+    shards::codec::check_frame(&head, &tail, size).map_err(|problem| shards::ShardError::malformed(path, problem))?;
+    read_head(path, Limit::Shard, size).with_context(cannot_read)
 }
 
 /// Decodes with the file named in the error.
@@ -132,14 +142,20 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let key = TransferKey {
         params: config.params,
         window_patterns: config.window_patterns.clone(),
+        one_sided_patterns: config.one_sided_patterns.clone(),
         quantize: config.storage.quantize,
         max_error: config.storage.max_error,
     };
     let mesh = &loaded.mesh;
     let (output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
-        let surfaces = crate::bake::Surfaces::resolve(mesh, &config.window_patterns)?;
+        let surfaces = super::bake_cmd::surfaces_of(mesh, config)?;
         check_windows(config, &surfaces)?;
-        let scene = Scene::build(mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
+        // Rounds ≥ 1 gather from round 0's hit records and trace nothing.
+        let scene = match stage {
+            Stage::Round(r) if r > 0 => Scene::without_bvh(mesh),
+            _ => Scene::build(mesh, BuildQuality::Sah),
+        }
+        .with_context(|| config.input.display().to_string())?;
         let input =
             input.map(|(layer, layer_crc, hits)| RoundInput { hits_path: &hits_path, hits, layer_path: &layer_path, layer, layer_crc });
         let pilot = pilot.map(|(pilot, crc)| PilotInput { path: &pilot_path, pilot, crc });
@@ -149,7 +165,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let mut part = output.part;
     if stage == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
-        let meta = bundle_meta(loaded.meta, &config.window_patterns, &surfaces);
+        let meta = bundle_meta(loaded.meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
         let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None };
         part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
     }
@@ -199,6 +215,27 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `bake`/`sun --plan-shards N`: the arguments checked as prtbake reads them,
+/// and the plan a launcher needs, one `key=value` per line: the shard count,
+/// for a transfer bake its bounces (rounds 0..=B) and whether it has a pilot
+/// stage, and whether `--threads` was given.
+pub fn print_plan(shards: u32, output: &Path, params: Option<&crate::bake::BakeParams>, threads_given: bool) -> anyhow::Result<()> {
+    if shards == 0 {
+        anyhow::bail!("--plan-shards 0: a sharded bake has at least one shard");
+    }
+    if !output.extension().is_some_and(|e| e.eq_ignore_ascii_case("prtb")) {
+        anyhow::bail!("{}: a sharded bake's output is the merged bundle; name it .prtb", output.display());
+    }
+    println!("shards={shards}");
+    if let Some(p) = params {
+        let pilot = p.adaptive > 0.0 && matches!(p.sampling, crate::bake::Sampling::Interior { .. });
+        println!("bounces={}", p.bounces);
+        println!("pilot={}", u8::from(pilot));
+    }
+    println!("threads_given={}", u8::from(threads_given));
+    Ok(())
+}
+
 /// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
 /// metadata without its stats: what every shard of one sun bake must share.
 fn day_crc(steps: &[SunStep], meta_without_stats: &serde_json::Value) -> u32 {
@@ -224,6 +261,7 @@ fn placeholder_stats(steps: &[SunStep]) -> SunStats {
 /// Traces one shard's sun samples into a part and prints what it wrote.
 pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
     let input = load_sun_input(config, PART_FORMAT, false)?;
+    let config = &super::sun_cmd::with_bundle_windows(config, &input)?;
     let started = std::time::Instant::now();
     let (part, steps) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let steps = day_steps(config, &input)?;
@@ -282,4 +320,35 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
         config.output.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::files::read::bytes_read;
+    use crate::shards::codec::{self, FileKind};
+
+    /// A shard file of another size than its trailer gives (a layer
+    /// extended to a sparse 3 GiB, or cut short) is refused after its header
+    /// and trailer, naming the file and both sizes; the file itself reads whole.
+    #[test]
+    fn shard_files_are_checked_against_their_trailer_before_reading() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grown.prtl");
+        let bytes = codec::to_vec(FileKind::Layer, |w| w.f32s(&[1.0; 1000]));
+        std::fs::write(&path, &bytes).unwrap();
+        bytes_read::take();
+        assert_eq!(read_shard_file(&path).unwrap(), bytes);
+        let frame = (codec::HEADER_LEN + codec::TRAILER_LEN) as u64;
+        assert_eq!(bytes_read::take(), frame + bytes.len() as u64);
+        let big = 3u64 << 30;
+        for len in [big, bytes.len() as u64 - 4] {
+            std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(len).unwrap();
+            let message = format!("{:#}", read_shard_file(&path).unwrap_err());
+            assert_eq!(bytes_read::take(), frame);
+            // Extended with zeros or cut short, the last 12 bytes are not a trailer.
+            let says = format!("is {len} bytes and does not end in its own length and CRC-32");
+            assert!(message.contains("grown.prtl") && message.contains(&says) && message.contains("truncated or extended"), "{message}");
+        }
+    }
 }

@@ -14,11 +14,12 @@ use anyhow::Context;
 use glam::Vec3;
 use serde_json::json;
 
-use crate::bake::{self, BuildQuality, Mode, Scene, SunMasks, SunParams, SunStats, Surfaces};
+use crate::bake::{self, Mode, SunMasks, SunParams, SunStats, Surfaces};
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::files::read::read_head;
 use crate::files::{read_limited, Limit};
 use crate::mesh::UpAxis;
+use crate::trace::{BuildQuality, Scene};
 
 use super::bake_cmd::BUNDLE_FORMAT;
 use super::Output;
@@ -62,7 +63,7 @@ pub struct SunConfig {
     /// Replace a read-only output (`--force`).
     pub force: bool,
     /// Trace one shard's samples into a part instead of the bundle (`--shard`).
-    pub shard: Option<crate::bake::shards::Shard>,
+    pub shard: Option<crate::shards::Shard>,
     /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`); a bundle's
     /// transfer is then baked again on the refined mesh (`sun_rebake`).
     pub refine: Option<super::bake_cmd::RefineRequest>,
@@ -76,6 +77,10 @@ pub struct SunReport {
     pub input_was_bundle: bool,
     pub sky_seconds: f64,
     pub build_seconds: f64,
+    /// Encoding and writing the bundle (and re-baking its transfer after `--refine`).
+    pub write_seconds: f64,
+    /// `--refine` on a bundle with transfer: the transfer was baked again on the refined mesh.
+    pub transfer_rebaked: bool,
     pub bundle_bytes: u64,
     /// What adaptive refinement did (`--refine`).
     pub refine: Option<crate::refine::RefineReport>,
@@ -115,6 +120,9 @@ pub struct SunInput {
     pub file_up: UpAxis,
     /// The input's file name, as META `source` records it.
     pub source_name: Option<String>,
+    /// The light the input bundle was baked for (its transfer's, else its
+    /// earlier sun masks'): window mode and patterns.
+    pub recorded_windows: Option<(Mode, Vec<String>)>,
 }
 
 impl SunInput {
@@ -149,18 +157,26 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
         UpAxis::Y
     };
     let (mesh, original, had_transfer) = if input_was_bundle {
-        let bytes = read_limited(input, Limit::Bundle).with_context(|| format!("cannot read {}", input.display()))?;
+        let bytes = bundle::read_bundle_bytes(input).map_err(|e| match e {
+            bundle::BundleError::Io { source, .. } => anyhow::Error::new(source).context(format!("cannot read {}", input.display())),
+            bundle::BundleError::InFile { source, .. } => anyhow::anyhow!("{}: not a valid bundle: {source}", input.display()),
+            other => other.into(),
+        })?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
         (b.mesh, Some((bytes, b.meta)), b.transfer.is_some())
     } else {
-        (super::load_mesh(input, config.up, quiet, &outputs, config.force)?, None, false)
+        // The new bundle says which glass was a window, as a transfer bake's does.
+        let mesh = super::load_mesh(input, config.up, quiet, &outputs, config.force)?;
+        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false)
     };
+    let recorded_windows = original.as_ref().and_then(|(_, meta)| recorded_windows(meta, had_transfer));
     let up = Vec3::Y;
     let north = match config.north {
         Some(n) => {
             let n = file_up.to_y_up(n);
             if !(n - up * n.dot(up)).is_finite() || (n - up * n.dot(up)).length() < 1e-6 {
-                anyhow::bail!("--north {:?} must be finite and not parallel to up", config.north.unwrap_or_default());
+                let n = config.north.unwrap_or_default();
+                anyhow::bail!("--north {},{},{} must be finite and not parallel to up", n.x, n.y, n.z);
             }
             n
         }
@@ -168,7 +184,72 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
     let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
-    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name })
+    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows })
+}
+
+/// The mode and `--window` patterns a bundle's META records: its transfer
+/// bake's when it has one, else its sun bake's.
+fn recorded_windows(meta: &serde_json::Value, had_transfer: bool) -> Option<(Mode, Vec<String>)> {
+    let from = if had_transfer { meta } else { meta.get("sun")? };
+    let mode: Mode = serde_json::from_value(from.pointer("/params/mode")?.clone()).ok()?;
+    let patterns = from
+        .get("window_patterns")
+        .and_then(|p| p.as_array())
+        .map_or_else(Vec::new, |a| a.iter().filter_map(|p| p.as_str().map(String::from)).collect());
+    Some((mode, patterns))
+}
+
+/// `config` with the window setup of the input bundle: a `sun` given
+/// neither `--window` nor `--window-mode` lights the bundle as its bake did
+/// (masks of another light than the transfer's would be silently wrong); a
+/// different setup is refused.
+pub fn with_bundle_windows(config: &SunConfig, input: &SunInput) -> anyhow::Result<SunConfig> {
+    let Some((mode, patterns)) = &input.recorded_windows else { return Ok(config.clone()) };
+    let asked_nothing = config.params.mode == Mode::Open && config.window_patterns.is_empty();
+    if asked_nothing {
+        if *mode == Mode::Window && !config.params.quiet {
+            eprintln!("sun: window mode with --window {patterns:?}, as {} was baked", config.input.display());
+        }
+        let mut adopted = config.clone();
+        adopted.params.mode = *mode;
+        adopted.window_patterns = patterns.clone();
+        return Ok(adopted);
+    }
+    if config.params.mode != *mode || config.window_patterns != *patterns {
+        let describe = |mode: Mode, patterns: &[String]| match mode {
+            Mode::Open => "open mode".to_string(),
+            Mode::Window => format!("window mode with --window {patterns:?}"),
+        };
+        anyhow::bail!(
+            "{}: baked in {}, but this sun bake asks for {}: the masks would light the scene differently from the bundle's transfer; give the same --window patterns, or none to use the bundle's",
+            config.input.display(),
+            describe(*mode, patterns),
+            describe(config.params.mode, &config.window_patterns)
+        );
+    }
+    Ok(config.clone())
+}
+
+/// Says on stderr when no vertex is lit at any step: a site, date, north or
+/// up axis that keeps the sun out of the scene gives all-dark masks.
+pub fn warn_if_never_lit(output: &Path, mode: Mode, window_patterns: &[String], stats: &SunStats) {
+    if stats.vertices == 0 || stats.lit_vertices.iter().any(|&n| n > 0) {
+        return;
+    }
+    let why = if stats.day_steps == 0 {
+        "the sun is below the horizon at every step (check --date, --from/--to and --tz)".to_string()
+    } else if mode == Mode::Window {
+        format!(
+            "the sun never reaches a surface through the windows ({window_patterns:?}) in {} daytime steps: check --north (the direction of geographic north in the file's axes; default -Z, or +Y with --up z) and --up, which turn the sun's path around the scene",
+            stats.day_steps
+        )
+    } else {
+        format!(
+            "no surface faces the sun unshadowed in {} daytime steps: check --north (default -Z, or +Y with --up z) and --up",
+            stats.day_steps
+        )
+    };
+    eprintln!("warning: {}: no vertex is lit at any step; {why}", output.display());
 }
 
 /// The day: sun position, colour and sky per step.
@@ -235,6 +316,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     // In place only without `--refine`: refining replaces the bundle's mesh
     // and transfer, which the input alone can give back.
     let mut input = load_sun_input(config, BUNDLE_FORMAT, config.refine.is_none())?;
+    let config = &with_bundle_windows(config, &input)?;
     // Refining a bundle's mesh re-bakes its transfer on the new vertices:
     // read how before any work, so a bundle that cannot be re-baked stops here.
     let recipe = match (&config.refine, &input.original) {
@@ -261,6 +343,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
         Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None))
     })??;
+    warn_if_never_lit(&config.output, config.params.mode, &config.window_patterns, &masks.stats);
     let refine = refined.map(|(mesh, report)| {
         input.mesh = mesh;
         report
@@ -277,6 +360,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         sun_meta["refine"] = r.meta();
     }
     let output = &config.output;
+    let write_start = Instant::now();
     let encoded = match (&refine, &input.original) {
         // The mesh changed: the bundle is made anew (the transfer re-baked on it, if it had one).
         (Some(_), Some((_, meta))) => {
@@ -300,6 +384,8 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         input_was_bundle: input.was_bundle(),
         sky_seconds,
         build_seconds,
+        write_seconds: write_start.elapsed().as_secs_f64(),
+        transfer_rebaked: recipe.is_some(),
         bundle_bytes,
         refine,
     })
@@ -366,6 +452,17 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
     }
+    let mut phases = vec![("sky".to_string(), report.sky_seconds)];
+    match &report.refine {
+        None => phases.extend([("BVH build".to_string(), report.build_seconds), ("sun rays".to_string(), s.seconds)]),
+        Some(r) => phases.extend([
+            (format!("{} BVH builds", r.rounds.len()), r.bvh_build_seconds),
+            (format!("refinement's sun rays and splits ({} rounds)", r.rounds.len()), (r.seconds - r.bvh_build_seconds).max(0.0)),
+        ]),
+    }
+    let write = if report.transfer_rebaked { "transfer re-baked on the refined mesh, and write" } else { "write" };
+    phases.push((write.to_string(), report.write_seconds));
+    println!("{}", super::bake_cmd::phase_line(&phases));
     println!(
         "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
         report.output.display(),

@@ -10,16 +10,18 @@ use std::path::Path;
 use anyhow::Context;
 use serde_json::Value;
 
-use crate::bake::{self, BakeParams, BuildQuality, Scene, Surfaces};
+use crate::bake::{self, BakeParams, Surfaces};
 use crate::budget;
 use crate::bundle::{make_bundle_stored, Bundle, Quantization};
 use crate::mesh::Mesh;
+use crate::trace::{BuildQuality, Scene};
 
 /// How a bundle's transfer was baked and stored, read from its META.
 #[derive(Clone, Debug)]
 pub struct TransferRecipe {
     pub params: BakeParams,
     pub window_patterns: Vec<String>,
+    pub one_sided_patterns: Vec<String>,
     /// The stored order, channels and quantization, when not as baked (f32).
     pub storage: Option<budget::Storage>,
     /// META entries that describe the mesh, not the bake: `source`, `clean`, `refine`.
@@ -49,6 +51,12 @@ impl TransferRecipe {
                 serde_json::from_value(v.clone()).with_context(|| format!("{name}: META `window_patterns` is not a list of names"))?
             }
         };
+        let one_sided_patterns = match meta.get("one_sided_patterns") {
+            None | Some(Value::Null) => Vec::new(),
+            Some(v) => {
+                serde_json::from_value(v.clone()).with_context(|| format!("{name}: META `one_sided_patterns` is not a list of names"))?
+            }
+        };
         let storage = match meta.get("storage") {
             None | Some(Value::Null) => None,
             Some(s) => Some(stored_as(s).with_context(|| format!("{name}: META `storage` is not a storage choice"))?),
@@ -59,12 +67,12 @@ impl TransferRecipe {
                 mesh_meta[key] = v.clone();
             }
         }
-        Ok(TransferRecipe { params, window_patterns, storage, mesh_meta })
+        Ok(TransferRecipe { params, window_patterns, one_sided_patterns, storage, mesh_meta })
     }
 
     /// Bakes the transfer of `mesh` as the recipe says: a bundle without sun sections.
     pub fn bake(&self, mesh: &Mesh) -> anyhow::Result<Bundle> {
-        let surfaces = Surfaces::resolve(mesh, &self.window_patterns)?;
+        let surfaces = Surfaces::resolve(mesh, &self.window_patterns)?.with_one_sided(mesh, &self.one_sided_patterns)?;
         let scene = Scene::build(mesh, BuildQuality::Sah)?;
         let result = bake::bake_transfer(mesh, &scene, &surfaces, &self.params)?;
         let choice = self.storage.map(|storage| {
@@ -73,7 +81,7 @@ impl TransferRecipe {
             choice.budget = None;
             choice
         });
-        let mut meta = super::bake_cmd::bundle_meta(self.mesh_meta.clone(), &self.window_patterns, &surfaces);
+        let mut meta = crate::bundle::bundle_meta(self.mesh_meta.clone(), &self.window_patterns, &self.one_sided_patterns, &surfaces);
         meta["transfer_rebaked"] =
             Value::String("by `sun --refine`: the transfer baked again on the sun-refined mesh with these params".into());
         Ok(make_bundle_stored(mesh, &result, &self.params, meta, choice.as_ref()))

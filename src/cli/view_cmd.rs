@@ -70,9 +70,25 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
     if let Some(shot) = &config.screenshot {
         let mut inputs = vec![path.as_path()];
         inputs.extend(config.env.as_deref());
-        super::check_outputs(&inputs, &[super::Output::new(shot, &["png"])], false)?;
+        super::check_outputs(&inputs, &[super::Output::new(shot, &["png", "exr"])], false)?;
+        if config.frames > 0 && is_exr(shot) {
+            anyhow::bail!("--frames times tone-mapped frames: name the screenshot .png");
+        }
     }
-    let bundle = crate::bundle::read_bundle(path).with_context(|| format!("cannot view {}", path.display()))?;
+    let mut bundle = crate::bundle::read_bundle(path).with_context(|| format!("cannot view {}", path.display()))?;
+    if bundle.transfer.is_none() {
+        if bundle.sun.is_none() {
+            anyhow::bail!("{}: the bundle has neither transfer nor sun masks: nothing to shade", path.display());
+        }
+        // Sun masks alone: albedo × the sun term, no sky light on the surfaces.
+        if !config.json {
+            eprintln!(
+                "{}: sun masks without transfer: surfaces show the direct sun only (bake transfer for the sky's light)",
+                path.display()
+            );
+        }
+        bundle.transfer = Some(crate::bundle::Transfer::zero(bundle.mesh.vertex_count()));
+    }
     let transfer = bundle.transfer.as_ref().with_context(|| format!("{}: the bundle has no transfer to shade", path.display()))?;
     let order = transfer.order as usize;
     let layers = LayerSelection::parse(&config.layers, &transfer.stored_bounces()).map_err(anyhow::Error::msg)?;
@@ -97,6 +113,14 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         None => crate::sky::time::default_tz_minutes(),
     };
     let wants_time_lapse = config.sky || config.time.is_some() || config.step.is_some();
+    // Steps from a list of directions (`sun --directions`) have no time of day.
+    let has_clock = bundle.meta.pointer("/sun/source/kind").and_then(|k| k.as_str()) == Some("spa");
+    if bundle.sun.is_some() && !has_clock && config.time.is_some() {
+        anyhow::bail!(
+            "{}: the time lapse's steps come from a list of sun directions, with no time of day: choose one with --step K",
+            path.display()
+        );
+    }
     let step = match (&bundle.sun, config.step, &config.time) {
         (None, _, _) if wants_time_lapse => {
             anyhow::bail!("{}: the bundle has no time lapse (sun masks), so --sky, --time and --step do not apply", path.display())
@@ -213,6 +237,24 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         }
         _ => None,
     };
+    let step_time = match (&bundle.sun, step) {
+        (Some(sun), Some(k)) if has_clock => Some(view::lighting::step_local_time(sun, k, tz_minutes)),
+        _ => None,
+    };
+    if is_exr(screenshot) {
+        // Linear radiance before tone mapping, for comparison with a path tracer.
+        let image = view::render_linear(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height)?;
+        let bytes = image.encode_exr().map_err(|e| anyhow::anyhow!("cannot encode {}: {e}", screenshot.display()))?;
+        crate::files::write_atomic(screenshot, &bytes).with_context(|| format!("cannot write {}", screenshot.display()))?;
+        if config.json {
+            return super::print_json(&json!({
+                "screenshot": super::json_path(screenshot), "width": width, "height": height, "adapter": gpu.adapter_name(),
+                "linear": true, "step": step, "step_local_time": step_time, "camera": camera.to_arg(), "panel": panel_report,
+            }));
+        }
+        println!("wrote {} ({width}x{height}, linear radiance, {})", screenshot.display(), gpu.adapter_name());
+        return Ok(());
+    }
     let (image, timing) = if config.frames > 0 {
         let (image, timing) = view::time_frames(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height, config.frames)?;
         (image, Some(timing))
@@ -220,10 +262,6 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         (view::render_image(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height)?, None)
     };
     image.write_png(screenshot)?;
-    let step_time = match (&bundle.sun, step) {
-        (Some(sun), Some(k)) => Some(view::lighting::step_local_time(sun, k, tz_minutes)),
-        _ => None,
-    };
     if config.json {
         return super::print_json(&json!({
             "screenshot": super::json_path(screenshot), "width": width, "height": height, "adapter": gpu.adapter_name(),
@@ -238,6 +276,11 @@ pub fn run(config: &ViewConfig) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(feature = "viewer")]
+fn is_exr(path: &std::path::Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))
 }
 
 /// Without a session, Mesa's Vulkan loader prints "XDG_RUNTIME_DIR is invalid

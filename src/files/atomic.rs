@@ -2,11 +2,16 @@
 //! synced, and renamed over the target only when all of a command's outputs
 //! are complete ([`Staged::commit`]).
 //!
-//! Temporaries have short fixed-length names (`.prtbake-<pid>-<n>.tmp`), so an
-//! output name of up to 255 bytes still fits. They are listed in a process-wide
-//! registry: the interrupt handler ([`install_interrupt_cleanup`]) removes them,
-//! and takes the registry's lock, so it never runs in the middle of a commit's
-//! renames (all of a commit lands, or none of it).
+//! Temporaries have short names (`.prtbake-<host>-<pid>-<n>.tmp`, the host
+//! as 8 hex digits of a hash of its name), so an output name of up to 255
+//! bytes still fits. They are listed in a process-wide registry: the
+//! interrupt handler ([`install_interrupt_cleanup`]) removes them, and takes
+//! the registry's lock, so it never runs in the middle of a commit's renames
+//! (all of a commit lands, or none of it). A process killed outright
+//! (SIGKILL, a crash) cannot clean up: the first write of a later run into a
+//! folder removes the temporaries there of this host's processes that no
+//! longer exist ([`remove_stale_temporaries`]); other hosts' (a folder shared
+//! by a cluster's nodes) are left alone.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -18,6 +23,76 @@ use std::sync::Mutex;
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// Distinguishes the temporaries of one process.
 static NEXT_TEMPORARY: AtomicU64 = AtomicU64::new(0);
+/// Folders this process has already swept for dead processes' temporaries.
+static SWEPT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// This host, as 8 hex digits of a CRC-32 of its name (or `0` where the name cannot be read).
+fn host_tag() -> String {
+    static TAG: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    TAG.get_or_init(|| {
+        #[cfg(unix)]
+        {
+            let mut name = [0u8; 256];
+            // SAFETY: the buffer is writable for its whole length.
+            if unsafe { libc::gethostname(name.as_mut_ptr().cast(), name.len()) } == 0 {
+                let end = name.iter().position(|&b| b == 0).unwrap_or(name.len());
+                return format!("{:08x}", crc32fast::hash(&name[..end]));
+            }
+        }
+        "0".to_string()
+    })
+    .clone()
+}
+
+/// Whether process `pid` of this host still exists.
+fn process_exists(pid: u32) -> bool {
+    #[cfg(unix)]
+    {
+        let Ok(pid) = i32::try_from(pid) else { return false };
+        // SAFETY: signal 0 only asks whether the process exists.
+        let r = unsafe { libc::kill(pid, 0) };
+        r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
+}
+
+/// Removes the temporaries in `dir` that this host's processes no longer
+/// running left (killed before they could remove them); returns how many.
+pub fn remove_stale_temporaries(dir: &Path) -> usize {
+    let prefix = format!(".prtbake-{}-", host_tag());
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    let own = std::process::id();
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(&prefix)).and_then(|r| r.strip_suffix(".tmp")) else { continue };
+        let Some(pid) = rest.split_once('-').and_then(|(pid, n)| n.parse::<u64>().ok().and(pid.parse::<u32>().ok())) else { continue };
+        if pid != own && !process_exists(pid) && std::fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// Sweeps `dir` once per process (see [`remove_stale_temporaries`]).
+fn sweep_once(dir: &Path) {
+    let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    {
+        let mut swept = SWEPT.lock().unwrap_or_else(|p| p.into_inner());
+        if swept.contains(&key) {
+            return;
+        }
+        swept.push(key);
+    }
+    let removed = remove_stale_temporaries(dir);
+    if removed > 0 {
+        eprintln!("note: removed {removed} temporary file(s) an interrupted prtbake left in {}", dir.display());
+    }
+}
 
 fn registry() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
     // A panic while holding the lock leaves the list itself intact.
@@ -52,12 +127,20 @@ impl Staged {
             return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name"));
         }
         let dir = parent_dir(&target);
-        let tmp = dir.join(format!(".prtbake-{}-{}.tmp", std::process::id(), NEXT_TEMPORARY.fetch_add(1, Ordering::Relaxed)));
+        sweep_once(dir);
+        let tmp =
+            dir.join(format!(".prtbake-{}-{}-{}.tmp", host_tag(), std::process::id(), NEXT_TEMPORARY.fetch_add(1, Ordering::Relaxed)));
         registry().push(tmp.clone());
+        // A replaced file keeps its permissions (a 0640 output stays 0640).
+        let keep = std::fs::metadata(&target).ok().filter(|m| m.is_file()).map(|m| m.permissions());
         let written = (|| {
             let mut writer = BufWriter::new(File::create(&tmp)?);
             fill(&mut writer)?;
-            writer.into_inner().map_err(|e| e.into_error())?.sync_all()
+            let file = writer.into_inner().map_err(|e| e.into_error())?;
+            if let Some(permissions) = keep {
+                file.set_permissions(permissions)?;
+            }
+            file.sync_all()
         })();
         if let Err(e) = written {
             let _ = std::fs::remove_file(&tmp);
@@ -228,6 +311,33 @@ mod tests {
         write_atomic(&link, b"new").unwrap();
         assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
         assert_eq!(std::fs::read_to_string(&target).unwrap(), "new");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn dead_processes_temporaries_are_removed_and_permissions_kept() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        // A process that has exited: its pid is free (until reused; then its file stays).
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let host = host_tag();
+        let stale = dir.path().join(format!(".prtbake-{host}-{dead}-0.tmp"));
+        let alive = dir.path().join(format!(".prtbake-{host}-{}-99.tmp", std::process::id()));
+        let other_host = dir.path().join(format!(".prtbake-ffffffff-{dead}-0.tmp"));
+        let not_ours = dir.path().join("notes.tmp");
+        for f in [&stale, &alive, &other_host, &not_ours] {
+            std::fs::write(f, "x").unwrap();
+        }
+        assert_eq!(remove_stale_temporaries(dir.path()), if host == "ffffffff" { 2 } else { 1 });
+        assert!(!stale.exists() && alive.exists() && not_ours.exists());
+        // Replacing keeps the target's mode.
+        let out = dir.path().join("out.prtb");
+        std::fs::write(&out, "old").unwrap();
+        std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_atomic(&out, b"new").unwrap();
+        assert_eq!(std::fs::metadata(&out).unwrap().permissions().mode() & 0o777, 0o640);
     }
 
     #[test]

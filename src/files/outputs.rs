@@ -50,8 +50,26 @@ pub enum OutputError {
     ReadOnly { path: PathBuf },
     #[error("{}: exists and was not written by prtbake: refusing to replace it (--force replaces it, or choose another output name)", path.display())]
     Foreign { path: PathBuf },
+    #[error("{}: the file name is {length} bytes, more than the {max} its folder allows: choose a shorter name", path.display())]
+    NameTooLong { path: PathBuf, length: usize, max: usize },
     #[error("{}: {source}", path.display())]
     Io { path: PathBuf, source: std::io::Error },
+}
+
+/// The longest file name the folder `dir` takes (NAME_MAX; 255 where it cannot be asked).
+fn name_max(dir: &Path) -> usize {
+    #[cfg(unix)]
+    {
+        if let Ok(c) = std::ffi::CString::new(dir.as_os_str().as_encoded_bytes()) {
+            // SAFETY: a valid NUL-terminated path; pathconf only reads it.
+            let max = unsafe { libc::pathconf(c.as_ptr(), libc::_PC_NAME_MAX) };
+            if max > 0 {
+                return max as usize;
+            }
+        }
+    }
+    let _ = dir;
+    255
 }
 
 /// The file a write to `path` replaces: `path` itself, or the end of its chain
@@ -121,6 +139,13 @@ fn check_one(output: &Output, force: bool) -> Result<Identity, OutputError> {
         Ok(meta) if meta.is_dir() => {}
         Ok(_) => return Err(no_directory("is not a directory")),
         Err(_) => return Err(no_directory("does not exist")),
+    }
+    // A name the file system refuses would fail only at the final rename,
+    // after the work, and after other outputs had landed.
+    let name = target.file_name().unwrap_or(path.as_os_str());
+    let (length, max) = (name.as_encoded_bytes().len(), name_max(dir));
+    if length > max {
+        return Err(OutputError::NameTooLong { path: owned(), length, max });
     }
     let canonical_dir = std::fs::canonicalize(dir).map_err(|source| OutputError::Io { path: owned(), source })?;
     let canonical = canonical_dir.join(target.file_name().unwrap_or(path.as_os_str()));
@@ -278,6 +303,15 @@ mod tests {
         std::fs::set_permissions(&read_only, permissions).unwrap();
         assert!(matches!(check(&[], &[Output::new(&read_only, PRTB)]), Err(OutputError::ReadOnly { .. })));
         check_outputs(&[], &[Output::new(&read_only, PRTB)], true).unwrap();
+    }
+
+    #[test]
+    fn names_too_long_for_the_folder_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let long = dir.path().join(format!("{}.json", "r".repeat(251)));
+        let e = check(&[], &[Output::new(&long, &["json"])]).unwrap_err();
+        assert!(matches!(e, OutputError::NameTooLong { length: 256, max: 255, .. }), "{e}");
+        check(&[], &[Output::new(&dir.path().join(format!("{}.json", "r".repeat(250))), &["json"])]).unwrap();
     }
 
     #[test]

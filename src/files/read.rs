@@ -1,8 +1,12 @@
 //! Bounded reads of input files. Every loader reads through [`read_limited`],
 //! which refuses anything that is not a regular file (after following links)
 //! and anything larger than the limit for its kind, before reading a byte.
+//! Formats whose header gives the file's size (bundles, GLB, shard files) or
+//! bounds it (EXR, Radiance HDR) read that header first ([`read_head`],
+//! [`read_tail`], [`HeadReader`]) and refuse a file of another size before
+//! reading its body: a valid header on a 3 GB file costs a few bytes.
 
-use std::io::Read;
+use std::io::{Read, Seek};
 use std::path::Path;
 
 /// The largest input of each kind prtbake reads (docs/safety.md).
@@ -94,11 +98,81 @@ pub fn read_head(path: &Path, limit: Limit, max: u64) -> std::io::Result<Vec<u8>
     read_prefix(path, size.min(max))
 }
 
+/// Reads the last `n` bytes of `path` (a regular file within `limit`; all of
+/// it when shorter), and returns them with the file's size: e.g. a trailer
+/// that gives the file's length.
+pub fn read_tail(path: &Path, limit: Limit, n: u64) -> std::io::Result<(Vec<u8>, u64)> {
+    let size = check_regular(path, limit)?;
+    let mut file = std::fs::File::open(path)?;
+    let n = n.min(size);
+    file.seek(std::io::SeekFrom::Start(size - n))?;
+    let mut bytes = Vec::with_capacity(n as usize);
+    file.take(n).read_to_end(&mut bytes)?;
+    count_read(bytes.len());
+    Ok((bytes, size))
+}
+
+/// A reader over at most the first `max` bytes of a regular file within a
+/// limit, for a decoder that reads a header of its own: what it reads is
+/// what is fetched, and [`HeadReader::bytes_read`] says how much that was.
+pub struct HeadReader {
+    inner: std::io::Take<std::fs::File>,
+    read: u64,
+    /// The file's size.
+    pub size: u64,
+}
+
+impl HeadReader {
+    pub fn open(path: &Path, limit: Limit, max: u64) -> std::io::Result<HeadReader> {
+        let size = check_regular(path, limit)?;
+        Ok(HeadReader { inner: std::fs::File::open(path)?.take(max), read: 0, size })
+    }
+
+    /// Bytes read so far (the header's length, once a decoder has read it unbuffered).
+    pub fn bytes_read(&self) -> u64 {
+        self.read
+    }
+}
+
+impl Read for HeadReader {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.read += n as u64;
+        count_read(n);
+        Ok(n)
+    }
+}
+
 fn read_prefix(path: &Path, len: u64) -> std::io::Result<Vec<u8>> {
     let file = std::fs::File::open(path)?;
     let mut bytes = Vec::with_capacity(len as usize);
     file.take(len).read_to_end(&mut bytes)?;
+    count_read(bytes.len());
     Ok(bytes)
+}
+
+#[inline]
+fn count_read(_n: usize) {
+    #[cfg(test)]
+    bytes_read::add(_n);
+}
+
+/// Bytes this thread has read from input files, for tests that bound what a
+/// refusal costs; release builds count nothing.
+#[cfg(test)]
+pub(crate) mod bytes_read {
+    use std::cell::Cell;
+
+    thread_local!(static READ: Cell<u64> = const { Cell::new(0) });
+
+    pub(crate) fn add(n: usize) {
+        READ.with(|read| read.set(read.get() + n as u64));
+    }
+
+    /// The bytes read since the last call, on this thread.
+    pub(crate) fn take() -> u64 {
+        READ.with(|read| read.replace(0))
+    }
 }
 
 #[cfg(test)]

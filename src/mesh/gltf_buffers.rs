@@ -36,28 +36,56 @@ fn read_u32(bytes: &[u8], at: usize) -> Option<u32> {
     Some(u32::from_le_bytes(word.try_into().ok()?))
 }
 
-/// Splits a GLB container into its JSON and (optional) BIN chunk, checking every
-/// length against the bytes actually present. Errors say what is wrong, telling a
-/// truncated file from a bad header.
-pub(crate) fn split_glb(bytes: &[u8]) -> Result<GlbChunks<'_>, String> {
-    if !is_glb(bytes) {
+/// Bytes of a GLB file's header and first chunk's header, which
+/// [`check_glb_head`] reads before the rest.
+pub(crate) const GLB_HEAD_LEN: usize = GLB_HEADER_LEN + CHUNK_HEADER_LEN;
+
+/// What a GLB file's first bytes (`head`: [`GLB_HEAD_LEN`] of them, or the
+/// whole file) say of a file of `file_len` bytes: magic, version 2, the
+/// total length the header gives is the file's (a file longer or shorter is
+/// refused, as the glTF validator does: `GLB_LENGTH_MISMATCH`), and the JSON
+/// chunk fits in it. A loader checks this before reading the rest.
+pub(crate) fn check_glb_head(head: &[u8], file_len: u64) -> Result<(), String> {
+    if !is_glb(head) {
         return Err("not a GLB file (bad magic)".into());
     }
-    let (Some(version), Some(declared)) = (read_u32(bytes, 4), read_u32(bytes, 8)) else {
-        return Err(format!("GLB header truncated ({} bytes)", bytes.len()));
+    let (Some(version), Some(declared)) = (read_u32(head, 4), read_u32(head, 8)) else {
+        return Err(format!("GLB header truncated ({file_len} bytes)"));
     };
     if version != 2 {
         return Err(format!("GLB version {version} is not supported (expected 2)"));
     }
-    let declared = declared as usize;
-    if declared < GLB_HEADER_LEN + CHUNK_HEADER_LEN {
+    let declared = u64::from(declared);
+    if declared < GLB_HEAD_LEN as u64 {
         return Err(format!("GLB header declares a length of {declared} bytes, too small for a JSON chunk"));
     }
-    if declared > bytes.len() {
-        return Err(format!("GLB truncated: header declares {declared} bytes, file has {}", bytes.len()));
+    if declared > file_len {
+        return Err(format!("GLB truncated: header declares {declared} bytes, file has {file_len}"));
     }
-    // Bytes past the declared length are ignored, as the spec's length field allows.
-    let body = &bytes[..declared];
+    if declared < file_len {
+        return Err(format!(
+            "the GLB header declares {declared} bytes but the file has {file_len}: {} bytes past its end (appended to, or not this GLB)",
+            file_len - declared
+        ));
+    }
+    if let Some(json) = read_u32(head, GLB_HEADER_LEN) {
+        if GLB_HEAD_LEN as u64 + u64::from(json) > declared {
+            return Err(format!(
+                "GLB chunk at byte {GLB_HEADER_LEN} declares {json} bytes, only {} remain",
+                declared - GLB_HEAD_LEN as u64
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Splits a GLB container into its JSON and (optional) BIN chunk, checking every
+/// length against the bytes actually present ([`check_glb_head`] first: the
+/// file is exactly as long as its header says). Errors say what is wrong,
+/// telling a truncated file from a bad header.
+pub(crate) fn split_glb(bytes: &[u8]) -> Result<GlbChunks<'_>, String> {
+    check_glb_head(bytes, bytes.len() as u64)?;
+    let body = bytes;
     let mut chunks = Vec::new();
     let mut at = GLB_HEADER_LEN;
     while at < body.len() {
@@ -107,13 +135,19 @@ pub(crate) fn load_buffers<'a>(
             gltf::buffer::Source::Uri(uri) => {
                 let file = resolve_relative_uri(uri, base_dir).map_err(|e| MeshError::gltf(path, format!("buffer {index}: {e}")))?;
                 // Never read past the declared length: a uri naming /dev/zero or a
-                // FIFO is refused, and a huge file is read only as far as needed.
+                // FIFO is refused, a file shorter than its byteLength is refused
+                // before a byte is read, and a longer one is read only as far as needed.
                 let declared = buffer.length() as u64;
                 sources.push(file.clone());
-                match crate::files::read::read_head(&file, crate::files::Limit::Mesh, declared) {
-                    Ok(bytes) => Cow::Owned(bytes),
-                    Err(source) => return Err(MeshError::MissingBuffer { path: path.to_path_buf(), buffer: index, file, source }),
+                let missing = |source| MeshError::MissingBuffer { path: path.to_path_buf(), buffer: index, file: file.clone(), source };
+                let size = crate::files::read::check_regular(&file, crate::files::Limit::Mesh).map_err(missing)?;
+                if size < declared {
+                    return Err(MeshError::gltf(
+                        path,
+                        format!("buffer {index} declares byteLength {declared} but {} holds only {size} bytes", file.display()),
+                    ));
                 }
+                Cow::Owned(crate::files::read::read_head(&file, crate::files::Limit::Mesh, declared).map_err(missing)?)
             }
         };
         let declared = buffer.length();

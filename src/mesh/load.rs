@@ -67,8 +67,19 @@ pub fn load_mesh(path: &Path, options: &LoadOptions) -> Result<LoadedMesh, MeshE
     if !matches!(extension.as_str(), "obj" | "gltf" | "glb") {
         return Err(MeshError::UnsupportedFormat { path: path.to_path_buf(), extension });
     }
-    let bytes = crate::files::read_limited(path, crate::files::Limit::Mesh)
-        .map_err(|source| MeshError::Read { path: path.to_path_buf(), source })?;
+    let read_error = |source| MeshError::Read { path: path.to_path_buf(), source };
+    let bytes = if extension == "obj" {
+        crate::files::read_limited(path, crate::files::Limit::Mesh).map_err(read_error)?
+    } else {
+        // A GLB's header gives its length: checked against the file's before the rest is read.
+        use super::gltf_buffers::{check_glb_head, is_glb, GLB_HEAD_LEN};
+        let head = crate::files::read::read_head(path, crate::files::Limit::Mesh, GLB_HEAD_LEN as u64).map_err(read_error)?;
+        let size = crate::files::read::check_regular(path, crate::files::Limit::Mesh).map_err(read_error)?;
+        if is_glb(&head) {
+            check_glb_head(&head, size).map_err(|e| MeshError::gltf(path, e))?;
+        }
+        crate::files::read::read_head(path, crate::files::Limit::Mesh, size).map_err(read_error)?
+    };
     let (mut warnings, mut sources) = (Vec::new(), Vec::new());
     let mesh = match extension.as_str() {
         "obj" => obj::load_obj(path, &bytes, options.up, &mut warnings, &mut sources)?,

@@ -300,6 +300,53 @@ fn gltf_external_buffer_is_read_relative_to_the_file() {
     assert_eq!(load(&path).unwrap().mesh.triangle_count(), 1);
 }
 
+/// A GLB longer or shorter than its header's length is refused after its
+/// header (20 bytes), as is a glTF buffer file shorter than its
+/// `byteLength` (10¹⁵ here) before a byte of it is read: a 3 GiB sparse
+/// file costs what its header does.
+#[test]
+fn sizes_are_checked_against_glb_headers_and_byte_lengths_before_reading() {
+    use crate::files::read::bytes_read;
+    let dir = tempfile::tempdir().unwrap();
+    let big = 3u64 << 30;
+    let grow = |path: &Path, len: u64| std::fs::OpenOptions::new().write(true).open(path).unwrap().set_len(len).unwrap();
+    let glb = dir.path().join("grown.glb");
+    let mut mesh = Mesh::default();
+    mesh.positions.extend(TRIANGLE.map(Vec3::from));
+    mesh.normals.extend([Vec3::Z; 3]);
+    mesh.indices.extend([0, 1, 2]);
+    mesh.tri_group.push(0);
+    mesh.tri_material.push(0);
+    mesh.materials.push(Material::opaque("grey", 0.5));
+    mesh.groups.push("g".into());
+    write_glb(&glb, &mesh).unwrap();
+    let len = std::fs::metadata(&glb).unwrap().len();
+    bytes_read::take();
+    assert_eq!(load(&glb).unwrap().mesh.triangle_count(), 1);
+    assert_eq!(bytes_read::take(), 20 + len);
+    grow(&glb, big);
+    let message = load(&glb).unwrap_err().to_string();
+    assert_eq!(bytes_read::take(), 20);
+    assert!(
+        message.contains("grown.glb")
+            && message.contains(&format!("declares {len} bytes but the file has {big}"))
+            && message.contains("past its end"),
+        "{message}"
+    );
+    grow(&glb, len - 4);
+    let message = load(&glb).unwrap_err().to_string();
+    assert_eq!(bytes_read::take(), 20);
+    assert!(message.contains("GLB truncated"), "{message}");
+
+    let bin = dir.path().join("big.bin");
+    std::fs::File::create(&bin).unwrap().set_len(big).unwrap();
+    let json = r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"big.bin","byteLength":1000000000000000}]}"#;
+    let gltf = write_file(dir.path(), "huge.gltf", json);
+    let message = load(&gltf).unwrap_err().to_string();
+    assert_eq!(bytes_read::take(), 20 + json.len() as u64, "the .gltf file read, not its buffer");
+    assert!(message.contains("huge.gltf") && message.contains("byteLength 1000000000000000") && message.contains("big.bin"), "{message}");
+}
+
 // ---- writer round trips ----
 
 /// A mesh in the writers' canonical order: triangles sorted by (group, material),

@@ -10,6 +10,7 @@ mod gltf_accessor;
 mod gltf_buffers;
 mod gltf_load;
 mod gltf_scene;
+pub mod inventory;
 mod load;
 mod normals;
 mod obj;

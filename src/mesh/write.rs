@@ -31,8 +31,16 @@ fn commit(staged: Staged, path: &Path) -> Result<(), MeshError> {
 /// symbolic link points to, named after it, as `mtllib` refers to it).
 pub fn mtl_path_for(path: &Path) -> PathBuf {
     let target = crate::files::outputs::final_target(path).unwrap_or_else(|_| path.to_path_buf());
-    let stem = target.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
-    target.with_file_name(format!("{stem}.mtl"))
+    // Byte for byte: two OBJ names that differ only in bytes that are not
+    // UTF-8 must not share one .mtl (a lossy name would make both `…\u{FFFD}.mtl`).
+    match target.file_stem() {
+        Some(stem) => {
+            let mut name = stem.to_os_string();
+            name.push(".mtl");
+            target.with_file_name(name)
+        }
+        None => target.with_file_name("mesh.mtl"),
+    }
 }
 
 fn check_writable(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
@@ -69,7 +77,12 @@ pub fn write_obj(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
 pub fn stage_obj(staged: &mut Staged, path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
     check_writable(path, mesh)?;
     let mtl_path = mtl_path_for(path);
-    let mtl_name = mtl_path.file_name().map_or_else(|| "mesh.mtl".into(), |n| n.to_string_lossy().into_owned());
+    let Some(mtl_name) = mtl_path.file_name().and_then(|n| n.to_str()).map(str::to_owned) else {
+        return Err(MeshError::InvalidForWrite {
+            path: path.to_path_buf(),
+            message: "the OBJ names its .mtl inside the file as text, so the name must be UTF-8".into(),
+        });
+    };
     stage_file(staged, &mtl_path, |w| write_mtl_text(w, &mesh.materials))?;
     stage_file(staged, path, |w| write_obj_text(w, mesh, &mtl_name))
 }
@@ -295,6 +308,10 @@ pub fn stage_glb_with(
 ) -> Result<(), MeshError> {
     check_writable(path, mesh)?;
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
+    if mesh.triangle_count() == 0 {
+        // glTF has no empty primitive: such a file fails validation.
+        return Err(invalid("the mesh has no triangles: nothing to write".into()));
+    }
     for (i, attribute) in attributes_in.iter().enumerate() {
         attribute.check(mesh.vertex_count()).map_err(invalid)?;
         if attributes_in[..i].iter().any(|a| a.semantic == attribute.semantic) {
@@ -315,7 +332,10 @@ pub fn stage_glb_with(
     // loader keys vertices by accessor and transform, not by glTF mesh).
     let pool: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
     let position = bin.push_vec3s(mesh.positions.iter().map(|p| p.to_array()), true);
-    let normal = bin.push_vec3s(mesh.normals.iter().map(|n| n.to_array()), false);
+    // glTF's NORMAL is unit length: a normal that is not (a bundle built in
+    // memory, a zero one) is normalised (+Y if zero); unit ones keep their bits.
+    let unit = |n: &glam::Vec3| if (n.length_squared() - 1.0).abs() <= 1e-5 { *n } else { n.normalize_or(glam::Vec3::Y) };
+    let normal = bin.push_vec3s(mesh.normals.iter().map(|n| unit(n).to_array()), false);
     let mut attributes = json!({"POSITION": position, "NORMAL": normal});
     if !mesh.uvs.is_empty() {
         let data: Vec<u8> = mesh.uvs.iter().flat_map(|uv| uv.to_array()).flat_map(f32::to_le_bytes).collect();

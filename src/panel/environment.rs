@@ -46,7 +46,7 @@ impl Sun {
         let cos_theta = 1.0 - f64::from(u[0]) * (1.0 - self.cos_radius);
         let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
         let phi = std::f64::consts::TAU * f64::from(u[1]);
-        let (t, b) = crate::bake::sampling::tangent_frame(self.direction);
+        let (t, b) = crate::sampling::tangent_frame(self.direction);
         let local = DVec3::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta);
         (t.as_dvec3() * local.x + b.as_dvec3() * local.y + self.direction.as_dvec3() * local.z).normalize().as_vec3()
     }

@@ -21,11 +21,11 @@ use rayon::prelude::*;
 use super::environment::Environment;
 use super::interior::Interior;
 use super::layout::{PanelLayout, NO_TRIANGLE};
-use crate::bake::sampling::{hash_seed, sample_2d, tangent_frame, DirectionPattern};
 use crate::brdf::Brdf;
+use crate::sampling::{hash_seed, sample_2d, tangent_frame, DirectionPattern};
 
 /// The most samples a texel can take (one Sobol stream: 2^16 points).
-pub const MAX_SAMPLES: u32 = crate::bake::sampling::MAX_RAYS_PER_POINT;
+pub const MAX_SAMPLES: u32 = crate::sampling::MAX_RAYS_PER_POINT;
 
 /// Choices of the estimator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,6 +49,8 @@ struct Sums {
     total: [f64; 3],
     /// The part that came through windows.
     window: [f64; 3],
+    /// The part that came straight from the sky or the sun (through windows or not).
+    sky: [f64; 3],
     /// Σ of each sample's luminance squared (for the standard error).
     luminance_sq: f64,
     rays: u64,
@@ -61,6 +63,9 @@ pub struct TexelResult {
     pub radiance: [f32; 3],
     /// The part of it that came through windows.
     pub through_windows: [f32; 3],
+    /// The part of it that came straight from the sky or the sun (through
+    /// windows or, in open mode, not); the rest the interior reflected.
+    pub from_sky: [f32; 3],
     /// Standard error of the mean luminance (Rec. 709 weights), from the sample variance.
     pub luminance_error: f32,
 }
@@ -140,6 +145,7 @@ impl<'a> PanelGather<'a> {
         Some(TexelResult {
             radiance: mean.map(|x| x as f32),
             through_windows: s.window.map(|x| (x / n) as f32),
+            from_sky: s.sky.map(|x| (x / n) as f32),
             luminance_error: (variance / n).sqrt() as f32,
         })
     }
@@ -175,11 +181,15 @@ impl<'a> PanelGather<'a> {
             };
             let mut value = [0.0f32; 3];
             let mut through_window = [0.0f32; 3];
-            let mut add = |w: [f32; 3], light: [f32; 3], window: bool| {
+            let mut from_sky = [0.0f32; 3];
+            let mut add = |w: [f32; 3], light: [f32; 3], window: bool, sky: bool| {
                 for c in 0..3 {
                     value[c] += w[c] * light[c];
                     if window {
                         through_window[c] += w[c] * light[c];
+                    }
+                    if sky {
+                        from_sky[c] += w[c] * light[c];
                     }
                 }
             };
@@ -190,11 +200,11 @@ impl<'a> PanelGather<'a> {
                 let weight = f.map(|f| f * sample.wi.z / sample.pdf);
                 let arrival = self.interior.trace(self.env, p, face, wi);
                 sums.rays += 1;
-                add(weight, arrival.radiance, arrival.through_window);
+                add(weight, arrival.radiance, arrival.through_window, arrival.sky_transmittance > 0.0);
                 if let (Some(sun), Some(l_sun)) = (sun, sun_radiance) {
                     if arrival.sky_transmittance > 0.0 && sun.contains(wi) {
                         let mis = if self.options.sun_sampling { power_heuristic(sample.pdf, sun_pdf) } else { 1.0 };
-                        add(weight, l_sun.map(|l| l * arrival.sky_transmittance * mis), arrival.through_window);
+                        add(weight, l_sun.map(|l| l * arrival.sky_transmittance * mis), arrival.through_window, true);
                     }
                 }
             }
@@ -210,7 +220,7 @@ impl<'a> PanelGather<'a> {
                         if tau > 0.0 {
                             let mis = power_heuristic(sun_pdf, self.brdf.pdf(wo_local, wi_local));
                             let weight = f.map(|f| f * wi_local.z / sun_pdf * mis * tau);
-                            add(weight, l_sun, window);
+                            add(weight, l_sun, window, true);
                         }
                     }
                 }
@@ -218,6 +228,7 @@ impl<'a> PanelGather<'a> {
             for c in 0..3 {
                 sums.total[c] += f64::from(value[c]);
                 sums.window[c] += f64::from(through_window[c]);
+                sums.sky[c] += f64::from(from_sky[c]);
             }
             let y = super::readability::luminance_f64(value.map(f64::from));
             sums.luminance_sq += y * y;

@@ -13,8 +13,9 @@
 use glam::Vec3;
 
 use super::environment::{Environment, Sun};
-use crate::bake::{Scene, Surfaces};
+use crate::bake::Surfaces;
 use crate::mesh::Mesh;
+use crate::trace::Scene;
 
 /// Panes of glass a ray may pass through before it counts as blocked
 /// (windscreen + a side window + a far window is three).

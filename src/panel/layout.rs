@@ -220,7 +220,7 @@ fn uv_spans_area(mesh: &Mesh, triangles: &[u32]) -> bool {
 /// The panel's plane and the oriented box of its corners projected there (x
 /// along the long axis, y = front × x).
 fn planar_frame(mesh: &Mesh, triangles: &[u32], centre: Vec3, front: Vec3) -> PlanarFrame {
-    let (t0, t1) = crate::bake::sampling::tangent_frame(front);
+    let (t0, t1) = crate::sampling::tangent_frame(front);
     let in_plane = |p: Vec3| DVec2::new((p - centre).dot(t0) as f64, (p - centre).dot(t1) as f64);
     // Principal axis of the panel's area (second moments of its triangles,
     // ∫ x xᵀ dA = A/12 · (Σ pᵢ pᵢᵀ + s sᵀ), s = Σ pᵢ), in closed form for 2×2.

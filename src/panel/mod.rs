@@ -50,4 +50,20 @@ pub enum PanelError {
     BadChannels { path: PathBuf, channels: u32 },
     #[error("texels {width}x{height}: each side must be 1..=4096")]
     BadTexels { width: u32, height: u32 },
+    #[error(
+        "{}: {non_finite} of {values} reflected radiance values are not finite (the light, {light}, overflows single precision): no readability can be computed",
+        .path.display()
+    )]
+    NonFinite { path: PathBuf, non_finite: usize, values: usize, light: String },
+}
+
+/// Refuses a gather whose results overflowed (a light far past any real
+/// one): statistics over NaN or infinity would read as "readable".
+pub fn check_finite(results: &[Option<TexelResult>], path: &std::path::Path, light: &str) -> Result<(), PanelError> {
+    let values: Vec<f32> = results.iter().flatten().flat_map(|t| t.radiance.into_iter().chain([t.luminance_error])).collect();
+    let non_finite = values.iter().filter(|v| !v.is_finite()).count();
+    if non_finite > 0 {
+        return Err(PanelError::NonFinite { path: path.to_path_buf(), non_finite, values: values.len(), light: light.to_string() });
+    }
+    Ok(())
 }

@@ -48,7 +48,10 @@ pub struct Readability {
     pub max_reflected_luminance: f32,
     /// Mean over the texels (with any reflected light) of the share of reflected luminance that came through windows.
     pub window_share: f32,
-    /// `1 − window_share`: the share from the interior.
+    /// Mean over the texels (with any reflected light) of the share that came
+    /// straight from the sky or the sun, through windows or not (open mode).
+    pub sky_share: f32,
+    /// `1 − sky_share`: the share the interior's surfaces reflected.
     pub interior_share: f32,
     /// Largest standard error of a texel's reflected luminance, relative to the texel's value.
     pub max_relative_error: f32,
@@ -67,13 +70,21 @@ impl Readability {
         let n = ratios.len();
         let median = if n % 2 == 1 { ratios[n / 2] } else { 0.5 * (ratios[n / 2 - 1] + ratios[n / 2]) };
         let below = ratios.iter().filter(|&&r| r < threshold).count();
-        let shares: Vec<f64> = texels
-            .iter()
-            .zip(&reflected)
-            .filter(|(_, &l)| l > 0.0)
-            .map(|(t, &l)| (f64::from(luminance(t.through_windows)) / f64::from(l)).clamp(0.0, 1.0))
-            .collect();
-        let window_share = if shares.is_empty() { 0.0 } else { (shares.iter().sum::<f64>() / shares.len() as f64) as f32 };
+        let mean_share = |part: fn(&TexelResult) -> [f32; 3]| {
+            let shares: Vec<f64> = texels
+                .iter()
+                .zip(&reflected)
+                .filter(|(_, &l)| l > 0.0)
+                .map(|(t, &l)| (f64::from(luminance(part(t))) / f64::from(l)).clamp(0.0, 1.0))
+                .collect();
+            if shares.is_empty() {
+                0.0
+            } else {
+                (shares.iter().sum::<f64>() / shares.len() as f64) as f32
+            }
+        };
+        let window_share = mean_share(|t| t.through_windows);
+        let sky_share = mean_share(|t| t.from_sky);
         let max_relative_error =
             texels.iter().zip(&reflected).filter(|(_, &l)| l > 0.0).map(|(t, &l)| t.luminance_error / l).fold(0.0f32, f32::max);
         Some(Readability {
@@ -85,7 +96,8 @@ impl Readability {
             mean_reflected_luminance: (reflected.iter().map(|&l| f64::from(l)).sum::<f64>() / n as f64) as f32,
             max_reflected_luminance: reflected.iter().copied().fold(0.0, f32::max),
             window_share,
-            interior_share: 1.0 - window_share,
+            sky_share,
+            interior_share: 1.0 - sky_share,
             max_relative_error,
         })
     }
@@ -102,7 +114,9 @@ mod tests {
         // L_r = (500 − 3·0.5)/2 = 249.25 gives exactly 3:1.
         assert!((contrast_ratio(display, 249.25) - 3.0).abs() < 1e-6);
         assert!((luminance([1.0, 1.0, 1.0]) - 1.0).abs() < 1e-6);
-        let texel = |y: f32, window: f32| Some(TexelResult { radiance: [y; 3], through_windows: [window; 3], luminance_error: 0.0 });
+        let texel = |y: f32, window: f32| {
+            Some(TexelResult { radiance: [y; 3], through_windows: [window; 3], from_sky: [window; 3], luminance_error: 0.0 })
+        };
         let results = vec![texel(0.0, 0.0), None, texel(249.25, 249.25), texel(500.0, 125.0), texel(10.0, 0.0)];
         let r = Readability::of(&results, display, 3.0).unwrap();
         assert_eq!(r.texels, 4);
@@ -110,6 +124,7 @@ mod tests {
         assert_eq!(r.fraction_below_threshold, 0.25, "only 500 (1.998) is below; 249.25 gives 3.0 exactly");
         // Shares over the three texels with light: 1, 0.25, 0.
         assert!((r.window_share - 1.25 / 3.0).abs() < 1e-6);
+        assert!((r.sky_share - 1.25 / 3.0).abs() < 1e-6 && (r.interior_share - 1.75 / 3.0).abs() < 1e-6);
         let median = 0.5 * (contrast_ratio(display, 10.0) + contrast_ratio(display, 249.25));
         assert!((r.median_contrast_ratio - median).abs() < 1e-4);
         assert!(Readability::of(&[None, None], display, 3.0).is_none());

@@ -40,9 +40,10 @@ pub mod probe;
 
 use glam::Vec3;
 
-use crate::bake::{self, BakeError, BakeParams, BuildQuality, Scene, SunMasks, SunParams, Surfaces, TransferResult};
+use crate::bake::{self, BakeError, BakeParams, SunMasks, SunParams, Surfaces, TransferResult};
 use crate::clean::split_edges;
 use crate::mesh::Mesh;
+use crate::trace::{BuildQuality, Scene};
 
 pub use error::{sun_edge_errors, transfer_edge_errors, MeanShading};
 
@@ -56,7 +57,9 @@ pub struct RefineParams {
     pub max_vertices: usize,
     /// Edges this short (world units) are never split.
     pub min_edge: f32,
-    /// At most this many split-and-re-bake rounds.
+    /// At most this many split-and-re-bake rounds: a safety stop, far past
+    /// what the budget takes (each round spends a share of it, see
+    /// [`round_take`]).
     pub max_rounds: u32,
     /// Transfer: a luminance difference counts only past this many standard
     /// errors of the two vertices' estimates (every bounce's spread), so that
@@ -68,21 +71,47 @@ pub struct RefineParams {
 pub const DEFAULT_MIN_EDGE_FRACTION: f32 = 2e-4;
 /// The default budget: this many times the input's vertices.
 pub const DEFAULT_BUDGET_FACTOR: usize = 4;
-/// The default round limit.
-pub const DEFAULT_MAX_ROUNDS: u32 = 16;
+/// The largest vertex budget accepted: the refined mesh (with its one-rings),
+/// its sample points and order-3 colour transfer take about 0.5 KB a vertex,
+/// about 12 GB here, half of a 24 GB machine. More is refused before any work.
+pub const MAX_VERTICES: usize = 25_000_000;
+/// The default round limit (the budget normally ends a refinement in 8–12 rounds).
+pub const DEFAULT_MAX_ROUNDS: u32 = 64;
 /// The default `noise_sigmas`: a difference two standard errors deep is
 /// noise one time in about twenty (the estimate overstates on stratified
 /// points, so fewer in practice).
 pub const DEFAULT_NOISE_SIGMAS: f64 = 2.0;
-/// A round splits at most `1 / ROUND_BUDGET_SHARE` of the vertex budget left.
+/// A round splits at most `1 / ROUND_BUDGET_SHARE` of the vertex budget
+/// left, so later rounds see the light the splits revealed ...
 const ROUND_BUDGET_SHARE: usize = 4;
+/// ... but at least `1 / ROUND_MIN_SHARE` of the whole growth the budget
+/// allows, so the budget is spent in a bounded number of rounds instead of
+/// an ever smaller share each round.
+const ROUND_MIN_SHARE: usize = 8;
+
+/// Vertices a round may add with `room` left of a budget that allows
+/// `growth` new vertices in all.
+pub fn round_take(room: usize, growth: usize) -> usize {
+    room.div_ceil(ROUND_BUDGET_SHARE).max(growth.div_ceil(ROUND_MIN_SHARE)).min(room)
+}
+
+/// Rounds the budget still takes from `room` left (each round spending its
+/// whole take): an upper bound on the rounds left when no edge converges first.
+pub fn rounds_left(mut room: usize, growth: usize) -> usize {
+    let mut rounds = 0;
+    while room > 0 && rounds < DEFAULT_MAX_ROUNDS as usize {
+        room -= round_take(room, growth).max(1);
+        rounds += 1;
+    }
+    rounds
+}
 
 impl RefineParams {
     /// `error` and/or `max_vertices` as asked, the rest from `mesh`'s size.
     pub fn for_mesh(mesh: &Mesh, error: Option<f64>, max_vertices: Option<usize>, min_edge: Option<f32>) -> RefineParams {
         RefineParams {
             error,
-            max_vertices: max_vertices.unwrap_or(mesh.vertex_count().saturating_mul(DEFAULT_BUDGET_FACTOR)),
+            max_vertices: max_vertices.unwrap_or(mesh.vertex_count().saturating_mul(DEFAULT_BUDGET_FACTOR).min(MAX_VERTICES)),
             min_edge: min_edge.unwrap_or(DEFAULT_MIN_EDGE_FRACTION * mesh.referenced_diagonal()),
             max_rounds: DEFAULT_MAX_ROUNDS,
             noise_sigmas: DEFAULT_NOISE_SIGMAS,
@@ -101,6 +130,9 @@ impl RefineParams {
         }
         if !(self.min_edge.is_finite() && self.min_edge >= 0.0) {
             return Err(BakeError::Params(format!("refine min edge {} must be finite and >= 0", self.min_edge)));
+        }
+        if self.max_vertices > MAX_VERTICES {
+            return Err(BakeError::Params(format!("refine budget {} vertices is over the {MAX_VERTICES} that fit", self.max_vertices)));
         }
         Ok(())
     }
@@ -132,6 +164,9 @@ pub struct RefineReport {
     pub stopped: String,
     pub input_vertices: usize,
     pub output_vertices: usize,
+    /// Wall time of the whole refinement, and of its BVH builds (one per round).
+    pub seconds: f64,
+    pub bvh_build_seconds: f64,
 }
 
 impl RefineReport {
@@ -144,18 +179,30 @@ impl RefineReport {
                 round.remove("seconds");
             }
         }
+        if let Some(fields) = value.as_object_mut() {
+            fields.remove("seconds");
+            fields.remove("bvh_build_seconds");
+        }
         value
     }
 
     /// One line for stderr.
     pub fn summary(&self) -> String {
         let last = self.rounds.last().cloned().unwrap_or_default();
+        let why = match self.stopped.as_str() {
+            "converged" => "converged: no edge over the error",
+            "budget" => "the vertex budget is spent (--max-vertices)",
+            "min_edge" => "every edge over the error is shorter than --min-edge",
+            "rounds" => "the safety limit of rounds",
+            other => other,
+        };
         format!(
-            "refine: {} -> {} vertices in {} round(s), stopped: {}; {} edge(s) over the error, largest {:.4}",
+            "refine: {} -> {} vertices in {} round(s), {:.1} s ({:.1} s of BVH builds); stopped: {why}; {} edge(s) over the error, largest {:.4}",
             self.input_vertices,
             self.output_vertices,
             self.rounds.len(),
-            self.stopped,
+            self.seconds,
+            self.bvh_build_seconds,
             last.edges_over,
             last.max_edge_error
         )
@@ -169,6 +216,7 @@ pub fn refine_transfer(
     mesh: Mesh,
     params: &BakeParams,
     window_patterns: &[String],
+    one_sided_patterns: &[String],
     refine: &RefineParams,
 ) -> Result<(Mesh, TransferResult, Surfaces, RefineReport), BakeError> {
     params.check()?;
@@ -177,8 +225,10 @@ pub fn refine_transfer(
     let mut report = RefineReport { params: Some(*refine), input_vertices: mesh.vertex_count(), ..RefineReport::default() };
     let layered = BakeParams { store_bounces: true, ..*params };
     let mut mesh = mesh;
-    let mut surfaces = Surfaces::resolve(&mesh, window_patterns)?;
+    let mut surfaces = Surfaces::resolve(&mesh, window_patterns)?.with_one_sided(&mesh, one_sided_patterns)?;
+    let whole_start = std::time::Instant::now();
     let scene = Scene::build(&mesh, BuildQuality::Sah)?;
+    report.bvh_build_seconds += scene.build_time.as_secs_f64();
     let mut result = bake::bake_transfer(&mesh, &scene, &surfaces, &layered)?;
     drop(scene);
     let mean = MeanShading::of(&mesh, &result);
@@ -187,16 +237,18 @@ pub fn refine_transfer(
     let mut totals = result.stats.clone();
     loop {
         let errors = transfer_edge_errors(&mesh, &result, &mean, refine.noise_sigmas);
-        let step = next_split(&mesh, &errors, refine, &mut report, baked, &result.stats, transfer_priority);
+        let step = next_split(&mesh, &errors, refine, &mut report, baked, &result.stats, transfer_priority, params.quiet);
         let Some(split) = step else { break };
         let vertices_before = mesh.vertex_count();
         let rebake = Rebake::of(&split.mesh, &split.changed_triangles);
         let kept_layers: Vec<Vec<f32>> =
             result.bounces.iter().map(|l| extend_rows(l, vertices_before, split.mesh.vertex_count())).collect();
         mesh = split.mesh;
-        surfaces = Surfaces::resolve(&mesh, window_patterns)?;
+        surfaces = Surfaces::resolve(&mesh, window_patterns)?.with_one_sided(&mesh, one_sided_patterns)?;
         let scene = Scene::build(&mesh, BuildQuality::Sah)?;
-        let kept = bake::transfer::Kept { layers: &kept_layers, vertices: &rebake.kept_vertices };
+        report.bvh_build_seconds += scene.build_time.as_secs_f64();
+        let kept_back: Vec<Vec<f32>> = result.back.iter().map(|l| extend_rows(l, vertices_before, mesh.vertex_count())).collect();
+        let kept = bake::transfer::Kept { layers: &kept_layers, back: &kept_back, vertices: &rebake.kept_vertices };
         let kept_noise = extend_rows(&result.noise, vertices_before, mesh.vertex_count());
         result = bake::transfer::bake_transfer_update(&mesh, &scene, &surfaces, &layered, &rebake.receivers, &kept)?;
         // A kept vertex keeps its value, so it keeps its noise too.
@@ -213,6 +265,7 @@ pub fn refine_transfer(
         totals.rays_gathered += result.stats.rays_gathered;
     }
     report.output_vertices = mesh.vertex_count();
+    report.seconds = whole_start.elapsed().as_secs_f64();
     // The stats count every round's work; the rest describes the final mesh.
     let seconds = started.elapsed().as_secs_f64() + totals.seconds;
     result.stats = bake::BakeStats {
@@ -248,12 +301,13 @@ pub fn refine_sun(
     let started = std::time::Instant::now();
     let surfaces = Surfaces::resolve(&mesh, window_patterns)?;
     let scene = Scene::build(&mesh, BuildQuality::Sah)?;
+    report.bvh_build_seconds += scene.build_time.as_secs_f64();
     let (mut masks, mut split_votes) = bake::sun::bake_sun_masks_split(&mesh, &scene, &surfaces, suns, params)?;
     let (mut rays, mut baked) = (masks.stats.rays, mesh.vertex_count());
     loop {
         let errors = sun_edge_errors(&mesh, &masks, &split_votes, suns, params.mode);
         let stats = bake::BakeStats { rays_traced: masks.stats.rays, seconds: masks.stats.seconds, ..Default::default() };
-        let Some(split) = next_split(&mesh, &errors, refine, &mut report, baked, &stats, sun_priority) else { break };
+        let Some(split) = next_split(&mesh, &errors, refine, &mut report, baked, &stats, sun_priority, params.quiet) else { break };
         let words = masks.words_per_vertex as usize;
         let rebake = Rebake::of(&split.mesh, &split.changed_triangles);
         let previous_masks = SunMasks { masks: extend_rows(&masks.masks, mesh.vertex_count(), split.mesh.vertex_count()), ..masks };
@@ -262,6 +316,7 @@ pub fn refine_sun(
         mesh = split.mesh;
         let surfaces = Surfaces::resolve(&mesh, window_patterns)?;
         let scene = Scene::build(&mesh, BuildQuality::Sah)?;
+        report.bvh_build_seconds += scene.build_time.as_secs_f64();
         (masks, split_votes) = bake::sun::bake_sun_masks_update(
             &mesh,
             &scene,
@@ -275,6 +330,7 @@ pub fn refine_sun(
         baked = rebake.kept_vertices.iter().filter(|&&k| !k).count();
     }
     report.output_vertices = mesh.vertex_count();
+    report.seconds = started.elapsed().as_secs_f64();
     // The stats count every round's rays; the rest describes the final mesh.
     masks.stats.rays = rays;
     masks.stats.seconds = started.elapsed().as_secs_f64();
@@ -304,6 +360,7 @@ pub struct EdgeError {
 
 /// Records the round just baked and chooses the next split: `None` when
 /// the refinement stops (the reason goes into `report.stopped`).
+#[allow(clippy::too_many_arguments)] // the round's state, each needed to choose the split
 fn next_split(
     mesh: &Mesh,
     errors: &[EdgeError],
@@ -312,6 +369,7 @@ fn next_split(
     vertices_baked: usize,
     stats: &bake::BakeStats,
     priority: fn(f64, f64) -> f64,
+    quiet: bool,
 ) -> Option<crate::clean::EdgeSplit> {
     let threshold = refine.error.unwrap_or(0.0);
     let length = |[a, b]: [u32; 2]| mesh.positions[a as usize].distance(mesh.positions[b as usize]);
@@ -327,6 +385,21 @@ fn next_split(
         rays_traced: stats.rays_traced,
         seconds: stats.seconds,
     });
+    if !quiet {
+        let last = &report.rounds[report.rounds.len() - 1];
+        let growth = refine.max_vertices.saturating_sub(report.input_vertices);
+        let left = if over.is_empty() { 0 } else { rounds_left(refine.max_vertices.saturating_sub(mesh.vertex_count()), growth) };
+        eprintln!(
+            "refine round {}: {} of {} vertices ({:.0}% of the budget spent), {} edge(s) over the error {}, largest {:.4}; at most {left} more round(s)",
+            report.rounds.len(),
+            last.vertices,
+            refine.max_vertices,
+            100.0 * (last.vertices.saturating_sub(report.input_vertices)) as f64 / growth.max(1) as f64,
+            last.edges_over,
+            threshold,
+            last.max_edge_error
+        );
+    }
     let stop = |report: &mut RefineReport, why: &str| {
         report.stopped = why.to_string();
         None
@@ -346,11 +419,12 @@ fn next_split(
     }
     // Largest integrated error first; ties by edge, so the order is fixed.
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-    // A round spends at most a share of the budget that is left, so that
-    // later rounds, which see the light the splits revealed, choose the rest.
+    // A round spends a share of the budget (`round_take`), so that later
+    // rounds, which see the light the splits revealed, choose the rest.
     // Each split edge adds a vertex (more on creases and through the
     // longest-edge closure): halve the take until the result fits.
-    let mut take = candidates.len().min(room.div_ceil(ROUND_BUDGET_SHARE));
+    let growth = refine.max_vertices.saturating_sub(report.input_vertices);
+    let mut take = candidates.len().min(round_take(room, growth));
     while take > 0 {
         let edges: Vec<[u32; 2]> = candidates[..take].iter().map(|c| c.1).collect();
         let split = split_edges(mesh, &edges);

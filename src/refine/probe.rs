@@ -8,8 +8,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::bake::{Scene, SunMasks, Surfaces};
+use crate::bake::{SunMasks, Surfaces};
 use crate::mesh::Mesh;
+use crate::trace::Scene;
 
 /// A point on a surface and its face normal.
 #[derive(Clone, Copy, Debug, PartialEq)]

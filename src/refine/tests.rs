@@ -71,7 +71,7 @@ fn refine_noise(
     noise_sigmas: f64,
 ) -> (Mesh, TransferResult, RefineReport) {
     let refine = RefineParams { error, max_vertices: budget, min_edge: 0.02, max_rounds: DEFAULT_MAX_ROUNDS, noise_sigmas };
-    let (m, r, _, report) = refine_transfer(mesh.clone(), params, &[], &refine).expect("refine");
+    let (m, r, _, report) = refine_transfer(mesh.clone(), params, &[], &[], &refine).expect("refine");
     (m, r, report)
 }
 
@@ -225,4 +225,25 @@ fn sun_refinement_draws_slat_shadows_4x_closer_to_the_per_point_reference() {
     let (again, again_masks, _) = one.install(|| refine_sun(mesh.clone(), &[], &suns, &params, &refine)).expect("refine");
     assert_eq!(again, refined);
     assert_eq!(again_masks.masks, masks.masks);
+}
+
+/// The budget, not a fixed round cap, ends a refinement: each round takes a
+/// quarter of the room left but at least an eighth of the whole growth, so
+/// the budget is spent in at most 8 + log_{4/3} 2 ≈ 11 rounds.
+#[test]
+fn rounds_spend_the_budget_in_a_bounded_number_of_rounds() {
+    for growth in [1usize, 7, 1000, 460_000, 25_000_000] {
+        let rounds = super::rounds_left(growth, growth);
+        assert!((1..=11).contains(&rounds), "growth {growth}: {rounds} rounds");
+        let mut room = growth;
+        let mut takes = Vec::new();
+        while room > 0 {
+            let take = super::round_take(room, growth);
+            assert!(take >= 1 && take <= room);
+            takes.push(take);
+            room -= take;
+        }
+        assert_eq!(takes.len(), rounds);
+        assert!(takes.iter().all(|&t| t >= growth.div_ceil(8).min(t)), "{takes:?}");
+    }
 }

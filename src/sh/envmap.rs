@@ -53,10 +53,19 @@ pub enum EnvMapError {
     NonFinite { path: PathBuf, col: u32, row: u32, value: [f32; 3] },
     #[error("{}: bad Radiance HDR file: {problem}", .path.display())]
     BadHdr { path: PathBuf, problem: HdrProblem },
+    #[error(
+        "{}: is {size} bytes, but the {width}×{height} image its header describes takes at most {bound}: not an image this size (data appended, or a damaged header)",
+        .path.display()
+    )]
+    Oversized { path: PathBuf, size: u64, width: u64, height: u64, bound: u64 },
 }
 
 /// OpenEXR magic number, the first four bytes of every EXR file.
 const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+/// Most bytes read for an EXR's headers (attributes, previews) before its size is checked.
+const EXR_HEAD_MAX: u64 = 64 << 20;
+/// Most bytes read for a Radiance header and resolution line.
+const HDR_HEAD_MAX: u64 = 64 << 10;
 
 /// Loads an equirectangular map from `.exr` (any compression and sample type
 /// the exr crate reads; the first layer with R, G, B; alpha ignored) or
@@ -64,14 +73,32 @@ const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
 /// case-insensitively.
 ///
 /// Refuses non-finite pixels, zero-size images and images over
-/// 16384×8192 pixels.
+/// 16384×8192 pixels. The header is read first: an image over the limit,
+/// or a file larger than the image its header describes can take
+/// ([`EnvMapError::Oversized`]: a map with gigabytes appended), is refused
+/// before the rest is read.
 pub fn load_equirect(path: &Path) -> Result<EquirectImage, EnvMapError> {
+    use crate::files::{read, Limit};
     let owned = || path.to_path_buf();
-    let bytes = crate::files::read_limited(path, crate::files::Limit::Image).map_err(|source| match source.kind() {
+    let io_error = |source: std::io::Error| match source.kind() {
         std::io::ErrorKind::NotFound => EnvMapError::NotFound { path: owned() },
         _ => EnvMapError::Io { path: owned(), source },
-    })?;
+    };
+    let size = read::check_regular(path, Limit::Image).map_err(io_error)?;
     let extension = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match extension.as_deref() {
+        Some("exr") => check_exr_size(path, size)?,
+        Some("hdr") => {
+            let head = read::read_head(path, Limit::Image, HDR_HEAD_MAX).map_err(io_error)?;
+            let header = super::rgbe::parse_header(&head).map_err(|problem| EnvMapError::BadHdr { path: owned(), problem })?;
+            let (width, height, bound) = (u64::from(header.width), u64::from(header.height), header.max_file_bytes());
+            if size > bound {
+                return Err(EnvMapError::Oversized { path: owned(), size, width, height, bound });
+            }
+        }
+        _ => return Err(EnvMapError::UnknownExtension { path: owned() }),
+    }
+    let bytes = read::read_head(path, Limit::Image, size).map_err(io_error)?;
     let image = match extension.as_deref() {
         Some("exr") => decode_exr(path, bytes)?,
         Some("hdr") => {
@@ -82,6 +109,41 @@ pub fn load_equirect(path: &Path) -> Result<EquirectImage, EnvMapError> {
     };
     check_pixels(path, &image)?;
     Ok(image)
+}
+
+/// Reads an EXR's headers alone (magic, attributes; at most
+/// [`EXR_HEAD_MAX`] bytes) and refuses it before its pixels are read when a
+/// part is over the pixel limit, or when the file is larger than its headers,
+/// offset tables and every chunk stored uncompressed can take (OpenEXR
+/// stores a chunk uncompressed when compressing does not shrink it; 64 bytes
+/// of chunk header each, `exr`'s `max_pixel_file_bytes`). Deep parts have no
+/// such bound and are left to the decoder.
+fn check_exr_size(path: &Path, size: u64) -> Result<(), EnvMapError> {
+    use crate::files::{read, Limit};
+    let owned = || path.to_path_buf();
+    let magic = read::read_head(path, Limit::Image, EXR_MAGIC.len() as u64).map_err(|source| EnvMapError::Io { path: owned(), source })?;
+    if magic != EXR_MAGIC {
+        return Err(EnvMapError::NotExr { path: owned() });
+    }
+    let mut reader =
+        read::HeadReader::open(path, Limit::Image, EXR_HEAD_MAX).map_err(|source| EnvMapError::Io { path: owned(), source })?;
+    let meta = exr::meta::MetaData::read_from_buffered(&mut reader, false).map_err(|source| EnvMapError::Exr { path: owned(), source })?;
+    let mut bound = reader.bytes_read();
+    for header in &meta.headers {
+        let (width, height) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
+        if width.saturating_mul(height) > MAX_PIXELS {
+            return Err(EnvMapError::TooLarge { path: owned(), width, height });
+        }
+        if header.deep {
+            return Ok(());
+        }
+        bound += 8 * header.chunk_count as u64 + header.max_pixel_file_bytes() as u64;
+    }
+    if size > bound {
+        let (width, height) = meta.headers.first().map_or((0, 0), |h| (h.layer_size.width() as u64, h.layer_size.height() as u64));
+        return Err(EnvMapError::Oversized { path: owned(), size, width, height, bound });
+    }
+    Ok(())
 }
 
 fn decode_exr(path: &Path, bytes: Vec<u8>) -> Result<EquirectImage, EnvMapError> {

@@ -317,3 +317,35 @@ fn projection_of_analytic_sky_matches_image_projection() {
         assert!((a[0] - b[0]).abs() < PROJECTION_TOL && (a[1] - b[1]).abs() < PROJECTION_TOL, "{a:?} vs {b:?}");
     }
 }
+
+/// An EXR or a Radiance HDR larger than the image its header describes can
+/// take (a valid map extended to a sparse 3 GiB) is refused after its
+/// header, naming the file, its size and the image's; the maps themselves load.
+#[test]
+fn maps_larger_than_their_headers_allow_are_refused_after_the_header() {
+    use crate::files::read::bytes_read;
+    let big = 3u64 << 30;
+    let exr = temp_path("grown.exr");
+    assert!(exr::prelude::write_rgb_file(&exr, 64, 32, |x, _| (x as f32, 1.0_f32, 0.5_f32)).is_ok());
+    let hdr = temp_path("grown.hdr");
+    assert!(std::fs::write(&hdr, encode_hdr(40, 20, &vec![[1.0, 2.0, 3.0]; 800], true, false)).is_ok());
+    for (path, size) in [(&exr, "64×32"), (&hdr, "40×20")] {
+        let len = std::fs::metadata(path).unwrap().len();
+        bytes_read::take();
+        assert!(load_equirect(path).is_ok());
+        assert!(bytes_read::take() >= len);
+        std::fs::OpenOptions::new().write(true).open(path).unwrap().set_len(big).unwrap();
+        let result = load_equirect(path);
+        let read = bytes_read::take();
+        let _ = std::fs::remove_file(path);
+        let message = match result {
+            Err(e @ EnvMapError::Oversized { .. }) => e.to_string(),
+            other => panic!("{}: expected Oversized, got {other:?}", path.display()),
+        };
+        assert!(
+            message.contains(&path.display().to_string()) && message.contains(&format!("is {big} bytes")) && message.contains(size),
+            "{message}"
+        );
+        assert!(read <= 64 << 10, "{}: {read} bytes read to refuse it", path.display());
+    }
+}

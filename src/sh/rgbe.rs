@@ -51,8 +51,29 @@ pub(crate) struct DecodedRgbe {
     pub rgb: Vec<[f32; 3]>,
 }
 
-/// Decodes a whole `.hdr` file held in memory.
-pub(crate) fn decode_rgbe(bytes: &[u8]) -> Result<DecodedRgbe, HdrProblem> {
+/// What a `.hdr` file's header says: the image's size and where its scanlines start.
+pub(crate) struct HdrHeader {
+    pub width: u32,
+    pub height: u32,
+    bottom_up: bool,
+    /// Offset of the first scanline.
+    pub data_start: usize,
+}
+
+impl HdrHeader {
+    /// The most bytes a file with this header can hold: the header, then
+    /// per scanline at most a 4-byte RLE marker and 16 bytes a pixel (a
+    /// pixel and three repeat codes that repeat nothing, the worst the flat
+    /// form decodes; per-channel RLE takes at most 8). Anything past that is
+    /// not this image.
+    pub fn max_file_bytes(&self) -> u64 {
+        self.data_start as u64 + u64::from(self.height) * (4 + 16 * u64::from(self.width))
+    }
+}
+
+/// Parses the header and resolution line at the start of `bytes` (a prefix
+/// of the file is enough) and checks the size against the decoder's limits.
+pub(crate) fn parse_header(bytes: &[u8]) -> Result<HdrHeader, HdrProblem> {
     if !bytes.starts_with(b"#?") {
         return Err(HdrProblem::MissingSignature);
     }
@@ -77,6 +98,12 @@ pub(crate) fn decode_rgbe(bytes: &[u8]) -> Result<DecodedRgbe, HdrProblem> {
     if width > MAX_SIDE || height > MAX_SIDE || u64::from(width) * u64::from(height) > MAX_PIXELS {
         return Err(HdrProblem::TooLarge { width, height });
     }
+    Ok(HdrHeader { width, height, bottom_up, data_start: cursor })
+}
+
+/// Decodes a whole `.hdr` file held in memory.
+pub(crate) fn decode_rgbe(bytes: &[u8]) -> Result<DecodedRgbe, HdrProblem> {
+    let HdrHeader { width, height, bottom_up, data_start: cursor } = parse_header(bytes)?;
     if width == 0 || height == 0 {
         // The caller reports the zero size with the file name.
         return Ok(DecodedRgbe { width, height, rgb: Vec::new() });

@@ -93,6 +93,8 @@ pub struct GpuMemory {
 struct Targets {
     width: u32,
     height: u32,
+    /// Linear radiance of the frame before tone mapping (read back for linear screenshots).
+    hdr: wgpu::Texture,
     hdr_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     luminance_bind: wgpu::BindGroup,
@@ -523,21 +525,24 @@ impl Renderer {
     ) -> Targets {
         let (width, height) = (width.max(1), height.max(1));
         let texture = |label: &str, format: wgpu::TextureFormat, usage: wgpu::TextureUsages| {
-            device
-                .create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                })
-                .create_view(&Default::default())
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
         };
-        let hdr_view = texture("hdr", HDR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING);
-        let depth_view = texture("depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        let hdr = texture(
+            "hdr",
+            HDR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
+        let hdr_view = hdr.create_view(&Default::default());
+        let depth_view = texture("depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&Default::default());
         let bind = |label: &str, layout: &wgpu::BindGroupLayout, second: &wgpu::Buffer, third: &wgpu::Buffer| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(label),
@@ -551,7 +556,12 @@ impl Renderer {
         };
         let luminance_bind = bind("luminance", luminance_layout, adapt_state, adapt_params);
         let tonemap_bind = bind("tonemap", tonemap_layout, adapt_state, tone_buffer);
-        Targets { width, height, hdr_view, depth_view, luminance_bind, tonemap_bind }
+        Targets { width, height, hdr, hdr_view, depth_view, luminance_bind, tonemap_bind }
+    }
+
+    /// The linear (pre-tone-mapping) frame target, `HDR_FORMAT`.
+    pub fn hdr_texture(&self) -> &wgpu::Texture {
+        &self.targets.hdr
     }
 
     /// Recreates the HDR and depth targets for a new output size.

@@ -43,6 +43,18 @@ impl Image {
         Ok(out)
     }
 
+    /// Decodes an 8-bit RGBA PNG (what [`Image::encode_png`] writes).
+    pub fn decode_png(bytes: &[u8]) -> Result<Image, String> {
+        let mut reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().map_err(|e| e.to_string())?;
+        let mut rgba = vec![0; reader.output_buffer_size().ok_or("image too large")?];
+        let info = reader.next_frame(&mut rgba).map_err(|e| e.to_string())?;
+        if (info.color_type, info.bit_depth) != (png::ColorType::Rgba, png::BitDepth::Eight) {
+            return Err(format!("{:?} {:?}: expected 8-bit RGBA", info.color_type, info.bit_depth));
+        }
+        rgba.truncate(info.buffer_size());
+        Ok(Image { width: info.width, height: info.height, rgba })
+    }
+
     /// Writes the image as PNG at `path` (atomically).
     pub fn write_png(&self, path: &Path) -> Result<(), ViewError> {
         let error = |message: String| ViewError::Write { path: path.to_path_buf(), message };
@@ -140,6 +152,97 @@ pub fn render_image(
     let output = Offscreen::new(gpu, width, height);
     renderer.render(gpu, &output.view, camera, settings, sun, 0.0, true);
     output.read(gpu, width, height)
+}
+
+/// A linear RGB image (the frame before tone mapping, in the lighting's
+/// units), rows top to bottom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearImage {
+    pub width: u32,
+    pub height: u32,
+    /// `width · height` pixels.
+    pub rgb: Vec<[f32; 3]>,
+}
+
+impl LinearImage {
+    /// The pixel at column `x`, row `y` (must be inside the image).
+    pub fn pixel(&self, x: u32, y: u32) -> [f32; 3] {
+        self.rgb[y as usize * self.width as usize + x as usize]
+    }
+
+    /// OpenEXR bytes (RGB f32, no compression loss).
+    pub fn encode_exr(&self) -> Result<Vec<u8>, String> {
+        use exr::prelude::*;
+        let w = self.width as usize;
+        let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {
+            let p = self.rgb[pos.y() * w + pos.x()];
+            (p[0], p[1], p[2])
+        });
+        let mut bytes = Vec::new();
+        Image::from_channels((w, self.height as usize), channels)
+            .write()
+            .to_buffered(std::io::Cursor::new(&mut bytes))
+            .map_err(|e| e.to_string())?;
+        Ok(bytes)
+    }
+}
+
+/// Renders one frame like [`render_image`] and reads back its linear
+/// radiance before tone mapping (half floats: values past 65,504 read as
+/// infinity).
+pub fn render_linear(
+    gpu: &Gpu,
+    scene: &PreparedScene,
+    sun: Option<&SunSeries>,
+    camera: &Camera,
+    settings: &FrameSettings,
+    width: u32,
+    height: u32,
+) -> Result<LinearImage, ViewError> {
+    check_size(width, height, gpu)?;
+    let renderer = Renderer::new(gpu, scene, HEADLESS_FORMAT, width, height)?;
+    let output = Offscreen::new(gpu, width, height);
+    renderer.render(gpu, &output.view, camera, settings, sun, 0.0, true);
+    let bytes_per_pixel = 8u32;
+    let padded_row = (width * bytes_per_pixel).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let readback = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("linear readback"),
+        size: padded_row as u64 * height as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("linear readback") });
+    encoder.copy_texture_to_buffer(
+        renderer.hdr_texture().as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &readback,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: Some(height) },
+        },
+        wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+    );
+    gpu.queue.submit([encoder.finish()]);
+    let slice = readback.slice(..);
+    let (sender, receiver) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |result| {
+        let _ = sender.send(result);
+    });
+    gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| ViewError::Gpu(e.to_string()))?;
+    receiver
+        .recv()
+        .map_err(|e| ViewError::Gpu(e.to_string()))?
+        .map_err(|e| ViewError::Gpu(format!("cannot map the readback buffer: {e}")))?;
+    let mut rgb = Vec::with_capacity((width * height) as usize);
+    {
+        let data = slice.get_mapped_range().map_err(|e| ViewError::Gpu(e.to_string()))?;
+        for row in data.chunks_exact(padded_row as usize).take(height as usize) {
+            for px in row[..(width * bytes_per_pixel) as usize].chunks_exact(8) {
+                let h = |i: usize| half::f16::from_le_bytes([px[2 * i], px[2 * i + 1]]).to_f32();
+                rgb.push([h(0), h(1), h(2)]);
+            }
+        }
+    }
+    readback.unmap();
+    Ok(LinearImage { width, height, rgb })
 }
 
 /// Frame time and memory of a headless run.

@@ -52,7 +52,7 @@ pub mod window;
 pub use backdrop::{Backdrop, SkyBackdrop};
 pub use camera::Camera;
 pub use gpu::{Gpu, GpuMemory, Renderer};
-pub use headless::{render_image, time_frames, FrameTiming, Image};
+pub use headless::{render_image, render_linear, time_frames, FrameTiming, Image, LinearImage};
 pub use scene::{LayerSelection, PreparedScene};
 pub use tonemap::{ToneMap, ToneOperator};
 

@@ -14,13 +14,14 @@ use glam::{Vec2, Vec3};
 use super::backdrop::{Backdrop, SkyBackdrop};
 use super::scene::LayerSelection;
 use super::FrameSettings;
-use crate::bake::{BuildQuality, Scene, Surfaces};
+use crate::bake::Surfaces;
 use crate::brdf::PanelBrdf;
 use crate::bundle::{Bundle, Transfer};
 use crate::mesh::Mesh;
 use crate::panel::{layout, select_panel, Environment, GatherOptions, Interior, Light, PanelGather, PanelLayout, Sun, TexelResult};
 use crate::sh::EquirectImage;
 use crate::sky::preetham::PreethamSky;
+use crate::trace::{BuildQuality, Scene};
 
 /// Texels along the panel's long side (square texels): 128 × 64 on the demo's LCD.
 pub const TEXELS_LONG_SIDE: u32 = 128;
@@ -282,7 +283,7 @@ mod tests {
         assert_eq!(disc.irradiance, [9e4, 8e4, 7e4]);
         let mut compared = 0;
         for k in 0..500u32 {
-            let (a, b) = crate::bake::sampling::sample_2d(crate::bake::sampling::DirectionPattern::Sobol, k, 0, 7);
+            let (a, b) = crate::sampling::sample_2d(crate::sampling::DirectionPattern::Sobol, k, 0, 7);
             let z = 1.0 - 2.0 * a;
             let r = (1.0 - z * z).max(0.0).sqrt();
             let d = Vec3::new(r * (std::f32::consts::TAU * b).cos(), r * (std::f32::consts::TAU * b).sin(), z);
@@ -309,7 +310,7 @@ mod tests {
 
     #[test]
     fn texels_off_the_panel_take_a_neighbour_and_lookup_is_nearest() {
-        let texel = |v: f32| Some(TexelResult { radiance: [v; 3], through_windows: [0.0; 3], luminance_error: 0.0 });
+        let texel = |v: f32| Some(TexelResult { radiance: [v; 3], through_windows: [0.0; 3], from_sky: [0.0; 3], luminance_error: 0.0 });
         // 3 × 2: only (0,0) = 1 and (2,1) = 5 are on the panel.
         let results = [texel(1.0), None, None, None, None, texel(5.0)];
         let t = PanelTexture::from_results(&results, 3, 2, 4);

@@ -1,6 +1,6 @@
-// The LCD panel (view::panel), appended to shading.wgsl: the PRT shading of
-// vs_main plus the final-gathered reflected radiance of the texel under the
-// fragment (nearest texel, as PanelTexture::at on the CPU), in the same units.
+// The LCD panel (view::panel), appended to shading.wgsl: the final-gathered
+// reflected radiance of the texel under the fragment (nearest texel, as
+// PanelTexture::at on the CPU), in the PRT shading's units.
 
 @group(1) @binding(0) var panel_texture: texture_2d<f32>;
 
@@ -27,6 +27,9 @@ fn vs_panel(v: VertexIn, @location(4) texcoord: vec2<f32>) -> PanelOut {
 fn fs_panel(in: PanelOut) -> @location(0) vec4<f32> {
     let size = vec2<i32>(textureDimensions(panel_texture));
     let texel = clamp(vec2<i32>(floor(in.texcoord * vec2<f32>(size))), vec2<i32>(0), size - vec2<i32>(1));
+    // The gathered radiance is everything the panel reflects toward the eye
+    // (its BRDF's diffuse haze included), as `prtbake panel` reports it; the
+    // PRT shading albedo · E stands in only until the first pass lands.
     let reflected = textureLoad(panel_texture, texel, 0).rgb;
-    return vec4<f32>(in.albedo * in.light + reflected, 1.0);
+    return vec4<f32>(reflected, 1.0);
 }

@@ -27,7 +27,14 @@
 //!   `2^stops`, the ACES filmic fit of Narkowicz 2015 per channel,
 //!   `f(x) = x(2.51x + 0.03) / (x(2.43x + 0.59) + 0.14)` (a toe, a shoulder,
 //!   display white only from x ≈ 7.2, i.e. ≈ 10–40× the adaptation
-//!   luminance), clamp, gamma.
+//!   luminance), clamp, gamma. A highlight guard lowers the exposure when
+//!   the brightest 1% of the frame (`L_99`, the 99th percentile of the same
+//!   pass, from a histogram of quarter stops below the maximum, adapted as
+//!   `L_a`) would pass `x = 5` (filmic 0.985, just short of white): the
+//!   scale becomes `a / L_a · min(1, 5 / (L_99 · a / L_a))`, so the sun
+//!   patches of a dim room keep their shape instead of clipping (the dining
+//!   room at 09:00 showed its blinds' sun only at `--exposure -3` before;
+//!   with the guard the default looks as that did).
 //!
 //! `Y` is Rec. 709 luminance `0.2126 R + 0.7152 G + 0.0722 B`. Every operator
 //! reads the HDR pixel's radiance as `rgb · alpha` (alpha: the transmittance of
@@ -130,11 +137,17 @@ pub fn filmic(x: f32) -> f32 {
     (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
 }
 
-/// The photographic operator on the CPU for adaptation luminance `l_a`, as tonemap.wgsl computes it.
-pub fn photographic(c: [f32; 3], t: &ToneMap, l_a: f32) -> [f32; 3] {
+/// Filmic input the brightest 1% of the frame may reach before the
+/// photographic operator lowers its exposure for them (filmic(5) = 0.985).
+pub const HIGHLIGHT: f32 = 5.0;
+
+/// The photographic operator on the CPU for adaptation luminance `l_a` and
+/// 99th-percentile luminance `l_99`, as tonemap.wgsl computes it.
+pub fn photographic(c: [f32; 3], t: &ToneMap, l_a: f32, l_99: f32) -> [f32; 3] {
     let l_a = l_a.max(1e-20);
-    let scale = t.exposure_stops.exp2() * photographic_key(l_a) / l_a;
-    c.map(|x| filmic(x.max(0.0) * scale).clamp(0.0, 1.0).powf(1.0 / t.gamma))
+    let scale = photographic_key(l_a) / l_a;
+    let guard = (HIGHLIGHT / (l_99 * scale).max(1e-20)).min(1.0);
+    c.map(|x| filmic(x.max(0.0) * t.exposure_stops.exp2() * scale * guard).clamp(0.0, 1.0).powf(1.0 / t.gamma))
 }
 
 /// A display value in 0..1 as an 8-bit code, rounded to nearest like a UNORM8 store.
@@ -162,8 +175,8 @@ mod tests {
         assert!(keys.windows(2).all(|w| w[1] > w[0]), "{keys:?}");
         // The same scene 10⁶ times dimmer maps darker: the operator is not scale-invariant.
         let t = ToneMap { gamma: 1.0, ..ToneMap::default() };
-        let day = photographic([1e4; 3], &t, 1e4)[0];
-        let night = photographic([1e-2; 3], &t, 1e-2)[0];
+        let day = photographic([1e4; 3], &t, 1e4, 1e4)[0];
+        let night = photographic([1e-2; 3], &t, 1e-2, 1e-2)[0];
         assert!(day > 3.0 * night, "day {day}, night {night}");
     }
 

@@ -11,9 +11,10 @@ struct Tone {
     drago: vec4<f32>,    // x bias, y L_dmax
 };
 
-// [0] adapted log-average luminance, [1] adapted maximum, [2] target log-average, [3] target maximum.
+// [0] adapted log-average luminance, [1] adapted maximum, [2] target log-average, [3] target maximum,
+// [4] adapted 99th percentile, [5] target 99th percentile.
 struct Adaptation {
-    values: array<f32, 4>,
+    values: array<f32, 6>,
 };
 
 fn luminance(c: vec3<f32>) -> f32 {
@@ -59,9 +60,16 @@ fn filmic(x: vec3<f32>) -> vec3<f32> {
     return (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14);
 }
 
+// Filmic input the brightest 1% may reach before the exposure is lowered for
+// them (filmic(5) = 0.985: just short of white).
+const HIGHLIGHT: f32 = 5.0;
+
 fn photographic(c: vec3<f32>) -> vec3<f32> {
     let l_a = max(adapted.values[0], 1e-20);
-    return filmic(c * (tone.exposure * photographic_key(l_a) / l_a));
+    let scale = photographic_key(l_a) / l_a;
+    // Highlight guard: sunlit patches in a dim room would clip at the key's exposure.
+    let guard = min(1.0, HIGHLIGHT / max(adapted.values[4] * scale, 1e-20));
+    return filmic(c * (tone.exposure * scale * guard));
 }
 
 @fragment

@@ -12,6 +12,8 @@ pub struct TransferKey {
     /// `quiet` and `hit_cache_bytes` are not part of the bake (not stored).
     pub params: BakeParams,
     pub window_patterns: Vec<String>,
+    /// `--one-sided` patterns: materials or groups whose back reflects nothing.
+    pub one_sided_patterns: Vec<String>,
     /// How the bundle stores the transfer: a fixed quantization, or `None` to choose one within the budget.
     pub quantize: Option<Quantization>,
     pub max_error: Option<f64>,
@@ -80,11 +82,11 @@ fn put_patterns(out: &mut Vec<u8>, patterns: &[String]) {
 }
 
 fn read_patterns(r: &mut Reader) -> Result<Vec<String>, String> {
-    let count = r.u32("window pattern count")?;
+    let count = r.u32("pattern count")?;
     // Each pattern takes at least its 4-byte length: no allocation beyond the bytes present.
     let mut patterns = Vec::new();
     for _ in 0..count {
-        patterns.push(r.string("window pattern")?);
+        patterns.push(r.string("pattern")?);
     }
     Ok(patterns)
 }
@@ -127,7 +129,7 @@ impl TransferKey {
         u32(&mut out, p.bounces);
         out.extend_from_slice(&[
             p.store_bounces as u8,
-            p.window_sampling as u8 | (p.keep_outside_sides as u8) << 1,
+            p.window_sampling as u8 | (p.keep_outside_sides as u8) << 1 | (p.two_sided as u8) << 2,
             quantize_code(self.quantize),
             self.max_error.is_some() as u8,
         ]);
@@ -135,6 +137,7 @@ impl TransferKey {
         out.extend_from_slice(&self.max_error.unwrap_or(0.0).to_le_bytes());
         out.extend_from_slice(&p.adaptive.to_le_bytes());
         put_patterns(&mut out, &self.window_patterns);
+        put_patterns(&mut out, &self.one_sided_patterns);
         out
     }
 
@@ -169,16 +172,18 @@ impl TransferKey {
             let bounces = r.u32("bounces")?;
             let store_bounces = flag(r.u8("store bounces")?, "store bounces")?;
             let window_options = r.u8("window options")?;
-            if window_options > 3 {
-                return Err(format!("window options {window_options} has bits other than 0 and 1"));
+            if window_options > 7 {
+                return Err(format!("options {window_options} has bits other than 0, 1 and 2"));
             }
-            let (window_sampling, keep_outside_sides) = (window_options & 1 == 1, window_options & 2 == 2);
+            let (window_sampling, keep_outside_sides, two_sided) =
+                (window_options & 1 == 1, window_options & 2 == 2, window_options & 4 == 4);
             let quantize = quantize_of(r.u8("quantize")?)?;
             let has_max_error = flag(r.u8("max error flag")?, "max error")?;
             let inside_distance = r.f32("inside distance")?;
             let max_error = r.f64("max error")?;
             let adaptive = r.f32("adaptive")?;
             let window_patterns = read_patterns(r)?;
+            let one_sided_patterns = read_patterns(r)?;
             let params = BakeParams {
                 order,
                 rays,
@@ -194,10 +199,11 @@ impl TransferKey {
                 keep_outside_sides,
                 inside_distance,
                 adaptive,
+                two_sided,
                 ..BakeParams::default()
             };
             params.check().map_err(|e| e.to_string())?;
-            Ok(TransferKey { params, window_patterns, quantize, max_error: has_max_error.then_some(max_error) })
+            Ok(TransferKey { params, window_patterns, one_sided_patterns, quantize, max_error: has_max_error.then_some(max_error) })
         })
     }
 
@@ -220,6 +226,8 @@ impl TransferKey {
             ("inside distance", p.inside_distance.to_string()),
             ("adaptive", p.adaptive.to_string()),
             ("window patterns", format!("{:?}", self.window_patterns)),
+            ("two-sided", p.two_sided.to_string()),
+            ("one-sided patterns", format!("{:?}", self.one_sided_patterns)),
             ("quantize", format!("{:?}", self.quantize)),
             ("max error", format!("{:?}", self.max_error)),
         ]
@@ -294,6 +302,7 @@ mod tests {
         let key = TransferKey {
             params: BakeParams { rays: 64, bounces: 3, mode: Mode::Window, seed: 7, store_bounces: true, ..BakeParams::default() },
             window_patterns: vec!["glass*".into(), "Glass_Gray=0.6".into()],
+            one_sided_patterns: vec!["curtain".into()],
             quantize: Some(Quantization::F16),
             max_error: Some(0.01),
         };
@@ -310,8 +319,14 @@ mod tests {
 
     #[test]
     fn bad_blocks_are_errors_not_panics() {
-        let block =
-            TransferKey { params: BakeParams::default(), window_patterns: vec!["a".into()], quantize: None, max_error: None }.encode();
+        let block = TransferKey {
+            params: BakeParams::default(),
+            window_patterns: vec!["a".into()],
+            one_sided_patterns: Vec::new(),
+            quantize: None,
+            max_error: None,
+        }
+        .encode();
         for len in 0..block.len() {
             assert!(TransferKey::decode(&block[..len]).is_err());
         }

@@ -198,7 +198,7 @@ mod tests {
     use glam::Vec3A;
 
     fn random_triangles(count: usize) -> Vec<RtTriangle> {
-        let mut rand = crate::bake::sampling::test_stream(7);
+        let mut rand = crate::sampling::test_stream(7);
         (0..count)
             .map(|_| {
                 let mut p = || Vec3A::new(rand() * 2.0 - 1.0, rand() * 2.0 - 1.0, rand() * 2.0 - 1.0);
@@ -226,7 +226,7 @@ mod tests {
             let back = blocks.triangle(i as u32);
             assert_eq!((back.v0, back.e1, back.e2, back.ng), (tri.v0, tri.e1, tri.e2, tri.ng));
         }
-        let mut rand = crate::bake::sampling::test_stream(99);
+        let mut rand = crate::sampling::test_stream(99);
         let mut hit_lanes = 0;
         for k in 0..3000 {
             let o = Vec3A::new(rand() * 4.0 - 2.0, rand() * 4.0 - 2.0, rand() * 4.0 - 2.0);
@@ -239,7 +239,7 @@ mod tests {
             for &(first, count) in &leaves {
                 let scalar = ScalarLeaf::test_leaf(&blocks, first, count, &ray, t_max);
                 #[cfg(target_arch = "x86_64")]
-                if crate::bake::bvh8::avx2_available() {
+                if crate::trace::bvh8::avx2_available() {
                     // SAFETY: AVX2 was detected.
                     let sse = unsafe { avx_test_leaf(&blocks, first, count, &ray, t_max) };
                     assert_eq!((scalar.mask, scalar.back), (sse.mask, sse.back));
@@ -275,7 +275,7 @@ mod tests {
         for (first, count) in [(1u32 << 27, 15u32), (5, 1), (1, 8)] {
             assert_eq!(ScalarLeaf::test_leaf(&blocks, first, count, &ray, f32::INFINITY).mask, 0, "{first}, {count}");
             #[cfg(target_arch = "x86_64")]
-            if crate::bake::bvh8::avx2_available() {
+            if crate::trace::bvh8::avx2_available() {
                 // SAFETY: AVX2 was detected.
                 assert_eq!(unsafe { avx_test_leaf(&blocks, first, count, &ray, f32::INFINITY) }.mask, 0);
             }

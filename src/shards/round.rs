@@ -15,8 +15,9 @@ use crate::bake::gather::RowBuffer;
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
 use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};
-use crate::bake::{BakeError, Scene, Surfaces};
+use crate::bake::{BakeError, Surfaces};
 use crate::mesh::Mesh;
+use crate::trace::Scene;
 
 /// What a transfer shard of round b ≥ 1 reads: its own hit records (from
 /// round 0) and the merged layer of round b − 1, with their paths for errors.
@@ -115,10 +116,13 @@ pub fn bake_transfer_shard(
         .into());
     }
     let mut plan = Plan::new(mesh, scene, surfaces, &params, None)?;
-    let identity = Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() };
-    // Shards split the base items by cost, in every stage alike.
-    let costs: Vec<u64> = plan.items.points_per_item().iter().map(|&p| p as u64 * params.rays as u64).collect();
-    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+    let identity = Identity {
+        mesh: MeshId::of(mesh),
+        plan_vertices: plan.mesh.vertex_count() as u64,
+        plan_triangles: plan.mesh.triangle_count() as u64,
+        shards: shard.count,
+        key: key.encode(),
+    };
     // Rounds of an adaptive bake run over the unified layout the pilot decides.
     let mut base_items = None;
     let mut pilot_crc = 0;
@@ -132,6 +136,11 @@ pub fn bake_transfer_shard(
         base_items = Some((plan.unify(&extra)?, extra));
         pilot_crc = p.crc;
     }
+    // Shards split the items by their cost in points × rays: the pilot stage
+    // the base points, every round of an adaptive bake the points the pilot
+    // decided (base and extra), so the rounds' shards stay balanced.
+    let costs: Vec<u64> = plan.items.points_per_item().iter().map(|&p| p as u64 * params.rays as u64).collect();
+    let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
     let points = plan.items.first_point(range.start) as u64..plan.items.first_point(range.end) as u64;
     let mut rejected = vec![false; plan.items.point_count() as usize];
     let mut source = SourceRows::empty();
@@ -150,7 +159,7 @@ pub fn bake_transfer_shard(
         Stage::Round(r) => format!("shard {shard}, round {r}/{}", params.bounces),
     };
     let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
-    let first_items = plan.items.first_items(mesh);
+    let first_items = plan.items.first_items(&plan.mesh);
     let sums = match (&base_items, round) {
         // Adaptive round 0: the base points again (the same bits as the
         // pilot's), then the extras, combined item by item as a whole bake does.
@@ -295,7 +304,13 @@ pub fn bake_sun_shard(
     let first_point = |item: usize| plan.layout.first_sample.get(item).map_or(plan.layout.sample_count(), |&f| f as u64);
     let (bits, rays) = plan.trace_items(scene, surfaces, range.clone());
     Ok(SunPart {
-        identity: Identity { mesh: MeshId::of(mesh), shards: shard.count, key: key.encode() },
+        identity: Identity {
+            mesh: MeshId::of(mesh),
+            plan_vertices: mesh.vertex_count() as u64,
+            plan_triangles: mesh.triangle_count() as u64,
+            shards: shard.count,
+            key: key.encode(),
+        },
         shard: shard.index,
         items: range.start as u32..range.end as u32,
         item_count: costs.len() as u32,

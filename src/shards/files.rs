@@ -14,6 +14,10 @@ use super::{MeshId, MAX_SHARDS};
 #[derive(Clone, Debug, PartialEq)]
 pub struct Identity {
     pub mesh: MeshId,
+    /// Vertices and triangles the bake sums into and gathers from: the
+    /// mesh's, and its back sides' twins after them (`bake::twins`).
+    pub plan_vertices: u64,
+    pub plan_triangles: u64,
     /// N, the number of shards.
     pub shards: u32,
     /// A [`super::TransferKey`] or [`super::SunKey`] block.
@@ -26,6 +30,8 @@ impl Identity {
         w.u32(self.shards)?;
         w.u64(self.mesh.vertices)?;
         w.u64(self.mesh.triangles)?;
+        w.u64(self.plan_vertices)?;
+        w.u64(self.plan_triangles)?;
         w.u32(self.key.len() as u32)?;
         w.bytes(&self.key)?;
         w.pad4()
@@ -39,13 +45,20 @@ impl Identity {
         }
         let vertices = r.u64("vertex count")?;
         let triangles = r.u64("triangle count")?;
-        if vertices > u32::MAX as u64 + 1 {
-            return Err(format!("{vertices} vertices: more than 32-bit indices reach"));
+        let plan_vertices = r.u64("plan vertex count")?;
+        let plan_triangles = r.u64("plan triangle count")?;
+        if plan_vertices > u32::MAX as u64 + 1 {
+            return Err(format!("{plan_vertices} vertices: more than 32-bit indices reach"));
+        }
+        if !(vertices <= plan_vertices && triangles <= plan_triangles && plan_triangles <= 2 * triangles && plan_vertices <= 2 * vertices) {
+            return Err(format!(
+                "the bake's {plan_vertices} vertices and {plan_triangles} triangles are not the mesh's {vertices} and {triangles} with their back sides"
+            ));
         }
         let len = r.u32("parameter block length")?;
         let key = r.take(len as u64, "parameter block")?.to_vec();
         r.pad4("parameter block")?;
-        Ok(Identity { mesh: MeshId { crc, vertices, triangles }, shards, key })
+        Ok(Identity { mesh: MeshId { crc, vertices, triangles }, plan_vertices, plan_triangles, shards, key })
     }
 
     fn read_shard(&self, r: &mut Reader) -> Result<u32, String> {
@@ -254,7 +267,7 @@ impl TransferPart {
             f => return Err(format!("row flags {f} in round {round}: rows carry moments (1), and only round 0's pilot is a pilot (3)")),
         };
         let stride = (pass_channels * coeffs) as u64;
-        let vertex_count = identity.mesh.vertices;
+        let vertex_count = identity.plan_vertices;
         let opened = VertexRows::read(&mut r, "opened vertices", stride, round == 0, tracks_noise, vertex_count)?;
         let late = VertexRows::read(&mut r, "late contributions", stride, round == 0, tracks_noise, vertex_count)?;
         let frame = r.blob("bundle frame")?.to_vec();
@@ -331,7 +344,7 @@ impl HitFile {
         let records = r.u64s(count.saturating_mul(rays as u64), "hit records")?;
         r.finish()?;
         // The gather indexes the hit triangle's corners: a record past the mesh would read out of bounds.
-        let triangles = identity.mesh.triangles;
+        let triangles = identity.plan_triangles;
         if let Some(i) = records.iter().position(|&h| h != crate::bake::gather::NO_HIT && h >> 32 >= triangles) {
             return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", records[i] >> 32));
         }
@@ -410,7 +423,7 @@ impl LayerFile {
             return Err(format!("{bounces} ray counts for round {round}"));
         }
         let rays_per_bounce = r.u64s(bounces as u64, "rays per bounce")?;
-        let v = identity.mesh.vertices;
+        let v = identity.plan_vertices;
         let weights = r.f32s(v, "weights")?;
         let noise = match r.u32("noise flag")? {
             0 => Vec::new(),
@@ -481,7 +494,7 @@ impl PilotFile {
         let (mut r, crc) = codec::open(bytes, FileKind::Pilot)?;
         let identity = Identity::read(&mut r)?;
         let points = r.u64("base points")?;
-        let v = identity.mesh.vertices;
+        let v = identity.plan_vertices;
         let weights = r.f32s(v, "weights")?;
         let dc_sums = r.f32s(v, "DC sums")?;
         let moments = read_moments(&mut r, v, "moments")?;
@@ -566,7 +579,13 @@ mod tests {
     use super::*;
 
     fn identity() -> Identity {
-        Identity { mesh: MeshId { crc: 0x1234_5678, vertices: 5, triangles: 3 }, shards: 3, key: vec![1, 2, 3, 4] }
+        Identity {
+            mesh: MeshId { crc: 0x1234_5678, vertices: 5, triangles: 3 },
+            plan_vertices: 5,
+            plan_triangles: 3,
+            shards: 3,
+            key: vec![1, 2, 3, 4],
+        }
     }
 
     fn part() -> TransferPart {

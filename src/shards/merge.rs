@@ -22,6 +22,12 @@ pub(crate) fn identity_difference(here: &Identity, there: &Identity, kind: FileK
     if here.shards != there.shards {
         return Some(format!("is one of {} shards, not of {} as in", here.shards, there.shards));
     }
+    if (here.plan_vertices, here.plan_triangles) != (there.plan_vertices, there.plan_triangles) {
+        return Some(format!(
+            "baked {} vertices and {} triangles with their back sides, not {} and {} as in",
+            here.plan_vertices, here.plan_triangles, there.plan_vertices, there.plan_triangles
+        ));
+    }
     if here.key == there.key {
         return None;
     }
@@ -69,6 +75,8 @@ struct PartHead<'a> {
     shard: u32,
     /// Transfer rounds; sun parts are all round 0.
     round: u32,
+    /// A part of adaptive allocation's pilot stage (before round 0).
+    pilot: bool,
     items: std::ops::Range<u32>,
     item_count: u32,
     points: std::ops::Range<u64>,
@@ -88,14 +96,15 @@ fn check_together(heads: &[PartHead], kind: FileKind) -> Result<Vec<usize>, Shar
                 format!("{d} {}: parts of one merge must come from one bake", first.path.display()),
             ));
         }
-        if head.round != first.round {
+        if (head.round, head.pilot) != (first.round, first.pilot) {
+            let stage = |h: &PartHead| if h.pilot { "the pilot stage".to_string() } else { format!("round {}", h.round) };
             return Err(ShardError::mismatch(
                 head.path,
                 format!(
-                    "is a part of round {}, but {} of round {}: merge one round at a time",
-                    head.round,
+                    "is a part of {}, but {} of {}: merge one stage or round at a time",
+                    stage(head),
                     first.path.display(),
-                    first.round
+                    stage(first)
                 ),
             ));
         }
@@ -166,6 +175,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             identity: &p.identity,
             shard: p.shard,
             round: p.round,
+            pilot: p.pilot,
             items: p.items.clone(),
             item_count: p.item_count,
             points: p.points.clone(),
@@ -228,7 +238,8 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
 
     // The sums, in shard order: each vertex's opening shard's row, then the
     // later shards' contributions in item order.
-    let vertex_count = first.identity.mesh.vertices as usize;
+    // The plan's rows: the mesh's vertices, then its back sides'.
+    let vertex_count = first.identity.plan_vertices as usize;
     let (pass_channels, channels, coeffs) = (reference.pass_channels as usize, reference.channels as usize, reference.coeffs as usize);
     let stride = pass_channels * coeffs;
     // The vertex count comes from the parts' identity: allocate without aborting when it lies.
@@ -329,13 +340,20 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     if frame_part.1.frame.is_empty() {
         return Err(ShardError::mismatch(&frame_part.0, "is shard 0 of the last round but carries no bundle frame (mesh and metadata)"));
     }
+    // The result is the mesh's vertices; the back sides' rows served the gathers only.
+    let mesh_vertices = first.identity.mesh.vertices as usize;
+    let stride = channels * coeffs;
+    total.truncate(mesh_vertices * stride);
+    layers.iter_mut().for_each(|l| l.truncate(mesh_vertices * stride));
+    noise.truncate(mesh_vertices);
     let stats = BakeStats {
         triangles: first.identity.mesh.triangles,
-        vertices: vertex_count as u64,
+        vertices: mesh_vertices as u64,
+        back_sides: first.identity.plan_triangles - first.identity.mesh.triangles,
         window_triangles: reference.window_triangles,
         points: reference.point_count,
         points_rejected,
-        vertices_without_samples: weights.iter().filter(|&&w| w <= 0.0).count() as u64,
+        vertices_without_samples: weights[..mesh_vertices.min(weights.len())].iter().filter(|&&w| w <= 0.0).count() as u64,
         rays: rays_per_bounce.iter().sum(),
         // Rounds ≥ 1 gather from each shard's hit records; they trace nothing.
         rays_gathered: rays_per_bounce.iter().skip(1).sum(),
@@ -343,7 +361,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         rays_traced,
         ..BakeStats::default()
     };
-    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, stats };
+    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, back: Vec::new(), stats };
     Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key })
 }
 
@@ -410,6 +428,7 @@ pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardE
             identity: &p.identity,
             shard: p.shard,
             round: 0,
+            pilot: false,
             items: p.items.clone(),
             item_count: p.item_count,
             points: p.points.clone(),
@@ -451,9 +470,15 @@ mod tests {
     /// does not exist: a part with one is refused, not merged.
     #[test]
     fn sun_bits_past_the_last_step_are_refused() {
-        use crate::bake::shards::{Identity, MeshId};
+        use crate::shards::{Identity, MeshId};
         let key = SunKey { params: crate::bake::SunParams::default(), window_patterns: Vec::new(), steps: 5, day_crc: 7 };
-        let identity = Identity { mesh: MeshId { crc: 1, vertices: 3, triangles: 1 }, shards: 1, key: key.encode() };
+        let identity = Identity {
+            mesh: MeshId { crc: 1, vertices: 3, triangles: 1 },
+            plan_vertices: 3,
+            plan_triangles: 1,
+            shards: 1,
+            key: key.encode(),
+        };
         let part = |bits: Vec<u32>| SunPart {
             identity: identity.clone(),
             shard: 0,

@@ -11,7 +11,7 @@
 use std::io::Write;
 
 /// Format version written; readers accept any minor of this major.
-pub const MAJOR: u16 = 3;
+pub const MAJOR: u16 = 4;
 pub const MINOR: u16 = 0;
 pub const HEADER_LEN: usize = 16;
 pub const TRAILER_LEN: usize = 12;
@@ -172,6 +172,36 @@ pub fn to_vec(kind: FileKind, body: impl FnOnce(&mut Writer<&mut Vec<u8>>) -> st
     out
 }
 
+/// What a shard file's first [`HEADER_LEN`] and last [`TRAILER_LEN`] bytes
+/// (`head`, `tail`) say of a file of `file_len` bytes: its kind (any shard
+/// file), its major version and flags, and that the length its trailer
+/// gives is the file's. A reader checks this before reading the body, so a
+/// part with gigabytes appended (or a file of zeros behind a shard magic)
+/// costs 28 bytes; [`open`] checks the rest, the CRC included, once read.
+pub fn check_frame(head: &[u8], tail: &[u8], file_len: u64) -> Result<FileKind, String> {
+    let kind = FileKind::of(head)?;
+    if file_len < (HEADER_LEN + TRAILER_LEN) as u64 || head.len() < HEADER_LEN || tail.len() < TRAILER_LEN {
+        return Err(format!("is {file_len} bytes, shorter than a header and trailer: truncated"));
+    }
+    let major = u16::from_le_bytes([head[8], head[9]]);
+    if major != MAJOR {
+        return Err(format!("is format version {major}, this prtbake reads version {MAJOR}: bake and merge with the same release"));
+    }
+    if head[12..16] != [0; 4] {
+        return Err("has flags set that this version does not know".into());
+    }
+    let tail = &tail[tail.len() - TRAILER_LEN..];
+    let length = u64::from_le_bytes(tail[..8].try_into().unwrap_or([0; 8]));
+    if length != file_len {
+        // The length sits in the trailer: when it disagrees, those bytes are
+        // whatever the cut left at the end, so they are not quoted.
+        return Err(format!(
+            "is {file_len} bytes and does not end in its own length and CRC-32: truncated or extended (a copy cut short, or bytes appended)"
+        ));
+    }
+    Ok(kind)
+}
+
 /// Checks a file's header and trailer: its kind is `expected`, its major
 /// version is this reader's, its length is the one it says and its CRC
 /// matches. Returns a reader over the body and the file's CRC.
@@ -193,7 +223,12 @@ pub fn open(bytes: &[u8], expected: FileKind) -> Result<(Reader<'_>, u32), Strin
     let (content, crc_bytes) = bytes.split_at(bytes.len() - 4);
     let length = u64::from_le_bytes(content[content.len() - 8..].try_into().unwrap_or([0; 8]));
     if length != bytes.len() as u64 {
-        return Err(format!("says it is {length} bytes but is {}: truncated or extended", bytes.len()));
+        // The length sits in the trailer: when it disagrees, those bytes are
+        // whatever the cut left at the end, so they are not quoted.
+        return Err(format!(
+            "is {} bytes and does not end in its own length and CRC-32: truncated or extended (a copy cut short, or bytes appended)",
+            bytes.len()
+        ));
     }
     let stored = u32::from_le_bytes(crc_bytes.try_into().unwrap_or([0; 4]));
     let crc = crc32fast::hash(content);

@@ -165,7 +165,7 @@ pub enum ShardError {
     #[error("no parts given: merge needs every part of one round")]
     NoParts,
     #[error(transparent)]
-    Bake(#[from] super::BakeError),
+    Bake(#[from] crate::bake::BakeError),
 }
 
 impl ShardError {
@@ -182,6 +182,9 @@ impl ShardError {
 pub fn hit_file_name(shard: Shard) -> String {
     format!("hits-{}-of-{}.prth", shard.index, shard.count)
 }
+
+#[cfg(test)]
+mod fuzz_tests;
 
 #[cfg(test)]
 mod tests {
@@ -223,7 +226,7 @@ mod tests {
     fn sharded(mesh: &Mesh, key: &TransferKey, count: u32) -> crate::bake::TransferResult {
         use std::path::{Path, PathBuf};
         let surfaces = crate::bake::Surfaces::resolve(mesh, &key.window_patterns).unwrap();
-        let scene = crate::bake::Scene::build(mesh, crate::bake::BuildQuality::Sah).unwrap();
+        let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).unwrap();
         let bounces = key.params.bounces;
         let mut layer: Option<(LayerFile, u32)> = None;
         let mut hits: Vec<Option<HitFile>> = vec![None; count as usize];
@@ -305,9 +308,9 @@ mod tests {
             }
             let params =
                 BakeParams { rays: 24, bounces, mode, sampling, window_sampling, store_bounces: true, adaptive, ..BakeParams::default() };
-            let key = TransferKey { params, window_patterns: Vec::new(), quantize: None, max_error: None };
+            let key = TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None };
             let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
-            let scene = crate::bake::Scene::build(&mesh, crate::bake::BuildQuality::Sah).unwrap();
+            let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
             let whole = bake_transfer(&mesh, &scene, &surfaces, &params).unwrap();
             assert_eq!(whole.stats.points_added > 0, adaptive > 0.0, "adaptive cases add points");
             for &count in counts {

@@ -245,7 +245,7 @@ mod tests {
     /// node for node, on one thread and on two.
     #[test]
     fn parallel_build_is_valid_and_thread_independent() {
-        let mut rand = crate::bake::sampling::test_stream(7);
+        let mut rand = crate::sampling::test_stream(7);
         let boxes: Vec<Aabb> = (0..3 * PARALLEL_SPAN)
             .map(|_| {
                 let p = Vec3A::new(rand() * 10.0, rand(), rand() * 4.0);

@@ -24,9 +24,10 @@ use obvhs::{
 };
 
 use super::bvh8::{self, Bvh8, Node8, NodeTest, ScalarTest};
+use super::fans::{find_fans, Fans};
 use super::leaf_blocks::{LeafBlocks, LeafTest, ScalarLeaf};
 use super::queries::{self, ClosestWalk, OcclusionWalk, QueryWalk};
-use super::sampling;
+use crate::sampling;
 
 use crate::mesh::Mesh;
 
@@ -152,8 +153,10 @@ pub struct Scene {
     batching: Batching,
     /// Triangles in BVH leaf order, one SoA block per leaf.
     pub(super) leaf_triangles: LeafBlocks,
-    /// Leaf order → mesh triangle index.
+    /// Leaf order → mesh triangle index (the box tree's leaves, then the fans').
     pub(super) leaf_to_mesh: Vec<u32>,
+    /// The triangles around points of very high valence, traced apart ([`super::fans`]).
+    pub(super) fans: Option<Fans>,
     /// Unit geometric normals per mesh triangle (zero for degenerate ones).
     face_normals: Vec<Vec3>,
     /// Bounding-box diagonal of the mesh: every epsilon is relative to it.
@@ -181,29 +184,40 @@ impl Scene {
             })
             .collect();
         let face_normals = triangles.iter().map(|t| Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero()).collect();
-        let (nodes, leaf_to_mesh, leaf_triangles) = if triangles.is_empty() {
-            (Vec::new(), Vec::new(), LeafBlocks::new(&[], []))
+        let (lo, hi) = mesh.bounds();
+        let diagonal = (hi - lo).length().max(f32::MIN_POSITIVE);
+        let max_coordinate = lo.abs().max(hi.abs()).max_element();
+        // Triangles around a point of very high valence are traced as fans;
+        // the box tree holds the others (all of them in an ordinary mesh).
+        let fan_plan = find_fans(mesh);
+        let boxed: Vec<u32> = match &fan_plan {
+            Some(plan) => (0..triangles.len() as u32).filter(|&t| !plan.in_fan[t as usize]).collect(),
+            None => (0..triangles.len() as u32).collect(),
+        };
+        let (nodes, mut leaf_to_mesh, mut leaves) = if boxed.is_empty() {
+            (Vec::new(), Vec::new(), Vec::new())
         } else {
+            let boxed_triangles: Vec<Triangle> = boxed.iter().map(|&t| triangles[t as usize]).collect();
             let mut bvh2 = match quality {
                 BuildQuality::Sah => {
-                    let boxes: Vec<obvhs::aabb::Aabb> = triangles.iter().map(|t| t.aabb()).collect();
+                    let boxes: Vec<obvhs::aabb::Aabb> = boxed_triangles.iter().map(|t| t.aabb()).collect();
                     super::sah::build_bvh2_sah(&boxes)
                 }
                 BuildQuality::Ploc => {
                     let params = BvhBuildParams { max_prims_per_leaf: 1, ..BvhBuildParams::medium_build() };
-                    build_bvh2_from_tris(&triangles, params, &mut Duration::default())
+                    build_bvh2_from_tris(&boxed_triangles, params, &mut Duration::default())
                 }
             };
             collapse(&mut bvh2, LEAF_TRIANGLES, NODE_COST);
             let bvh8 = Bvh8::from_bvh2(&bvh2);
-            let in_leaf_order: Vec<RtTriangle> = bvh8.primitive_order.iter().map(|&i| RtTriangle::from(&triangles[i as usize])).collect();
-            let blocks = LeafBlocks::new(&in_leaf_order, bvh8.leaves());
-            // The two arrays every ray walks (nodes and blocks) sit on huge pages.
-            (super::hugepages::copy_to_huge_pages(&bvh8.nodes), bvh8.primitive_order, blocks)
+            let leaves: Vec<(u32, u32)> = bvh8.leaves().collect();
+            let leaf_to_mesh = bvh8.primitive_order.iter().map(|&i| boxed[i as usize]).collect();
+            // The array every ray walks first sits on huge pages (the blocks too, below).
+            (super::hugepages::copy_to_huge_pages(&bvh8.nodes), leaf_to_mesh, leaves)
         };
-        let (lo, hi) = mesh.bounds();
-        let diagonal = (hi - lo).length().max(f32::MIN_POSITIVE);
-        let max_coordinate = lo.abs().max(hi.abs()).max_element();
+        let fans = fan_plan.map(|plan| Fans::build(plan, mesh, diagonal.max(max_coordinate), &mut leaf_to_mesh, &mut leaves));
+        let in_leaf_order: Vec<RtTriangle> = leaf_to_mesh.iter().map(|&t| RtTriangle::from(&triangles[t as usize])).collect();
+        let leaf_triangles = LeafBlocks::new(&in_leaf_order, leaves);
         // Offsets: relative to scene size, and never below what f32 can resolve
         // at the largest coordinate (64 ulps), so 1e-3 m and 1e4 m scenes behave alike.
         let ulp_floor = max_coordinate * f32::EPSILON * 64.0;
@@ -214,6 +228,7 @@ impl Scene {
             batching: Batching { closest_hit: BatchMode::OneByOne, occlusion: BatchMode::OneByOne },
             leaf_triangles,
             leaf_to_mesh,
+            fans,
             face_normals,
             diagonal,
             max_coordinate,
@@ -223,6 +238,32 @@ impl Scene {
         };
         scene.batching = scene.measure_batching(mesh);
         scene.build_time = start.elapsed();
+        Ok(scene)
+    }
+
+    /// The scene's geometry (face normals, diagonal, offsets) without a BVH,
+    /// for passes that only gather from recorded hits (a sharded bake's
+    /// rounds ≥ 1): building the BVH would be most of their time. A ray
+    /// traced in it hits nothing.
+    pub fn without_bvh(mesh: &Mesh) -> Result<Scene, SceneError> {
+        check_extent(mesh)?;
+        let empty = Mesh {
+            positions: mesh.positions.clone(),
+            indices: Vec::new(),
+            tri_material: Vec::new(),
+            tri_group: Vec::new(),
+            materials: mesh.materials.clone(),
+            ..Mesh::default()
+        };
+        let mut scene = Scene::build(&empty, BuildQuality::Sah)?;
+        // The same arithmetic as `build`'s, so gathers see the same bits.
+        scene.face_normals = (0..mesh.triangle_count())
+            .map(|t| {
+                let [a, b, c] = mesh.triangle_positions(t);
+                let t = Triangle { v0: a.into(), v1: b.into(), v2: c.into() };
+                Vec3::from((t.v1 - t.v0).cross(t.v2 - t.v0)).normalize_or_zero()
+            })
+            .collect();
         Ok(scene)
     }
 
@@ -307,7 +348,7 @@ impl Scene {
     /// Answers `queries` with walk `W`, in `mode`, on the fastest node and leaf tests this CPU has.
     #[inline]
     fn run<W: QueryWalk>(&self, queries: &[RayQuery], out: &mut [W::Answer], mode: BatchMode) {
-        if self.nodes.is_empty() {
+        if self.nodes.is_empty() && self.fans.is_none() {
             out.iter_mut().for_each(|o| *o = W::Answer::default());
             return;
         }

@@ -121,6 +121,8 @@ impl<Lf: LeafTest> bvh8::Leaves for ClosestLeaves<'_, Lf> {
     #[inline(always)]
     fn visit(&mut self, first: u32, count: u32, t_max: f32) -> LeafResult {
         let (best, tie) = (&mut *self.best, self.scene.tie_distance);
+        #[cfg(test)]
+        work::add(u64::from(count));
         let mut reach = t_max;
         let hits = Lf::test_leaf(&self.scene.leaf_triangles, first, count, &best.ray, reach);
         let mut lanes = hits.mask;
@@ -169,7 +171,15 @@ impl QueryWalk for ClosestWalk {
     #[inline(always)]
     fn step<T: NodeTest, Lf: LeafTest, const INTERLEAVED: bool>(&mut self, scene: &Scene) -> bool {
         let mut leaves = ClosestLeaves::<Lf> { scene, best: &mut self.best, test: std::marker::PhantomData };
-        self.walk.step::<T, _, true, INTERLEAVED>(&scene.nodes, &self.boxes, 0.0, &mut leaves)
+        let more = !scene.nodes.is_empty() && self.walk.step::<T, _, true, INTERLEAVED>(&scene.nodes, &self.boxes, 0.0, &mut leaves);
+        if !more {
+            // The box tree done, the fans (if any) within the reach it left.
+            if let Some(fans) = &scene.fans {
+                let (origin, direction) = (Vec3::from(leaves.best.ray.origin), Vec3::from(leaves.best.ray.direction));
+                fans.walk::<T, _, true>(origin, direction, &self.boxes, self.walk.t_max(), &mut leaves);
+            }
+        }
+        more
     }
 
     #[inline(always)]
@@ -209,6 +219,8 @@ impl<Lf: LeafTest> bvh8::Leaves for OcclusionLeaves<'_, Lf> {
 
     #[inline(always)]
     fn visit(&mut self, first: u32, count: u32, t_max: f32) -> LeafResult {
+        #[cfg(test)]
+        work::add(u64::from(count));
         let hits = Lf::test_leaf(self.blocks, first, count, self.ray, t_max);
         if hits.mask != 0 {
             *self.found = Some(first + hits.mask.trailing_zeros());
@@ -240,7 +252,15 @@ impl QueryWalk for OcclusionWalk {
     fn step<T: NodeTest, Lf: LeafTest, const INTERLEAVED: bool>(&mut self, scene: &Scene) -> bool {
         let mut leaves =
             OcclusionLeaves::<Lf> { blocks: &scene.leaf_triangles, ray: &self.ray, found: &mut self.found, test: std::marker::PhantomData };
-        self.walk.step::<T, _, false, INTERLEAVED>(&scene.nodes, &self.boxes, 0.0, &mut leaves)
+        let more = !scene.nodes.is_empty() && self.walk.step::<T, _, false, INTERLEAVED>(&scene.nodes, &self.boxes, 0.0, &mut leaves);
+        if !more && leaves.found.is_none() {
+            // Nothing blocks the ray in the box tree: the fans (if any).
+            if let Some(fans) = &scene.fans {
+                let (origin, direction) = (Vec3::from(self.ray.origin), Vec3::from(self.ray.direction));
+                fans.walk::<T, _, false>(origin, direction, &self.boxes, self.walk.t_max(), &mut leaves);
+            }
+        }
+        more
     }
 
     #[inline(always)]
@@ -264,4 +284,24 @@ fn barycentrics(tri: &obvhs::rt_triangle::RtTriangle, p: Vec3) -> (f32, f32) {
     let u = ((bb * da - ab * db) / det).clamp(0.0, 1.0);
     let v = ((aa * db - ab * da) / det).clamp(0.0, 1.0 - u);
     (u, v)
+}
+
+/// Work the walks on this thread have done: box nodes, fan caps and
+/// triangles tested. Tests bound how it grows with a scene (a count, so the
+/// bound holds whatever the machine's speed); release builds count nothing.
+#[cfg(test)]
+pub(crate) mod work {
+    use std::cell::Cell;
+
+    thread_local!(static DONE: Cell<u64> = const { Cell::new(0) });
+
+    #[inline(always)]
+    pub(crate) fn add(n: u64) {
+        DONE.with(|done| done.set(done.get() + n));
+    }
+
+    /// The work done since the last call, on this thread.
+    pub(crate) fn take() -> u64 {
+        DONE.with(|done| done.replace(0))
+    }
 }

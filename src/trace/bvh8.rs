@@ -312,6 +312,13 @@ impl Walk {
         self.t_max = t_max;
     }
 
+    /// The maximum distance the walk has come down to (the query's, or
+    /// shortened by the leaves' answers).
+    #[inline(always)]
+    pub fn t_max(&self) -> f32 {
+        self.t_max
+    }
+
     /// Visits the next node or leaf, then picks the one after it, and
     /// returns false once the walk has ended. Every child the ray enters is
     /// prefetched when its parent is tested, so a step rarely waits on memory
@@ -334,6 +341,8 @@ impl Walk {
             }
         } else {
             let node = &nodes[self.next as usize];
+            #[cfg(test)]
+            super::queries::work::add(1);
             let entry = &mut self.entry;
             let mut mask = T::test(node, ray, t_min, self.t_max, entry);
             if mask != 0 {
@@ -548,7 +557,7 @@ mod tests {
         let tris = grid_triangles(12);
         let bvh2 = build_bvh2_from_tris(&tris, BvhBuildParams::medium_build(), &mut Default::default());
         let bvh8 = Bvh8::from_bvh2(&bvh2);
-        let mut rand = crate::bake::sampling::test_stream(12345);
+        let mut rand = crate::sampling::test_stream(12345);
         for _ in 0..2000 {
             let o = Vec3::new(rand() * 14.0 - 1.0, rand() * 3.0 - 1.0, rand() * 14.0 - 1.0);
             let mut d = Vec3::new(rand() - 0.5, rand() - 0.5, rand() - 0.5).normalize();
