@@ -4,10 +4,16 @@
 //! centre, a cone with apex valence 20k, a 100k-corner polygon face fanned from
 //! one corner), where every triangle shares one point: near-linear too.
 //!
-//! Run: `cargo bench --bench clean` (only the fans: `cargo bench --bench clean -- fan`).
+//! And `--cut-intersections` where cuts crowd: `n` fins crossing along one
+//! axis (`n (n − 1) / 2` crossing pairs, one line per fin) and `n` thin
+//! triangles crossing at one point (every pair crosses): the work follows
+//! the pieces cut, not the pairs' squares.
+//!
+//! Run: `cargo bench --bench clean` (only the fans: `cargo bench --bench clean -- fan`;
+//! only the cut: `cargo bench --bench clean -- cut`).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use prtbake::clean::fixtures::{fan, large_torus, FanShape};
+use prtbake::clean::fixtures::{fan, fins_through_axis, large_torus, thin_crossing, FanShape};
 use prtbake::clean::{clean_mesh, CleanParams};
 use prtbake::mesh::Mesh;
 
@@ -34,5 +40,22 @@ fn fans(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(clean_benches, torus, fans);
+fn cut(c: &mut Criterion) {
+    let mut group = c.benchmark_group("clean/cut");
+    group.sample_size(10);
+    let params = CleanParams { cut_intersections: true, ..CleanParams::default() };
+    let cases = [
+        ("fins-100", fins_through_axis(100)),
+        ("fins-1000", fins_through_axis(1000)),
+        ("thin-20", thin_crossing(20)),
+        ("thin-30", thin_crossing(30)),
+    ];
+    for (name, mesh) in cases {
+        group.throughput(Throughput::Elements(mesh.triangle_count() as u64));
+        group.bench_function(name, |b| b.iter(|| clean_mesh(&mesh, &params).unwrap()));
+    }
+    group.finish();
+}
+
+criterion_group!(clean_benches, torus, fans, cut);
 criterion_main!(clean_benches);

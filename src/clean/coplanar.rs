@@ -77,11 +77,22 @@ impl Frame {
 /// Finds overlapping coplanar pairs, removes covered triangles when `remove` is set,
 /// and reports the overlaps that remain. With `keep_two_sided`, opposite-facing
 /// triangles never cover or overlap each other (they are the two sides of a sheet).
-pub(crate) fn remove_covered_coplanar(work: &mut Work, plane_tol: f32, keep_two_sided: bool, remove: bool) -> CoplanarOutcome {
+///
+/// `max_sine`: pairs whose planes meet at an angle with a larger sine are
+/// not coplanar however small they are (with the cut on, they are crossings:
+/// two small triangles on either side of a cut line lie within the plane
+/// tolerance of each other's plane); `None` for no limit.
+pub(crate) fn remove_covered_coplanar(
+    work: &mut Work,
+    plane_tol: f32,
+    keep_two_sided: bool,
+    remove: bool,
+    max_sine: Option<f64>,
+) -> CoplanarOutcome {
     let n = work.tris.len();
     let corners: Vec<[DVec3; 3]> = (0..n).map(|t| work.tri_positions(t).map(|p| p.as_dvec3())).collect();
     let frames: Vec<Option<Frame>> = (0..n).map(|t| if work.tri_alive[t] { Frame::of(corners[t]) } else { None }).collect();
-    let (pairs, enumerated) = find_overlapping_pairs(work, &corners, &frames, plane_tol as f64, keep_two_sided);
+    let (pairs, enumerated) = find_overlapping_pairs(work, &corners, &frames, plane_tol as f64, keep_two_sided, max_sine);
 
     // Adjacency in CSR form: for each triangle, its overlapping partners and areas.
     let mut start = vec![0usize; n + 1];
@@ -154,6 +165,7 @@ fn find_overlapping_pairs(
     frames: &[Option<Frame>],
     plane_tol: f64,
     keep_two_sided: bool,
+    max_sine: Option<f64>,
 ) -> (Vec<Pair>, usize) {
     let pad = plane_tol as f32;
     let boxes: Vec<Aabb> = (0..work.tris.len())
@@ -166,6 +178,9 @@ fn find_overlapping_pairs(
         let (a, b) = (a as usize, b as usize);
         let (Some(fa), Some(fb)) = (frames[a], frames[b]) else { continue };
         if keep_two_sided && fa.n.dot(fb.n) < 0.0 {
+            continue;
+        }
+        if max_sine.is_some_and(|m| fa.n.cross(fb.n).length() > m) {
             continue;
         }
         let on_plane = |f: &Frame, ps: &[DVec3; 3]| ps.iter().all(|&p| (p - f.o).dot(f.n).abs() <= plane_tol);

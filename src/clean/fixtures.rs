@@ -635,3 +635,79 @@ pub fn touching_triangles() -> Mesh {
     b.tri_facing(touch, Vec3::X, 0, g);
     b.mesh
 }
+
+/// `n` copies of one triangle in the plane y = 0, each slid by 1/100 of its
+/// base along the base line: every copy overlaps every other and none covers
+/// another (each apex is its own), and every base corner lies on the other
+/// copies' bases. The stacked-coplanar case of the clean-up's scaling tests
+/// and benches (`n (n − 1) / 2` partial overlaps, nothing to remove or zip).
+pub fn stacked_coplanar(n: usize) -> Mesh {
+    let mut b = Builder::new(materials());
+    let g = b.group("stack");
+    for i in 0..n {
+        let d = Vec3::new(0.01 * i as f32, 0.0, 0.0);
+        let v = [Vec3::ZERO, Vec3::X, Vec3::new(0.3, 0.0, -1.0)].map(|p| b.vertex(p + d, Vec3::Y));
+        b.tri_facing(v, Vec3::Y, 0, g);
+    }
+    b.mesh
+}
+
+/// `n` fins around the y axis (unit radius, turned by 360°/n each), every
+/// fin a triangle with one edge on the axis, from y = h to y = h + 1 where
+/// h = i / (2n) staggers them: the fins meet only along the axis, where
+/// each fin's edge carries the other fins' corners (T-junctions between
+/// n surfaces, not a crack).
+pub fn fins_on_axis(n: usize) -> Mesh {
+    let mut b = Builder::new(materials());
+    let g = b.group("fins");
+    for i in 0..n {
+        let (a, h) = (2.0 * PI * i as f32 / n as f32, 0.5 * i as f32 / n as f32);
+        let out = Vec3::new(a.cos(), h + 0.5, -a.sin());
+        let normal = Vec3::new(a.sin(), 0.0, a.cos());
+        let v = [Vec3::new(0.0, h, 0.0), Vec3::new(0.0, h + 1.0, 0.0), out].map(|p| b.vertex(p, normal));
+        b.tri_facing(v, normal, 0, g);
+    }
+    b.mesh
+}
+
+/// `n` fins sharing the y axis: fin `i` is the triangle (−0.5, 0), (1, 0),
+/// (−0.5, 1) of its plane (turned by 180°/n each about the axis), so the
+/// axis crosses every fin from y = 0 (its bottom edge) to y = 2/3 (its
+/// slanted edge). Every pair of fins crosses along that one segment:
+/// `n (n − 1) / 2` crossing pairs, one line to cut.
+pub fn fins_through_axis(n: usize) -> Mesh {
+    let mut b = Builder::new(materials());
+    let g = b.group("fins");
+    for i in 0..n {
+        let a = PI * i as f32 / n as f32;
+        let (along, normal) = (Vec3::new(a.cos(), 0.0, -a.sin()), Vec3::new(a.sin(), 0.0, a.cos()));
+        let v = [(-0.5, 0.0), (1.0, 0.0), (-0.5, 1.0)].map(|(s, y)| b.vertex(along * s + Vec3::Y * y, normal));
+        b.tri_facing(v, normal, 0, g);
+    }
+    b.mesh
+}
+
+/// `n` thin triangles (length 2, 0.04 wide at the base) through the origin
+/// in pseudo-random directions (a fixed generator): every pair crosses in a
+/// short segment through the origin, and every crossing of two segments in
+/// a triangle (where three triangles meet) lies there too, so near-coincident
+/// points and shallow crossings abound: the degenerate case of cutting.
+pub fn thin_crossing(n: usize) -> Mesh {
+    let mut b = Builder::new(materials());
+    let g = b.group("sticks");
+    let mut state = 777u64;
+    let mut random = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((state >> 33) as f32) / (1u64 << 31) as f32
+    };
+    for _ in 0..n {
+        let d = Vec3::new(random() - 0.5, random() - 0.5, random() - 0.5).normalize();
+        let (e, f) = d.any_orthonormal_pair();
+        let turn = random() * 2.0 * PI;
+        let side = e * turn.cos() + f * turn.sin();
+        let normal = d.cross(side);
+        let v = [-d - side * 0.02, d, -d + side * 0.02].map(|p| b.vertex(p, normal));
+        b.tri_facing(v, normal, 0, g);
+    }
+    b.mesh
+}

@@ -1,5 +1,4 @@
-//! Cutting where surfaces pass through each other (issue 20, "cut where
-//! geometry interpenetrates").
+//! Cutting where surfaces pass through each other.
 //!
 //! Why: in architectural and CAD models a wall runs past another wall and a
 //! floor runs under and past a wall. A vertex's transfer is the hat-weighted
@@ -8,130 +7,187 @@
 //! bright bands along the junction (seed 000 calls interpenetrating CAD
 //! geometry "a really big problem"). Cutting every triangle along the lines
 //! where other triangles cross it makes those lines edges; the weld then keeps
-//! the triangles on either side of such a line apart ([`super::weld`], wedges),
-//! so no sample from one side enters a vertex of the other.
+//! the triangles on either side of such a line apart ([`super::weld`],
+//! wedges, and [`find_seams`]), so no sample from one side enters a vertex of
+//! the other.
 //!
 //! How:
-//! 1. *Pairs*: the coplanar step's broad phase ([`super::hub_pairs`], a box
-//!    tree and, around high-valence points, angular sectors, which find every
-//!    pair with a common point away from the hub), boxes padded by the contact
-//!    tolerance. Pairs that share an edge are skipped (non-coplanar triangles
-//!    sharing an edge meet only along it), and so are coplanar pairs (within
-//!    the plane tolerance: overlaps are [`super::coplanar`]'s).
+//! 1. *Pairs*: the coplanar step's broad phase ([`super::hub_pairs`]), boxes
+//!    padded by the contact tolerance. Pairs that share an edge are skipped,
+//!    and so are coplanar pairs (within the plane tolerance: overlaps are
+//!    [`super::coplanar`]'s).
 //! 2. *Segment*: each triangle's corners are classified against the other's
-//!    plane with [`robust::orient3d`] (Shewchuk's adaptive exact predicate:
-//!    the sign is exact however close to the plane a corner is), then a corner
-//!    within the contact tolerance of the plane counts as on it (positions
-//!    closer than the weld tolerance are one point for every step, and a wall
-//!    resting on a floor 1e-7 off it is a contact). Each triangle meets the
-//!    other's plane in a segment of their common line; the pair's
-//!    intersection is the overlap of the two. A pair that meets in a point
-//!    (a shared corner, a touch) is not cut, nor one whose segment lies on a
-//!    boundary edge of both (two patches' rims along each other: zipping's job).
-//!    Nor are segments shorter than the zip tolerance, pairs whose planes
-//!    meet at less than about 3° ([`MIN_CUT_SINE`]), or a pair of input
-//!    triangles cut before in this clean ([`CutPairs`]): each of these made
-//!    pieces thinner than the weld tolerance that the next round removed and
-//!    the cut re-made (the dining room did not converge).
+//!    plane with [`robust::orient3d`] (Shewchuk's adaptive exact predicate),
+//!    then a corner within the contact tolerance of the plane counts as on
+//!    it. The pair's intersection is the overlap of the two triangles'
+//!    crossings of each other's plane. A pair meeting in a point is not cut,
+//!    nor segments shorter than the zip tolerance, nor pairs whose planes meet
+//!    at less than about 3° ([`MIN_CUT_SINE`]). A segment lying along an edge
+//!    of a triangle does not cut that triangle (a wall standing on a floor is
+//!    not cut at its foot, pieces cut before are not cut again): that edge is
+//!    a seam, and only where the segment ends inside the edge does the edge
+//!    take a point.
 //! 3. *Points*: segment ends within the contact tolerance of a corner of the
 //!    pair are that corner; new ends closer than it to each other are one
-//!    point (the smallest id), so both triangles of a pair, and the pairs along
-//!    one line, share point ids. Then, until nothing changes: a point on an
-//!    edge goes into every triangle that uses the edge (no T-junction), a point
-//!    on a segment splits it in both triangles of its pair, and two segments
-//!    crossing inside a triangle (three triangles meeting at a point) add the
-//!    crossing to all three segments and triangles.
-//! 4. *Triangulate*: each triangle with new points is replaced by a
-//!    constrained Delaunay triangulation (the `spade` crate, robust
-//!    predicates) of its corners and points with its edges and segments as
-//!    constraints, in an affine frame of the triangle in which every point on
-//!    an edge lies exactly on that edge's line (barycentric coordinates
-//!    rounded to multiples of 2^-30, the corner `C` to multiples of 2^-10:
-//!    every coordinate is exact), so the triangulation covers the triangle
-//!    exactly. New vertices interpolate the triangle's attributes
-//!    barycentrically. The pieces tile the triangle: its area is kept up to
-//!    the rounding of the new points to f32.
+//!    point (transitively), so the pairs along one line and the triangles of
+//!    one surface share them, however many pairs found them (1,000 fins on one
+//!    axis: 499,500 pairs, one line). A point on an edge goes into every
+//!    triangle using the edge (no T-junction).
+//! 4. *Planes*: the triangles that take a segment or a point are grouped into
+//!    regions (neighbours across an edge with the same two vertices, the same
+//!    material and group, facing the same way, within the plane tolerance of
+//!    one plane). In each region the segments are merged: the same piece found
+//!    by several pairs once, a point within the tolerance of a segment splits
+//!    it, two segments crossing are split at their crossing (three surfaces
+//!    meeting at a point; crossings closer than the tolerance are one point,
+//!    across regions too), and a point where two collinear pieces meet and
+//!    nothing else does is dropped (a straight wall crossing a floor is one
+//!    line in the floor, not a piece per wall triangle).
+//! 5. *No shared edge*: a piece that another surface also has as an edge
+//!    (the wall crossing the floor has the same line) would be an edge of four
+//!    triangles; the later region takes a point on its piece instead, at a
+//!    parameter that no other region uses, so the two surfaces meet along the
+//!    line without sharing an edge of it, and no non-manifold edge appears.
+//! 6. *Triangulate*: each region is re-triangulated as one polygon with its
+//!    outline and pieces as constraints, to the sliver angle where the input
+//!    allows it ([`super::planar`]: constrained Delaunay triangulation and
+//!    Delaunay refinement, points added inside the plane and on the pieces,
+//!    never moving either). New vertices interpolate the attributes of the
+//!    original triangle they lie in.
 //!
-//! Limits: a segment is straight in each triangle, so curved intersections are
-//! cut as polylines at the tessellation's resolution. Two segments that cross
-//! in a triangle's frame but were not found crossing in 3D (rounding) are
-//! split there for that triangle alone ([`CutOutcome::unshared_splits`]); a
-//! piece the triangulation still cannot insert is left out and counted
-//! ([`CutOutcome::dropped_pieces`]). Both are reported; both are zero on the
-//! fixtures and the dining room (5 unshared crossings on the Ferrari). A piece
-//! is oriented by the triangle's frame, where new points sit at their rounded
-//! barycentric coordinates; their 3D positions are the rounded f32 points, so
-//! a piece a few tolerances wide can fold over its neighbour in 3D (the
-//! grey-white room reports a few overlaps between pieces of one triangle, of
-//! 1e-5 to 4e-5 m²). Measurements: docs/performance.md.
+//! Limits: a segment is straight in each triangle, so curved intersections
+//! are cut as polylines at the tessellation's resolution. A region's outline,
+//! where it meets triangles outside the region, is kept whole, so a triangle
+//! pressed against it may stay below the sliver angle; so does an angle
+//! between two constraints (a cut line meeting an edge at 2° makes a 2°
+//! corner). Candidate pairs are enumerated by boxes: n triangles that all
+//! cross one line are n(n − 1)/2 pairs to test (fast, but quadratic).
+//! Measurements: docs/performance.md.
 
 use super::hub_pairs;
-use super::spatial::{cluster_points, Aabb};
+use super::planar::{self, PlanarRegion};
+use super::spatial::{cluster_points_dense, Aabb, AabbTree};
 use super::work::{sorted_edges, EdgeUse, Work};
-use glam::{DVec3, Vec3};
-use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use glam::{DVec2, DVec3, Vec3};
+use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// What [`cut_intersections`] did.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct CutOutcome {
-    /// Intersection segments inserted (one per pair of triangles that cross).
-    pub segments: usize,
-    /// Triangles replaced by their pieces (the cut ones and their edge neighbours).
+    /// Pairs of triangles found crossing.
+    pub pairs: usize,
+    /// Pieces of intersection lines inserted (after merging, before refinement).
+    pub pieces: usize,
+    /// Triangles replaced by the re-triangulation of their region.
     pub triangles_cut: usize,
-    /// Crossings of two segments that only one triangle's frame found (split
-    /// there alone, not shared with the other triangles).
+    /// Crossings of two pieces the triangulation found and split (not found in 3D).
     pub unshared_splits: usize,
-    /// Segment pieces the triangulation could not insert (left uncut).
+    /// Pieces the triangulation could not insert (left uncut).
     pub dropped_pieces: usize,
-    /// Triangles whose triangulation failed (left whole).
+    /// Triangles of regions whose triangulation failed (left whole).
     pub failed_triangles: usize,
+    /// Points the re-triangulation added to reach the sliver angle.
+    pub refinement_points: usize,
+    /// Pieces given a point so that two surfaces do not share them as an edge.
+    pub lines_separated: usize,
+    /// Pieces still shared (too short to take a point): non-manifold edges left.
+    pub shared_left: usize,
+    /// Smallest angle (radians) of the triangles made, and of those they replaced.
+    pub min_angle: f64,
+    pub replaced_min_angle: f64,
+    /// The cut lines as point edges (lower id first): seams for the wedges.
+    pub seams: Vec<(u32, u32)>,
 }
 
-/// Barycentric coordinates are rounded to multiples of this in a triangle's frame.
-const QUANTUM: f64 = 1.0 / (1u64 << 30) as f64;
-/// The frame's corner `C` is rounded to multiples of this (relative to `|AB|`).
-const SHAPE_QUANTUM: f64 = 1.0 / 1024.0;
+/// The tolerances of [`cut_intersections`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CutTolerances {
+    /// Distance within which triangles count as coplanar (the coplanar step's).
+    pub plane: f64,
+    /// Distance within which a point touches a plane, an edge or another point.
+    pub contact: f64,
+    /// Segments shorter than this are not cut (the zip tolerance).
+    pub min_length: f64,
+    /// Target smallest angle of the re-triangulated regions (radians; 0: none).
+    pub min_angle: f64,
+}
+
 /// Pairs whose planes meet at a smaller angle (sine; about 3°) are not cut:
 /// an offset δ of either moves their common line by δ / sin θ, so the cut is
 /// ill-conditioned, and such pairs are mostly one surface modelled twice a
 /// hair apart (a car's double-sided panels) rather than a wall through a floor.
-const MIN_CUT_SINE: f64 = 0.05;
-/// Rounds of the point propagation (each adds points; real meshes settle in 2).
-const MAX_PROPAGATION_ROUNDS: usize = 16;
+pub(crate) const MIN_CUT_SINE: f64 = 0.05;
+/// The parameters at which the regions after the first place their point on
+/// a shared piece: `1/4 + (k + SEPARATION_OFFSET) / 2K` for the k-th of K, in
+/// the middle half (no short piece) and not at a dyadic fraction, where
+/// refinement splits pieces (midpoints).
+const SEPARATION_OFFSET: f64 = 0.618_034;
 
-/// One pair's intersection: the two triangles and the points along it.
-#[derive(Clone, Debug)]
-struct Segment {
-    tris: [u32; 2],
-    ends: [u32; 2],
-    /// Points inside the segment, unordered.
-    inner: Vec<u32>,
-}
+/// Faces whose shortest side is under this many plane tolerances are not
+/// refined: near a point where many lines meet (thin triangles crossing at
+/// one spot) refinement made triangles so small that triangles of other
+/// planes there lie within the plane tolerance of them, which the coplanar
+/// step then removed as covered, round after round.
+const MIN_REFINED_FACE: f64 = 32.0;
 
 /// Where a point lies on a triangle.
 #[derive(Clone, Copy, Debug)]
 enum Loc {
     Corner(usize),
-    /// On the edge from corner `k` to `k + 1`, at parameter `s` in (0, 1).
-    Edge(usize, f64),
-    /// Barycentric coordinates of corners 1 and 2.
-    Interior(f64, f64),
+    /// On the edge from corner `k` to `k + 1`.
+    Edge(usize),
+    Interior,
     /// Outside the triangle by more than the tolerance: not inserted.
     Outside,
 }
 
-/// Cuts every live triangle along the segments where other triangles cross it
-/// (see the module doc). `plane_tol` is the coplanar step's tolerance, `tol`
-/// the contact tolerance (the weld tolerance).
-pub(crate) fn cut_intersections(
-    work: &mut Work,
-    plane_tol: f64,
-    tol: f64,
-    min_length: f64,
-    cut: &mut CutPairs,
-    input_of: &[u32],
-) -> CutOutcome {
+/// A segment end before the new points are clustered.
+#[derive(Clone, Copy, Debug)]
+enum EndRef {
+    Point(u32),
+    New(u32),
+}
+
+/// A crossing pair's segment, before its ends are points.
+struct Raw {
+    tris: [u32; 2],
+    ends: [DVec3; 2],
+    /// Per triangle: `None` when the segment does not cut it (along a rim
+    /// or a non-manifold edge), `Some(true)` across it, `Some(false)` along one
+    /// of its manifold edges (a seam).
+    cuts: [Option<bool>; 2],
+}
+
+/// One triangle's constraint: two point ids and whether it crosses the triangle (not along an edge).
+type Constraint = ([u32; 2], bool);
+
+/// The triangles the cut has tested against each other, as their corner
+/// positions, and whether it has cut, across the rounds of one clean. The
+/// clean cuts once (the first round; [`CutMemo::has_cut`]), so the set only
+/// matters to a caller that cuts again: a pair of tested triangles is not
+/// tested again (nothing about it changed), a triangle that another step
+/// changed or moved is new and tested against all.
+#[derive(Default)]
+pub(crate) struct CutMemo(HashSet<[[u32; 3]; 3]>, bool);
+
+impl CutMemo {
+    /// True once a round has cut something.
+    pub(crate) fn has_cut(&self) -> bool {
+        self.1
+    }
+}
+
+impl CutMemo {
+    fn key(work: &Work, t: usize) -> [[u32; 3]; 3] {
+        let mut k = work.tri_positions(t).map(|p| p.to_array().map(f32::to_bits));
+        k.sort_unstable();
+        k
+    }
+}
+
+/// Cuts every live triangle along the segments where other triangles cross
+/// it (see the module doc). `memo` holds the triangles earlier rounds tested.
+pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut CutMemo) -> CutOutcome {
     let n = work.tris.len();
     let corners: Vec<[DVec3; 3]> = (0..n).map(|t| work.tri_positions(t).map(|p| p.as_dvec3())).collect();
     let points: Vec<[u32; 3]> = (0..n).map(|t| work.tri_points(t)).collect();
@@ -140,164 +196,701 @@ pub(crate) fn cut_intersections(
         work.tri_alive[t] && a != b && b != c && c != a && work.tri_cross(t).length_squared() > 0.0
     };
     let boxes: Vec<Aabb> =
-        (0..n).map(|t| if usable(t) { Aabb::of_points(&work.tri_positions(t), tol as f32) } else { Aabb::EMPTY }).collect();
-    let candidates = hub_pairs::candidate_pairs(&points, &corners, &boxes, tol);
+        (0..n).map(|t| if usable(t) { Aabb::of_points(&work.tri_positions(t), tol.contact as f32) } else { Aabb::EMPTY }).collect();
+    let settled: Vec<bool> = (0..n).map(|t| boxes[t] != Aabb::EMPTY && memo.0.contains(&CutMemo::key(work, t))).collect();
+    let candidates = candidate_pairs(&points, &corners, &boxes, &settled, tol.contact);
+    let edge_users = EdgeUsers(sorted_edges(work));
+    let mut out = CutOutcome { min_angle: f64::INFINITY, replaced_min_angle: f64::INFINITY, ..CutOutcome::default() };
 
     // 1-2. Segments of the crossing pairs, ends as positions.
-    let mut raw: Vec<(u32, u32, [DVec3; 2])> = Vec::new();
-    for &(a, b) in &candidates.pairs {
+    let mut raw: Vec<Raw> = Vec::new();
+    for &(a, b) in &candidates {
         let (a, b) = (a as usize, b as usize);
         let shared = points[a].iter().filter(|p| points[b].contains(p)).count();
-        if shared >= 2 || cut.0.contains(&origin_pair(work, input_of, a, b)) {
+        if shared >= 2 {
             continue;
         }
-        if let Some(ends) = pair_segment(corners[a], corners[b], plane_tol, tol).filter(|e| e[0].distance(e[1]) >= min_length) {
-            raw.push((a as u32, b as u32, ends));
+        let Some(ends) = pair_segment(corners[a], corners[b], tol.plane, tol.contact).filter(|e| e[0].distance(e[1]) >= tol.min_length)
+        else {
+            continue;
+        };
+        // Along an edge: a seam, unless the edge is a rim, non-manifold or a seam already.
+        let cut_of = |t: usize| match along_edge(corners[t], ends, tol.contact) {
+            None => Some(true),
+            Some(k) => {
+                let users = edge_users.of(points[t][k], points[t][(k + 1) % 3]);
+                (users.len() == 2 && !splits_vertices(work, users)).then_some(false)
+            }
+        };
+        let cuts = [cut_of(a), cut_of(b)];
+        if cuts == [None, None] {
+            continue;
         }
+        raw.push(Raw { tris: [a as u32, b as u32], ends, cuts });
     }
 
-    // 3. Point ids: a corner of the pair within `tol`, else a new point (clustered).
+    // 3. Point ids: a corner of the pair within the tolerance, else a new point (clustered).
     let mut new_positions: Vec<Vec3> = Vec::new();
-    let mut ends_of: Vec<[EndRef; 2]> = Vec::with_capacity(raw.len());
-    for &(a, b, ends) in &raw {
-        let pair_corners: Vec<(u32, DVec3)> = (0..3)
-            .map(|k| (points[a as usize][k], corners[a as usize][k]))
-            .chain((0..3).map(|k| (points[b as usize][k], corners[b as usize][k])))
-            .collect();
-        ends_of.push(ends.map(|p| {
-            let nearest = pair_corners
-                .iter()
-                .map(|&(id, c)| (c.distance(p), id))
-                .filter(|&(d, _)| d <= tol)
-                .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-            match nearest {
-                Some((_, id)) => EndRef::Point(id),
-                None => {
-                    new_positions.push(p.as_vec3());
-                    EndRef::New(new_positions.len() as u32 - 1)
+    let ends_of: Vec<[EndRef; 2]> = raw
+        .iter()
+        .map(|r| {
+            r.ends.map(|p| {
+                let (points, corners) = (&points, &corners);
+                let nearest = r
+                    .tris
+                    .iter()
+                    .flat_map(|&t| (0..3).map(move |k| (points[t as usize][k], corners[t as usize][k])))
+                    .map(|(id, c)| (c.distance(p), id))
+                    .filter(|&(d, _)| d <= tol.contact)
+                    .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+                match nearest {
+                    Some((_, id)) => EndRef::Point(id),
+                    None => {
+                        new_positions.push(p.as_vec3());
+                        EndRef::New(new_positions.len() as u32 - 1)
+                    }
                 }
-            }
-        }));
-    }
-    let ids: Vec<u32> = (0..new_positions.len() as u32).collect();
-    let reps = cluster_points(&new_positions, &ids, tol as f32);
-    let mut new_point = vec![u32::MAX; new_positions.len()];
-    for i in 0..new_positions.len() {
-        let r = reps[i] as usize;
-        if new_point[r] == u32::MAX {
-            new_point[r] = work.push_point(new_positions[r]);
-        }
-        new_point[i] = new_point[r];
-    }
-    let mut segments: Vec<Segment> = Vec::new();
-    for (&(a, b, _), ends) in raw.iter().zip(&ends_of) {
-        let ends = ends.map(|e| match e {
-            EndRef::Point(id) => id,
-            EndRef::New(i) => new_point[i as usize],
-        });
+            })
+        })
+        .collect();
+    let new_point = push_clustered(work, &new_positions, tol.contact);
+    let point_of = |e: EndRef| match e {
+        EndRef::Point(id) => id,
+        EndRef::New(i) => new_point[i as usize],
+    };
+
+    // Constraints per triangle, and the points each edge takes.
+    let mut constraints: BTreeMap<u32, Vec<Constraint>> = BTreeMap::new();
+    let mut edge_points: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+    let mut seams: Vec<(u32, u32)> = Vec::new();
+    let mut touched: HashSet<u32> = HashSet::new();
+    for (r, ends) in raw.iter().zip(&ends_of) {
+        let ends = ends.map(point_of);
         if ends[0] == ends[1] {
             continue;
         }
-        segments.push(Segment { tris: [a, b], ends, inner: Vec::new() });
-    }
-
-    if segments.is_empty() {
-        return CutOutcome::default();
-    }
-    // Edge users on points (sorted by edge), for the boundary rule and the propagation.
-    let edge_users = EdgeUsers(sorted_edges(work));
-    // Boundary rule: a segment on a rim edge of both triangles is zipping's.
-    let mut planner = Planner {
-        work,
-        corners: &corners,
-        points: &points,
-        tol,
-        edge_users: &edge_users,
-        extra: BTreeMap::new(),
-        segs_of: BTreeMap::new(),
-    };
-    segments.retain(|s| !planner.on_rims_of_both(s));
-    for (i, s) in segments.iter().enumerate() {
-        for &t in &s.tris {
-            planner.segs_of.entry(t).or_default().push(i as u32);
-        }
-    }
-    let segment_count = segments.len();
-    for s in &segments {
-        cut.0.insert(origin_pair(planner.work, input_of, s.tris[0] as usize, s.tris[1] as usize));
-    }
-    if segment_count == 0 {
-        return CutOutcome::default();
-    }
-
-    // 3. Propagate points until nothing changes.
-    let mut queue: VecDeque<(u32, u32)> = VecDeque::new();
-    for s in &mut segments {
-        // A corner of either triangle on the segment splits it (else the
-        // piece between them is thinner than the tolerance).
-        let (a, b) = (planner.position(s.ends[0]), planner.position(s.ends[1]));
-        for &t in &s.tris {
-            for (k, &p) in points[t as usize].iter().enumerate() {
-                if !s.ends.contains(&p) && !s.inner.contains(&p) && on_segment(a, b, corners[t as usize][k], tol) {
-                    s.inner.push(p);
+        let mut crossing = false;
+        for (&t, &cut) in r.tris.iter().zip(&r.cuts) {
+            let Some(across) = cut else { continue };
+            let locs = ends.map(|p| locate_point(work, &points, &corners, t, p, tol.contact));
+            if locs.iter().any(|l| matches!(l, Loc::Outside)) {
+                continue;
+            }
+            for (&p, loc) in ends.iter().zip(&locs) {
+                if let Loc::Edge(k) = *loc {
+                    let key = edge_key(points[t as usize][k], points[t as usize][(k + 1) % 3]);
+                    edge_points.entry(key).or_default().push(p);
                 }
             }
-        }
-        for &t in &s.tris {
-            for &p in s.ends.iter().chain(&s.inner) {
-                queue.push_back((t, p));
+            if !across && locs.iter().all(|l| matches!(l, Loc::Corner(_))) {
+                // Along a whole edge: a seam, nothing to cut.
+                seams.push(edge_key(ends[0], ends[1]));
             }
+            if across {
+                touched.insert(t);
+                crossing = true;
+            }
+            constraints.entry(t).or_default().push((ends, across));
         }
+        out.pairs += usize::from(crossing);
     }
-    let pair_segment_of: HashMap<(u32, u32), u32> =
-        segments.iter().enumerate().map(|(i, s)| ((s.tris[0].min(s.tris[1]), s.tris[0].max(s.tris[1])), i as u32)).collect();
-    let mut crossings: HashMap<[u32; 3], u32> = HashMap::new();
-    for _ in 0..MAX_PROPAGATION_ROUNDS {
-        planner.propagate(&mut queue, &mut segments);
-        if !planner.find_crossings(&mut segments, &pair_segment_of, &mut crossings, &mut queue) {
-            break;
-        }
+    for (&(a, b), list) in &mut edge_points {
+        list.sort_unstable();
+        list.dedup();
+        touched.extend(edge_users.of(a, b).iter().map(|e| e.tri));
+    }
+    if touched.is_empty() {
+        out.seams = seams;
+        memo.0 = (0..n).filter(|&t| work.tri_alive[t]).map(|t| CutMemo::key(work, t)).collect();
+        return out;
     }
 
-    // 4. Triangulate every triangle that gained a point.
-    let mut out = CutOutcome { segments: segment_count, ..CutOutcome::default() };
-    let extra = std::mem::take(&mut planner.extra);
-    let segs_of = std::mem::take(&mut planner.segs_of);
-    for (&t, pts) in &extra {
-        let segs: Vec<&Segment> = segs_of.get(&t).map(|v| v.iter().map(|&i| &segments[i as usize]).collect()).unwrap_or_default();
-        match triangulate(work, t as usize, pts, &segs, tol) {
-            Some(pieces) => {
-                out.triangles_cut += usize::from(pieces.count > 1);
-                out.unshared_splits += pieces.unshared;
-                out.dropped_pieces += pieces.dropped;
-            }
-            None => out.failed_triangles += 1,
-        }
+    // 4. Regions and their pieces.
+    let regions = group_regions(work, &points, &corners, &edge_users, &touched, tol.plane);
+    let mut plans: Vec<Plan> =
+        regions.into_iter().map(|r| plan_region(work, &points, &corners, &edge_users, &edge_points, &constraints, r, tol)).collect();
+    split_at_crossings(work, &mut plans, tol.contact);
+    for plan in &mut plans {
+        plan.finish_pieces(work, tol.contact);
+        out.pieces += plan.pieces.iter().filter(|p| p.1).count();
     }
+    // 5. No piece is an edge of two surfaces.
+    separate_shared_pieces(work, &mut plans, &edge_users, &mut out, tol.contact);
+
+    // 6. Triangulate.
+    for plan in &plans {
+        triangulate_region(work, &corners, plan, tol, &mut out);
+    }
+    out.seams.extend(seams);
+    out.seams.sort_unstable();
+    out.seams.dedup();
+    work.compact_triangles();
+    memo.0 = (0..work.tris.len()).map(|t| CutMemo::key(work, t)).collect();
+    memo.1 = true;
     out
 }
 
-/// Pairs of input triangles cut so far, across the
-/// rounds of one clean: their pieces are not cut against each other again.
-/// Rounding the new points to f32 and removing the slivers a cut leaves
-/// (thinner than the weld tolerance) can make a cut pair's pieces cross again
-/// by a hair; on the dining room (269k triangles) the same 246 pairs were
-/// re-cut every round and the clean never converged.
-#[derive(Default)]
-pub(crate) struct CutPairs(std::collections::HashSet<(u32, u32)>);
-
-/// The input triangles of triangles `a` and `b` (`input_of` maps this round's
-/// input triangles to the clean's), in order.
-fn origin_pair(work: &Work, input_of: &[u32], a: usize, b: usize) -> (u32, u32) {
-    let (x, y) = (input_of[work.tri_origin[a] as usize], input_of[work.tri_origin[b] as usize]);
-    (x.min(y), x.max(y))
+/// The pairs to test: every pair with overlapping boxes but those of two
+/// settled triangles. All unsettled (the first round): the coplanar step's
+/// broad phase, near-linear at high-valence points; otherwise the same among
+/// the unsettled, and each unsettled box against a tree of the settled.
+fn candidate_pairs(points: &[[u32; 3]], corners: &[[DVec3; 3]], boxes: &[Aabb], settled: &[bool], tol: f64) -> Vec<(u32, u32)> {
+    let fresh: Vec<Aabb> = boxes.iter().zip(settled).map(|(&b, &s)| if s { Aabb::EMPTY } else { b }).collect();
+    let mut pairs = hub_pairs::candidate_pairs(points, corners, &fresh, tol).pairs;
+    let old: Vec<u32> = (0..boxes.len() as u32).filter(|&t| settled[t as usize]).collect();
+    if !old.is_empty() {
+        let tree = AabbTree::build(old.iter().map(|&t| boxes[t as usize]).collect());
+        let mut hits = Vec::new();
+        for t in (0..boxes.len()).filter(|&t| fresh[t] != Aabb::EMPTY) {
+            hits.clear();
+            tree.query(&fresh[t], &mut hits);
+            pairs.extend(hits.iter().map(|&i| (old[i as usize].min(t as u32), old[i as usize].max(t as u32))));
+        }
+        pairs.sort_unstable();
+    }
+    pairs
 }
 
-/// A segment end before the new points are clustered.
-#[derive(Clone, Copy, Debug)]
-enum EndRef {
-    Point(u32),
-    New(u32),
+/// Appends the positions as points, those closer than `tol` to each other
+/// (transitively) as one (the first); returns each position's point id.
+fn push_clustered(work: &mut Work, positions: &[Vec3], tol: f64) -> Vec<u32> {
+    // Bit-identical positions first (the pairs along one line find its ends
+    // thousands of times; clustering compares the points of a cell pairwise).
+    let mut first: HashMap<[u32; 3], u32> = HashMap::new();
+    let distinct: Vec<u32> = (0..positions.len() as u32)
+        .filter(|&i| *first.entry(positions[i as usize].to_array().map(f32::to_bits)).or_insert(i) == i)
+        .collect();
+    let reps = cluster_points_dense(positions, &distinct, tol as f32);
+    let mut point = vec![u32::MAX; positions.len()];
+    for (&i, &r) in distinct.iter().zip(&reps) {
+        if point[r as usize] == u32::MAX {
+            point[r as usize] = work.push_point(positions[r as usize]);
+        }
+        point[i as usize] = point[r as usize];
+    }
+    for i in 0..positions.len() {
+        point[i] = point[first[&positions[i].to_array().map(f32::to_bits)] as usize];
+    }
+    point
+}
+
+/// A point edge as its two point ids, the lower first.
+fn edge_key(a: u32, b: u32) -> (u32, u32) {
+    (a.min(b), a.max(b))
+}
+
+/// True when the two users of an edge have different vertices at one of its
+/// ends: the edge is already a seam (a cut line, a hard edge or a UV seam).
+fn splits_vertices(work: &Work, users: &[EdgeUse]) -> bool {
+    let vertex_at = |e: &EdgeUse, p: u32| {
+        let t = e.tri as usize;
+        (0..3).find(|&c| work.vertex_point[work.tris[t][c] as usize] == p).map(|c| work.tris[t][c])
+    };
+    let (e, f) = (&users[0], &users[1]);
+    [e.lo, e.hi].iter().any(|&p| vertex_at(e, p) != vertex_at(f, p))
+}
+
+/// The edge of the triangle with corners `c` that holds both points (within `tol`), if any.
+fn along_edge(c: [DVec3; 3], ends: [DVec3; 2], tol: f64) -> Option<usize> {
+    let on = |loc: Loc| -> [bool; 3] {
+        match loc {
+            Loc::Corner(k) => {
+                let mut e = [false; 3];
+                e[k] = true;
+                e[(k + 2) % 3] = true;
+                e
+            }
+            Loc::Edge(k) => {
+                let mut e = [false; 3];
+                e[k] = true;
+                e
+            }
+            _ => [false; 3],
+        }
+    };
+    let corner_or = |p: DVec3| match (0..3).find(|&k| c[k].distance(p) <= tol) {
+        Some(k) => Loc::Corner(k),
+        None => locate(c, p, tol),
+    };
+    let (x, y) = (on(corner_or(ends[0])), on(corner_or(ends[1])));
+    (0..3).find(|&k| x[k] && y[k])
+}
+
+/// Where point `p` lies on triangle `t` (a corner when it is one by id).
+fn locate_point(work: &Work, points: &[[u32; 3]], corners: &[[DVec3; 3]], t: u32, p: u32, tol: f64) -> Loc {
+    match points[t as usize].iter().position(|&c| c == p) {
+        Some(k) => Loc::Corner(k),
+        None => locate(corners[t as usize], work.points[p as usize].as_dvec3(), tol),
+    }
+}
+
+/// Unit normal of a triangle (zero for a degenerate one).
+fn normal(t: [DVec3; 3]) -> DVec3 {
+    (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero()
+}
+
+/// A region: triangles (ascending) and the vertex each uses at each of its points.
+struct Region {
+    tris: Vec<u32>,
+    vertex_of: HashMap<u32, u32>,
+}
+
+/// Groups the touched triangles into planar regions (see the module doc, step 4).
+fn group_regions(
+    work: &Work,
+    points: &[[u32; 3]],
+    corners: &[[DVec3; 3]],
+    edge_users: &EdgeUsers,
+    touched: &HashSet<u32>,
+    plane_tol: f64,
+) -> Vec<Region> {
+    let mut seeds: Vec<u32> = touched.iter().copied().collect();
+    seeds.sort_unstable();
+    let mut assigned: HashSet<u32> = HashSet::new();
+    let mut regions = Vec::new();
+    for seed in seeds {
+        if !assigned.insert(seed) {
+            continue;
+        }
+        let s = seed as usize;
+        let (origin, n) = (corners[s][0], normal(corners[s]));
+        let mut vertex_of: HashMap<u32, u32> = (0..3).map(|k| (points[s][k], work.tris[s][k])).collect();
+        let mut tris = vec![seed];
+        let mut next = 0;
+        while next < tris.len() {
+            let t = tris[next] as usize;
+            next += 1;
+            for k in 0..3 {
+                let users = edge_users.of(points[t][k], points[t][(k + 1) % 3]);
+                let [e, f] = users else { continue };
+                let u = if e.tri as usize == t { f.tri } else { e.tri };
+                let ui = u as usize;
+                let joins = touched.contains(&u)
+                    && !assigned.contains(&u)
+                    && work.tri_material[ui] == work.tri_material[s]
+                    && work.tri_group[ui] == work.tri_group[s]
+                    && normal(corners[ui]).dot(n) > 0.0
+                    && corners[ui].iter().all(|&c| (c - origin).dot(n).abs() <= plane_tol)
+                    && (0..3).all(|c| vertex_of.get(&points[ui][c]).is_none_or(|&v| v == work.tris[ui][c]));
+                if joins {
+                    assigned.insert(u);
+                    (0..3).for_each(|c| {
+                        vertex_of.insert(points[ui][c], work.tris[ui][c]);
+                    });
+                    tris.push(u);
+                }
+            }
+        }
+        tris.sort_unstable();
+        regions.push(Region { tris, vertex_of });
+    }
+    regions
+}
+
+/// One region's plan: its points and the pieces to insert.
+struct Plan {
+    region: Region,
+    /// The region's plane: origin, two axes and the normal.
+    frame: [DVec3; 4],
+    /// Point ids; the index is the local id.
+    points: Vec<u32>,
+    local: HashMap<u32, usize>,
+    /// Outline pieces (point ids) and whether each is a rim.
+    outline: Vec<([u32; 2], bool)>,
+    on_outline: HashSet<u32>,
+    /// Segments (point ids, deduplicated), whether they cross (not along an
+    /// edge), and the points found inside each.
+    cuts: Vec<([u32; 2], bool, Vec<u32>)>,
+    /// The pieces to insert, once [`Plan::finish_pieces`] ran.
+    pieces: Vec<([u32; 2], bool)>,
+    /// Pieces on the outline (no constraint needed): seams.
+    seams: Vec<(u32, u32)>,
+}
+
+impl Plan {
+    fn add_point(&mut self, p: u32) -> usize {
+        let next = self.points.len();
+        *self.local.entry(p).or_insert_with(|| {
+            self.points.push(p);
+            next
+        })
+    }
+
+    /// Splits the segments at their inner points, merges duplicates, drops
+    /// the pieces on the outline and the points where two collinear pieces
+    /// meet and nothing else does (see the module doc, step 4).
+    fn finish_pieces(&mut self, work: &Work, tol: f64) {
+        let pos = |p: u32| work.points[p as usize].as_dvec3();
+        let mut pieces: BTreeMap<(u32, u32), bool> = BTreeMap::new();
+        for ([a, b], across, inner) in &self.cuts {
+            let (pa, dir) = (pos(*a), pos(*b) - pos(*a));
+            let mut chain: Vec<(f64, u32)> = inner.iter().map(|&p| ((pos(p) - pa).dot(dir), p)).collect();
+            chain.push((f64::NEG_INFINITY, *a));
+            chain.push((f64::INFINITY, *b));
+            chain.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+            chain.dedup_by_key(|x| x.1);
+            for w in chain.windows(2) {
+                if w[0].1 != w[1].1 {
+                    *pieces.entry(edge_key(w[0].1, w[1].1)).or_insert(false) |= *across;
+                }
+            }
+        }
+        let outline: HashSet<(u32, u32)> = self.outline.iter().map(|&([a, b], _)| edge_key(a, b)).collect();
+        let on_outline: Vec<(u32, u32)> = pieces.keys().copied().filter(|k| outline.contains(k)).collect();
+        for k in &on_outline {
+            pieces.remove(k);
+        }
+        self.seams.extend(on_outline);
+
+        // Joints: a free point of two collinear pieces.
+        let mut at: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
+        for &(a, b) in pieces.keys() {
+            at.entry(a).or_default().push((a, b));
+            at.entry(b).or_default().push((a, b));
+        }
+        let mut joints: Vec<u32> = at
+            .iter()
+            .filter(|(p, list)| list.len() == 2 && !self.region.vertex_of.contains_key(p) && !self.on_outline.contains(p))
+            .map(|(&p, _)| p)
+            .collect();
+        joints.sort_unstable();
+        for x in joints {
+            let Some(list) = at.get(&x).filter(|l| l.len() == 2).cloned() else { continue };
+            let other = |k: (u32, u32)| if k.0 == x { k.1 } else { k.0 };
+            let (a, b) = (other(list[0]), other(list[1]));
+            let merged = edge_key(a, b);
+            let (pa, pb, px) = (pos(a), pos(b), pos(x));
+            let ab = pb - pa;
+            let s = (px - pa).dot(ab) / ab.length_squared();
+            if a == b || pieces.contains_key(&merged) || !(0.0..=1.0).contains(&s) || px.distance(pa + ab * s) > tol {
+                continue;
+            }
+            let across = pieces.remove(&list[0]).unwrap_or(false) | pieces.remove(&list[1]).unwrap_or(false);
+            pieces.insert(merged, across);
+            at.remove(&x);
+            for (end, old) in [(a, list[0]), (b, list[1])] {
+                if let Some(l) = at.get_mut(&end) {
+                    l.retain(|&k| k != old);
+                    l.push(merged);
+                }
+            }
+        }
+        self.pieces = pieces.into_iter().map(|((a, b), across)| ([a, b], across)).collect();
+        // Only the points the triangulation needs: corners, outline and piece ends.
+        let mut used: Vec<u32> = self.region.vertex_of.keys().copied().collect();
+        used.extend(self.on_outline.iter().copied());
+        used.extend(self.pieces.iter().flat_map(|p| p.0));
+        used.sort_unstable();
+        used.dedup();
+        self.points.clear();
+        self.local.clear();
+        for p in used {
+            self.add_point(p);
+        }
+    }
+}
+
+/// The plan of one region: its outline (with the points its edges take) and
+/// its segments with the points within the tolerance of each.
+#[allow(clippy::too_many_arguments)]
+fn plan_region(
+    work: &Work,
+    points: &[[u32; 3]],
+    corners: &[[DVec3; 3]],
+    edge_users: &EdgeUsers,
+    edge_points: &HashMap<(u32, u32), Vec<u32>>,
+    constraints: &BTreeMap<u32, Vec<Constraint>>,
+    region: Region,
+    tol: &CutTolerances,
+) -> Plan {
+    let first = region.tris[0] as usize;
+    let n = normal(corners[first]);
+    let u = (corners[first][1] - corners[first][0]).normalize_or_zero();
+    let frame = [corners[first][0], u, n.cross(u), n];
+    let members: HashSet<u32> = region.tris.iter().copied().collect();
+    let mut plan = Plan {
+        region,
+        frame,
+        points: Vec::new(),
+        local: HashMap::new(),
+        outline: Vec::new(),
+        on_outline: HashSet::new(),
+        cuts: Vec::new(),
+        pieces: Vec::new(),
+        seams: Vec::new(),
+    };
+    let tris = plan.region.tris.clone();
+    let pos = |p: u32| work.points[p as usize].as_dvec3();
+    let mut outline: BTreeMap<(u32, u32), bool> = BTreeMap::new();
+    for &t in &tris {
+        for k in 0..3 {
+            let (a, b) = (points[t as usize][k], points[t as usize][(k + 1) % 3]);
+            let users = edge_users.of(a, b);
+            if users.len() == 2 && users.iter().all(|e| members.contains(&e.tri)) {
+                continue;
+            }
+            let mut chain = vec![a];
+            if let Some(list) = edge_points.get(&edge_key(a, b)) {
+                let mut along: Vec<(f64, u32)> = list.iter().map(|&p| ((pos(p) - pos(a)).dot(pos(b) - pos(a)), p)).collect();
+                along.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+                chain.extend(along.into_iter().map(|x| x.1));
+            }
+            chain.push(b);
+            chain.dedup();
+            for w in chain.windows(2) {
+                // Never split, rims included: points added on a rim are boundary
+                // points, which zipping welds to other surfaces' rim points
+                // within its tolerance (fins on one axis: their rims meet there).
+                outline.insert(edge_key(w[0], w[1]), false);
+            }
+            plan.on_outline.extend(chain);
+        }
+    }
+    plan.outline = outline.into_iter().map(|((a, b), rim)| ([a, b], rim)).collect();
+    let mut cuts: BTreeMap<(u32, u32), bool> = BTreeMap::new();
+    for t in &tris {
+        for &([a, b], across) in constraints.get(t).map(Vec::as_slice).unwrap_or_default() {
+            *cuts.entry(edge_key(a, b)).or_insert(false) |= across;
+        }
+    }
+    plan.cuts = cuts.into_iter().map(|((a, b), across)| ([a, b], across, Vec::new())).collect();
+    // Points within the tolerance of a segment split it.
+    let mut candidates: Vec<u32> = plan.region.vertex_of.keys().copied().collect();
+    candidates.extend(plan.on_outline.iter().copied());
+    candidates.extend(plan.cuts.iter().flat_map(|c| c.0));
+    candidates.sort_unstable();
+    candidates.dedup();
+    let boxes: Vec<Aabb> = plan.cuts.iter().map(|c| Aabb::of_points(&c.0.map(|p| work.points[p as usize]), tol.contact as f32)).collect();
+    let tree = AabbTree::build(boxes);
+    let mut found = Vec::new();
+    for &p in &candidates {
+        let q = work.points[p as usize];
+        found.clear();
+        tree.query(&Aabb { min: q, max: q }, &mut found);
+        for &c in &found {
+            let cut = &mut plan.cuts[c as usize];
+            if !cut.0.contains(&p) && on_segment(pos(cut.0[0]), pos(cut.0[1]), q.as_dvec3(), tol.contact) {
+                cut.2.push(p);
+            }
+        }
+    }
+    plan
+}
+
+/// Splits the segments of each region where two of them cross (three
+/// surfaces meet at a point); crossings closer than `tol` are one point,
+/// across regions too, and one within `tol` of a point already on both
+/// segments is that point.
+fn split_at_crossings(work: &mut Work, plans: &mut [Plan], tol: f64) {
+    let mut found: Vec<(usize, usize, usize, Vec3)> = Vec::new();
+    for (r, plan) in plans.iter().enumerate() {
+        let pos = |p: u32| work.points[p as usize].as_dvec3();
+        let boxes: Vec<Aabb> = plan.cuts.iter().map(|c| Aabb::of_points(&c.0.map(|p| work.points[p as usize]), tol as f32)).collect();
+        let tree = AabbTree::build(boxes.clone());
+        let mut hits = Vec::new();
+        for (i, c) in plan.cuts.iter().enumerate() {
+            hits.clear();
+            tree.query(&boxes[i], &mut hits);
+            hits.sort_unstable();
+            for &j in hits.iter().filter(|&&j| j as usize > i) {
+                let d = &plan.cuts[j as usize];
+                if c.0.iter().any(|p| d.0.contains(p)) {
+                    continue;
+                }
+                let Some(q) = segment_crossing([pos(c.0[0]), pos(c.0[1])], [pos(d.0[0]), pos(d.0[1])], tol) else { continue };
+                let shared = c.2.iter().any(|p| (d.2.contains(p) || d.0.contains(p)) && pos(*p).distance(q) <= 2.0 * tol)
+                    || d.2.iter().any(|p| c.0.contains(p));
+                if !shared {
+                    found.push((r, i, j as usize, q.as_vec3()));
+                }
+            }
+        }
+    }
+    let positions: Vec<Vec3> = found.iter().map(|f| f.3).collect();
+    let ids = push_clustered(work, &positions, tol);
+    for (&(r, i, j, _), &p) in found.iter().zip(&ids) {
+        for c in [i, j] {
+            let inner = &mut plans[r].cuts[c].2;
+            if !inner.contains(&p) {
+                inner.push(p);
+            }
+        }
+    }
+}
+
+/// Gives each piece that another surface also has as an edge a point of its
+/// own (see the module doc, step 5).
+fn separate_shared_pieces(work: &mut Work, plans: &mut [Plan], edge_users: &EdgeUsers, out: &mut CutOutcome, tol: f64) {
+    let in_region: HashSet<u32> = plans.iter().flat_map(|p| p.region.tris.iter().copied()).collect();
+    let outline: HashSet<(u32, u32)> = plans.iter().flat_map(|p| p.outline.iter().map(|&([a, b], _)| edge_key(a, b))).collect();
+    let mut claimed: HashSet<(u32, u32)> = HashSet::new();
+    let mut needs: BTreeMap<(u32, u32), Vec<(usize, usize)>> = BTreeMap::new();
+    for (r, plan) in plans.iter().enumerate() {
+        for (i, &([a, b], _)) in plan.pieces.iter().enumerate() {
+            let key = edge_key(a, b);
+            let existing = outline.contains(&key) || edge_users.of(a, b).iter().any(|e| !in_region.contains(&e.tri));
+            if existing || !claimed.insert(key) {
+                needs.entry(key).or_default().push((r, i));
+            }
+        }
+    }
+    let mut split: Vec<(usize, usize, u32)> = Vec::new();
+    for ((lo, hi), list) in needs {
+        let (a, b) = (work.points[lo as usize].as_dvec3(), work.points[hi as usize].as_dvec3());
+        let count = list.len() as f64;
+        if a.distance(b) * 0.5 * SEPARATION_OFFSET.min(1.0 - SEPARATION_OFFSET) / count <= 2.0 * tol {
+            out.shared_left += list.len();
+            continue;
+        }
+        for (k, (r, i)) in list.into_iter().enumerate() {
+            let s = 0.25 + 0.5 * (k as f64 + SEPARATION_OFFSET) / count;
+            let m = work.push_point(a.lerp(b, s).as_vec3());
+            split.push((r, i, m));
+            out.lines_separated += 1;
+        }
+    }
+    split.sort_unstable_by(|x, y| (x.0, std::cmp::Reverse(x.1)).cmp(&(y.0, std::cmp::Reverse(y.1))));
+    for (r, i, m) in split {
+        let plan = &mut plans[r];
+        let ([a, b], across) = plan.pieces.remove(i);
+        plan.pieces.push(([a, m], across));
+        plan.pieces.push(([m, b], across));
+        plan.add_point(m);
+    }
+}
+
+/// Re-triangulates one region ([`super::planar`]) and writes its triangles
+/// over the region's (new vertices interpolate the original triangle they lie in).
+fn triangulate_region(work: &mut Work, corners: &[[DVec3; 3]], plan: &Plan, tol: &CutTolerances, out: &mut CutOutcome) {
+    let [o, u, v, _] = plan.frame;
+    let project = |p: DVec3| DVec2::new((p - o).dot(u), (p - o).dot(v));
+    let tris = &plan.region.tris;
+    let local = |p: u32| plan.local[&p];
+    let region = PlanarRegion {
+        points: plan.points.iter().map(|&p| project(work.points[p as usize].as_dvec3())).collect(),
+        outline: plan.outline.iter().map(|&([a, b], rim)| ([local(a), local(b)], rim)).collect(),
+        cuts: plan.pieces.iter().map(|&([a, b], _)| [local(a), local(b)]).collect(),
+        triangles: tris.iter().map(|&t| work.tri_points(t as usize).map(local)).collect(),
+        min_angle: tol.min_angle,
+        min_spacing: 2.0 * tol.contact,
+        max_new_points: 2 * plan.points.len() + 32,
+        min_feature: MIN_REFINED_FACE * tol.plane,
+        split_offset: 0.2 * ((plan.region.tris[0] as f64 * SEPARATION_OFFSET).fract() - 0.5),
+    };
+    let Some(result) = planar::triangulate(&region) else {
+        out.failed_triangles += tris.len();
+        return;
+    };
+    out.unshared_splits += result.crossings;
+    out.dropped_pieces += result.dropped;
+    out.refinement_points += result.refinement_points;
+    for &t in tris {
+        out.replaced_min_angle = out.replaced_min_angle.min(super::work::min_angle(corners[t as usize]));
+    }
+    // Points: the region's corners keep their vertices; others interpolate.
+    let original = |i: usize| tris[i] as usize;
+    let mut point_ids = plan.points.clone();
+    let mut vertices: Vec<u32> = Vec::with_capacity(plan.points.len() + result.new_points.len());
+    for (i, &p) in plan.points.iter().enumerate() {
+        let vertex = match plan.region.vertex_of.get(&p) {
+            Some(&vertex) => vertex,
+            None => {
+                let (t, w) = result.point_at[i];
+                work.push_vertex_bary(work.tris[original(t)], w.map(|x| x as f32), p)
+            }
+        };
+        vertices.push(vertex);
+    }
+    for q in &result.new_points {
+        let c = corners[original(q.triangle)];
+        let position = c[0] * q.bary[0] + c[1] * q.bary[1] + c[2] * q.bary[2];
+        let p = work.push_point(position.as_vec3());
+        point_ids.push(p);
+        vertices.push(work.push_vertex_bary(work.tris[original(q.triangle)], q.bary.map(|x| x as f32), p));
+    }
+    // Faces in their original triangle's slot, then at the end.
+    let mut faces = result.faces.clone();
+    faces.sort_by_key(|&(_, parent)| parent);
+    let mut filled = vec![false; tris.len()];
+    for &(f, parent) in &faces {
+        let tri = f.map(|i| vertices[i]);
+        let t = original(parent);
+        if filled[parent] {
+            work.push_tri_like(tri, t);
+        } else {
+            work.tris[t] = tri;
+            filled[parent] = true;
+        }
+        let angle = super::work::min_angle(f.map(|i| work.points[point_ids[i] as usize].as_dvec3()));
+        out.min_angle = out.min_angle.min(angle);
+    }
+    for (i, &t) in tris.iter().enumerate() {
+        if !filled[i] {
+            work.tri_alive[t as usize] = false;
+        }
+    }
+    out.triangles_cut += tris.len();
+    out.seams.extend(result.cut_pieces.iter().map(|&[a, b]| edge_key(point_ids[a], point_ids[b])));
+    out.seams.extend(plan.seams.iter().copied());
+}
+
+/// The point edges where a cut separates a surface: edges of two triangles
+/// with different vertices at an end (the only ones the weld could join),
+/// along which a third triangle, not in their plane and not using the edge,
+/// lies for more than `tol` (within `tol` of it). Cleaning a cut mesh again
+/// finds its cut lines this way, so the weld keeps their sides apart.
+pub(crate) fn find_seams(work: &Work, tol: f64) -> HashSet<(u32, u32)> {
+    let edges = sorted_edges(work);
+    let candidates: Vec<(u32, u32, u32, u32)> = super::work::edge_runs(&edges)
+        .filter_map(|run| match run {
+            [e, f] if splits_vertices(work, run) => Some((e.lo, e.hi, e.tri, f.tri)),
+            _ => None,
+        })
+        .collect();
+    let mut seams = HashSet::new();
+    if candidates.is_empty() {
+        return seams;
+    }
+    let live: Vec<u32> = (0..work.tris.len() as u32).filter(|&t| work.tri_alive[t as usize]).collect();
+    let tree = AabbTree::build(live.iter().map(|&t| Aabb::of_points(&work.tri_positions(t as usize), tol as f32)).collect());
+    for (lo, hi, t1, t2) in candidates {
+        let (a, b) = (work.points[lo as usize], work.points[hi as usize]);
+        let n1 = work.tri_cross(t1 as usize).normalize_or_zero();
+        let lies_along = tree.any(&Aabb::of_points(&[a, b], 0.0), |i| {
+            let w = live[i as usize];
+            if w == t1 || w == t2 {
+                return false;
+            }
+            let c = work.tri_positions(w as usize).map(|p| p.as_dvec3());
+            let nw = normal(c);
+            nw.cross(n1).length() >= MIN_CUT_SINE && overlap_length(c, nw, a.as_dvec3(), b.as_dvec3(), tol) > tol
+        });
+        if lies_along {
+            seams.insert((lo, hi));
+        }
+    }
+    seams
+}
+
+/// The length of segment `a`–`b` within `tol` of triangle `c` (unit normal `n`).
+fn overlap_length(c: [DVec3; 3], n: DVec3, a: DVec3, b: DVec3, tol: f64) -> f64 {
+    if (a - c[0]).dot(n).abs() > tol || (b - c[0]).dot(n).abs() > tol {
+        return 0.0;
+    }
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    for k in 0..3 {
+        let inward = n.cross(c[(k + 1) % 3] - c[k]).normalize_or_zero();
+        let (da, db) = ((a - c[k]).dot(inward) + tol, (b - c[k]).dot(inward) + tol);
+        if da < 0.0 && db < 0.0 {
+            return 0.0;
+        }
+        if da < 0.0 {
+            lo = lo.max(da / (da - db));
+        } else if db < 0.0 {
+            hi = hi.min(da / (da - db));
+        }
+    }
+    (hi - lo).max(0.0) * a.distance(b)
 }
 
 /// The pair's intersection segment, or `None` when the triangles do not cross
@@ -346,11 +939,6 @@ fn pair_segment(a: [DVec3; 3], b: [DVec3; 3], plane_tol: f64, tol: f64) -> Optio
         return None;
     }
     Some([start, end])
-}
-
-/// Unit normal of a triangle (zero for a degenerate one).
-fn normal(t: [DVec3; 3]) -> DVec3 {
-    (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero()
 }
 
 /// Signed distances of `pts` from the plane of `tri` (along its normal): the
@@ -405,149 +993,6 @@ impl EdgeUsers {
     }
 }
 
-/// The state of step 3: the points each triangle gains.
-struct Planner<'a> {
-    work: &'a mut Work,
-    corners: &'a [[DVec3; 3]],
-    points: &'a [[u32; 3]],
-    tol: f64,
-    edge_users: &'a EdgeUsers,
-    /// New points of each triangle (sorted by triangle: deterministic order).
-    extra: BTreeMap<u32, Vec<u32>>,
-    /// Segments of each triangle.
-    segs_of: BTreeMap<u32, Vec<u32>>,
-}
-
-impl Planner<'_> {
-    fn position(&self, p: u32) -> DVec3 {
-        self.work.points[p as usize].as_dvec3()
-    }
-
-    /// Where point `p` lies on triangle `t`.
-    fn locate(&self, t: u32, p: u32) -> Loc {
-        let ids = self.points[t as usize];
-        if let Some(k) = ids.iter().position(|&c| c == p) {
-            return Loc::Corner(k);
-        }
-        locate(self.corners[t as usize], self.position(p), self.tol)
-    }
-
-    /// True when the segment lies on a rim edge (one user) of both its triangles.
-    fn on_rims_of_both(&self, s: &Segment) -> bool {
-        s.tris.iter().all(|&t| match self.edge_holding(t, s.ends) {
-            Some(k) => {
-                let [a, b] = [self.points[t as usize][k], self.points[t as usize][(k + 1) % 3]];
-                self.edge_users.of(a, b).len() <= 1
-            }
-            None => false,
-        })
-    }
-
-    /// The edge of `t` that holds both points, if any.
-    fn edge_holding(&self, t: u32, ends: [u32; 2]) -> Option<usize> {
-        let on = |loc: Loc| -> [bool; 3] {
-            match loc {
-                Loc::Corner(k) => {
-                    let mut e = [false; 3];
-                    e[k] = true;
-                    e[(k + 2) % 3] = true;
-                    e
-                }
-                Loc::Edge(k, _) => {
-                    let mut e = [false; 3];
-                    e[k] = true;
-                    e
-                }
-                _ => [false; 3],
-            }
-        };
-        let (x, y) = (on(self.locate(t, ends[0])), on(self.locate(t, ends[1])));
-        (0..3).find(|&k| x[k] && y[k])
-    }
-
-    /// Adds queued (triangle, point) pairs and what follows from them.
-    fn propagate(&mut self, queue: &mut VecDeque<(u32, u32)>, segments: &mut [Segment]) {
-        while let Some((t, p)) = queue.pop_front() {
-            let loc = self.locate(t, p);
-            if matches!(loc, Loc::Corner(_) | Loc::Outside) {
-                continue;
-            }
-            let list = self.extra.entry(t).or_default();
-            if list.contains(&p) {
-                continue;
-            }
-            list.push(p);
-            // On an edge: every other user of the edge gets it too.
-            if let Loc::Edge(k, _) = loc {
-                let ids = self.points[t as usize];
-                let (a, b) = (ids[k], ids[(k + 1) % 3]);
-                queue.extend(self.edge_users.of(a, b).iter().filter(|e| e.tri != t).map(|e| (e.tri, p)));
-            }
-            // On a segment of this triangle: the segment is split there, in both its triangles.
-            let segs = self.segs_of.get(&t).cloned().unwrap_or_default();
-            for si in segs {
-                let s = &mut segments[si as usize];
-                if s.ends.contains(&p) || s.inner.contains(&p) {
-                    continue;
-                }
-                let (a, b) = (self.work.points[s.ends[0] as usize].as_dvec3(), self.work.points[s.ends[1] as usize].as_dvec3());
-                if on_segment(a, b, self.position(p), self.tol) {
-                    s.inner.push(p);
-                    queue.extend(s.tris.iter().filter(|&&u| u != t).map(|&u| (u, p)));
-                }
-            }
-        }
-    }
-
-    /// Crossings of two segments inside a triangle: three triangles meet at a
-    /// point, which goes into all three segments. Returns whether any was new.
-    fn find_crossings(
-        &mut self,
-        segments: &mut [Segment],
-        pair_segment_of: &HashMap<(u32, u32), u32>,
-        crossings: &mut HashMap<[u32; 3], u32>,
-        queue: &mut VecDeque<(u32, u32)>,
-    ) -> bool {
-        let mut found = false;
-        let tris: Vec<u32> = self.segs_of.iter().filter(|(_, s)| s.len() >= 2).map(|(&t, _)| t).collect();
-        for t in tris {
-            let segs = self.segs_of[&t].clone();
-            for (i, &s1) in segs.iter().enumerate() {
-                for &s2 in &segs[i + 1..] {
-                    let (x, y) = (&segments[s1 as usize], &segments[s2 as usize]);
-                    let other = |s: &Segment| if s.tris[0] == t { s.tris[1] } else { s.tris[0] };
-                    let mut key = [t, other(x), other(y)];
-                    key.sort_unstable();
-                    if crossings.contains_key(&key) || x.ends.iter().any(|e| y.ends.contains(e)) {
-                        continue;
-                    }
-                    let pos = |p: u32| self.work.points[p as usize].as_dvec3();
-                    let Some(q) = segment_crossing([pos(x.ends[0]), pos(x.ends[1])], [pos(y.ends[0]), pos(y.ends[1])], self.tol) else {
-                        continue;
-                    };
-                    let mut touched = vec![s1, s2];
-                    let (o1, o2) = (other(x), other(y));
-                    if let Some(&s3) = pair_segment_of.get(&(o1.min(o2), o1.max(o2))) {
-                        let s = &segments[s3 as usize];
-                        if on_segment(pos(s.ends[0]), pos(s.ends[1]), q, 2.0 * self.tol) {
-                            touched.push(s3);
-                        }
-                    }
-                    let point = self.work.push_point(q.as_vec3());
-                    crossings.insert(key, point);
-                    found = true;
-                    for si in touched {
-                        let s = &mut segments[si as usize];
-                        s.inner.push(point);
-                        queue.extend(s.tris.iter().map(|&u| (u, point)));
-                    }
-                }
-            }
-        }
-        found
-    }
-}
-
 /// Where `p` lies on the triangle with corners `c`, within `tol` of its edges.
 fn locate(c: [DVec3; 3], p: DVec3, tol: f64) -> Loc {
     let (e0, e1, e2) = (c[1] - c[0], c[2] - c[0], p - c[0]);
@@ -568,12 +1013,8 @@ fn locate(c: [DVec3; 3], p: DVec3, tol: f64) -> Loc {
     }
     let near: Vec<usize> = (0..3).filter(|&i| dist[i] <= tol).collect();
     match near.as_slice() {
-        [] => Loc::Interior(b1, b2),
-        [i] => {
-            let k = (i + 1) % 3;
-            let (bk, bn) = (bary[k], bary[(k + 1) % 3]);
-            Loc::Edge(k, (bn / (bk + bn)).clamp(0.0, 1.0))
-        }
+        [] => Loc::Interior,
+        [i] => Loc::Edge((i + 1) % 3),
         // Near two edges: at their common corner, which it is not (ids differ):
         // on the edge it is nearer to.
         _ => {
@@ -583,7 +1024,7 @@ fn locate(c: [DVec3; 3], p: DVec3, tol: f64) -> Loc {
             if bk + bn <= 0.0 {
                 return Loc::Outside;
             }
-            Loc::Edge(k, (bn / (bk + bn)).clamp(0.0, 1.0))
+            Loc::Edge(k)
         }
     }
 }
@@ -620,263 +1061,6 @@ fn segment_crossing(x: [DVec3; 2], y: [DVec3; 2], tol: f64) -> Option<DVec3> {
     (p.distance(q) <= 2.0 * tol && away(x) && away(y)).then_some(mid)
 }
 
-/// Rounds to a multiple of [`QUANTUM`].
-fn quantize(x: f64) -> f64 {
-    (x / QUANTUM).round() * QUANTUM
-}
-
-/// The triangle's frame: `A = (0, 0)`, `B = (1, 0)`, `C = (c, h)`, the shape of
-/// the triangle rounded so that every coordinate below is exact.
-struct Frame {
-    c: f64,
-    h: f64,
-}
-
-impl Frame {
-    fn of(p: [DVec3; 3]) -> Frame {
-        let (ab, ac) = (p[1] - p[0], p[2] - p[0]);
-        let l2 = ab.length_squared();
-        let round = |x: f64| (x / SHAPE_QUANTUM).round() * SHAPE_QUANTUM;
-        let c = round(ac.dot(ab) / l2).clamp(-1024.0, 1024.0);
-        let h = round(ac.cross(ab).length() / l2).clamp(SHAPE_QUANTUM, 1024.0);
-        Frame { c, h }
-    }
-
-    /// The 2D point of barycentric coordinates (of corners 1 and 2), multiples of [`QUANTUM`].
-    fn at(&self, b1: f64, b2: f64) -> Point2<f64> {
-        Point2::new(b1 + b2 * self.c, b2 * self.h)
-    }
-
-    /// Barycentric coordinates (of corners 1 and 2) of a 2D point.
-    fn bary(&self, p: Point2<f64>) -> (f64, f64) {
-        let b2 = p.y / self.h;
-        (p.x - b2 * self.c, b2)
-    }
-}
-
-/// Frame coordinates (barycentric, of corners 1 and 2, exact) of a point at `loc`.
-fn frame_bary(loc: Loc) -> Option<(f64, f64)> {
-    let q = |s: f64| quantize(s).clamp(QUANTUM, 1.0 - QUANTUM);
-    match loc {
-        Loc::Corner(0) => Some((0.0, 0.0)),
-        Loc::Corner(1) => Some((1.0, 0.0)),
-        Loc::Corner(_) => Some((0.0, 1.0)),
-        Loc::Edge(0, s) => Some((q(s), 0.0)),
-        Loc::Edge(1, s) => {
-            let s = q(s);
-            Some((1.0 - s, s))
-        }
-        Loc::Edge(_, s) => Some((0.0, 1.0 - q(s))),
-        Loc::Interior(b1, b2) => {
-            let (mut b1, mut b2) = (quantize(b1).max(QUANTUM), quantize(b2).max(QUANTUM));
-            let excess = b1 + b2 - (1.0 - QUANTUM);
-            if excess > 0.0 {
-                if b1 >= b2 {
-                    b1 -= excess;
-                } else {
-                    b2 -= excess;
-                }
-            }
-            (b1 >= QUANTUM && b2 >= QUANTUM).then_some((b1, b2))
-        }
-        Loc::Outside => None,
-    }
-}
-
-/// Barycentric weights of the three corners at `loc` (exact parameters, for attributes).
-fn weights(loc: Loc) -> [f32; 3] {
-    match loc {
-        Loc::Corner(k) => {
-            let mut w = [0.0; 3];
-            w[k] = 1.0;
-            w
-        }
-        Loc::Edge(k, s) => {
-            let mut w = [0.0; 3];
-            w[k] = (1.0 - s) as f32;
-            w[(k + 1) % 3] = s as f32;
-            w
-        }
-        Loc::Interior(b1, b2) => [(1.0 - b1 - b2) as f32, b1 as f32, b2 as f32],
-        Loc::Outside => [1.0 / 3.0; 3],
-    }
-}
-
-/// What triangulating one triangle did.
-#[derive(Default)]
-struct Pieces {
-    count: usize,
-    /// Crossings of two constraints this triangle's frame found and split alone.
-    unshared: usize,
-    /// Constraint pieces the triangulation could not insert.
-    dropped: usize,
-}
-
-/// Upper bound on the crossings split within one triangle's frame.
-const MAX_FRAME_SPLITS: usize = 64;
-
-/// Replaces triangle `t` by the constrained triangulation of its corners, the
-/// points `pts` and the segments `segs`. `None` when it failed (the triangle
-/// is left whole).
-fn triangulate(work: &mut Work, t: usize, pts: &[u32], segs: &[&Segment], tol: f64) -> Option<Pieces> {
-    let corners = work.tri_positions(t).map(|p| p.as_dvec3());
-    let ids = work.tri_points(t);
-    let frame = Frame::of(corners);
-    let locate_point = |work: &Work, p: u32| -> Loc {
-        match ids.iter().position(|&c| c == p) {
-            Some(k) => Loc::Corner(k),
-            None => locate(corners, work.points[p as usize].as_dvec3(), tol),
-        }
-    };
-    // The points: (point id, location, frame position); the index is the local id.
-    let mut local: Vec<(u32, Loc, Point2<f64>)> = Vec::new();
-    let mut local_of: HashMap<u32, usize> = HashMap::new();
-    let mut at_position: HashMap<[u64; 2], usize> = HashMap::new();
-    let mut add = |local: &mut Vec<(u32, Loc, Point2<f64>)>, p: u32, loc: Loc| -> Option<usize> {
-        let (b1, b2) = frame_bary(loc)?;
-        let xy = frame.at(b1, b2);
-        // Two points at one frame position are one vertex (the older id).
-        let i = *at_position.entry([xy.x.to_bits(), xy.y.to_bits()]).or_insert_with(|| {
-            local.push((p, loc, xy));
-            local.len() - 1
-        });
-        Some(i)
-    };
-    for (k, &corner) in ids.iter().enumerate() {
-        let i = add(&mut local, corner, Loc::Corner(k))?;
-        local_of.insert(corner, i);
-    }
-    let mut on_edge: [Vec<(f64, usize)>; 3] = Default::default();
-    for &p in pts {
-        let loc = locate_point(work, p);
-        if matches!(loc, Loc::Outside | Loc::Corner(_)) {
-            continue;
-        }
-        if let Some(i) = add(&mut local, p, loc) {
-            local_of.insert(p, i);
-            if let Loc::Edge(k, s) = loc {
-                on_edge[k].push((s, i));
-            }
-        }
-    }
-    let mut boundary: Vec<[usize; 2]> = Vec::new();
-    for (k, list) in on_edge.iter_mut().enumerate() {
-        list.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        let mut chain = vec![k];
-        chain.extend(list.iter().map(|&(_, i)| i));
-        chain.push((k + 1) % 3);
-        chain.dedup();
-        boundary.extend(chain.windows(2).map(|w| [w[0], w[1]]));
-    }
-    // Segment pieces inside the triangle (pieces along an edge are boundary).
-    let on_edges = |loc: Loc| -> u8 {
-        match loc {
-            Loc::Corner(k) => (1 << k) | (1 << ((k + 2) % 3)),
-            Loc::Edge(k, _) => 1 << k,
-            _ => 0,
-        }
-    };
-    let mut pieces: Vec<[usize; 2]> = Vec::new();
-    for s in segs {
-        let (a, b) = (work.points[s.ends[0] as usize].as_dvec3(), work.points[s.ends[1] as usize].as_dvec3());
-        let mut along: Vec<(f64, usize)> = s
-            .ends
-            .iter()
-            .chain(&s.inner)
-            .filter_map(|&p| local_of.get(&p).map(|&i| ((work.points[p as usize].as_dvec3() - a).dot(b - a), i)))
-            .collect();
-        along.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        along.dedup_by_key(|x| x.1);
-        for w in along.windows(2) {
-            let (i, j) = (w[0].1, w[1].1);
-            if i != j && on_edges(local[i].1) & on_edges(local[j].1) == 0 {
-                pieces.push([i.min(j), i.max(j)]);
-            }
-        }
-    }
-    pieces.sort_unstable();
-    pieces.dedup();
-    // Crossings the 3D pass missed, in this frame's exact arithmetic: split both pieces.
-    let mut out = Pieces::default();
-    let xy = |local: &[(u32, Loc, Point2<f64>)], i: usize| robust::Coord { x: local[i].2.x, y: local[i].2.y };
-    for _ in 0..MAX_FRAME_SPLITS {
-        let Some((x, y, q)) = first_crossing(&pieces, |i| xy(&local, i)) else { break };
-        let (b1, b2) = frame.bary(q);
-        let loc = Loc::Interior(b1, b2);
-        let Some((b1, b2)) = frame_bary(loc) else { break };
-        let point = corners[0] + (corners[1] - corners[0]) * b1 + (corners[2] - corners[0]) * b2;
-        let id = work.push_point(point.as_vec3());
-        let Some(m) = add(&mut local, id, Loc::Interior(b1, b2)) else { break };
-        out.unshared += 1;
-        let [p, q] = [pieces[x], pieces[y]];
-        pieces.retain(|e| *e != p && *e != q);
-        for [a, b] in [[p[0], m], [m, p[1]], [q[0], m], [m, q[1]]] {
-            if a != b {
-                pieces.push([a.min(b), a.max(b)]);
-            }
-        }
-        pieces.sort_unstable();
-        pieces.dedup();
-    }
-
-    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> = ConstrainedDelaunayTriangulation::new();
-    let mut handles = Vec::with_capacity(local.len());
-    for &(_, _, xy) in &local {
-        handles.push(cdt.insert(xy).ok()?);
-    }
-    for [i, j] in boundary.into_iter().chain(pieces) {
-        let (a, b) = (handles[i], handles[j]);
-        if a != b && !cdt.exists_constraint(a, b) && cdt.try_add_constraint(a, b).is_empty() {
-            out.dropped += 1;
-        }
-    }
-    // Spade numbers vertices in insertion order (no two share a position).
-    if handles.iter().enumerate().any(|(i, h)| h.index() != i) {
-        return None;
-    }
-    // Vertices: the corners keep theirs, new points get one interpolated here.
-    let tri_vertices = work.tris[t];
-    let vertex_of: Vec<u32> = local
-        .iter()
-        .map(|&(p, loc, _)| match loc {
-            Loc::Corner(k) => tri_vertices[k],
-            _ => work.push_vertex_bary(tri_vertices, weights(loc), p),
-        })
-        .collect();
-    let faces: Vec<[u32; 3]> = cdt.inner_faces().map(|f| f.vertices().map(|v| vertex_of[v.fix().index()])).collect();
-    if faces.is_empty() {
-        return None;
-    }
-    work.tris[t] = faces[0];
-    for &f in &faces[1..] {
-        work.push_tri_like(f, t);
-    }
-    out.count = faces.len();
-    Some(out)
-}
-
-/// The first pair of pieces (in order) that cross properly in the frame
-/// (each one's ends strictly on both sides of the other's line, exactly), and
-/// the crossing point.
-fn first_crossing(pieces: &[[usize; 2]], xy: impl Fn(usize) -> robust::Coord<f64>) -> Option<(usize, usize, Point2<f64>)> {
-    for (x, &[a, b]) in pieces.iter().enumerate() {
-        for (y, &[c, d]) in pieces.iter().enumerate().skip(x + 1) {
-            if a == c || a == d || b == c || b == d {
-                continue;
-            }
-            let (pa, pb, pc, pd) = (xy(a), xy(b), xy(c), xy(d));
-            let side = |p, q, r| robust::orient2d(p, q, r);
-            let (s1, s2) = (side(pa, pb, pc), side(pa, pb, pd));
-            let (s3, s4) = (side(pc, pd, pa), side(pc, pd, pb));
-            if s1 * s2 < 0.0 && s3 * s4 < 0.0 {
-                let u = s3 / (s3 - s4);
-                return Some((x, y, Point2::new(pa.x + (pb.x - pa.x) * u, pa.y + (pb.y - pa.y) * u)));
-            }
-        }
-    }
-    None
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -905,18 +1089,5 @@ mod tests {
         // Coplanar and overlapping.
         let c = tri([[0.1, 0.0, 0.1], [2.0, 0.0, 0.1], [0.1, 0.0, 2.0]]);
         assert!(pair_segment(a, c, 1e-9, 1e-9).is_none());
-    }
-
-    #[test]
-    fn frame_puts_edge_points_exactly_on_the_edges() {
-        let f = Frame::of(tri([[0.0, 0.0, 0.0], [3.0, 0.1, 0.0], [0.7, 2.9, 0.3]]));
-        let c = |p: Point2<f64>| robust::Coord { x: p.x, y: p.y };
-        let (a, b, cc) = (f.at(0.0, 0.0), f.at(1.0, 0.0), f.at(0.0, 1.0));
-        for s in [0.1, 0.123456789, 0.5, 0.999] {
-            for (k, (from, to)) in [(a, b), (b, cc), (cc, a)].into_iter().enumerate() {
-                let (b1, b2) = frame_bary(Loc::Edge(k, s)).unwrap();
-                assert_eq!(robust::orient2d(c(from), c(to), c(f.at(b1, b2))), 0.0, "edge {k} at {s}");
-            }
-        }
     }
 }

@@ -73,6 +73,7 @@ pub mod fixtures;
 mod hub_pairs;
 mod intersect;
 mod orient;
+mod planar;
 mod refine;
 mod report;
 mod spatial;
@@ -246,13 +247,13 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
     }
     let identity: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
     let mut flipped = refine::FlippedEdges::default();
-    let mut cut = intersect::CutPairs::default();
-    let mut round = clean_once(mesh, params, &identity, &mut flipped, &mut cut);
+    let mut memo = intersect::CutMemo::default();
+    let mut round = clean_once(mesh, params, &identity, &mut flipped, &mut memo);
     let mut report = round.report.clone();
     report.rounds = 1;
     // Repeat until a round repairs nothing, so that cleaning a cleaned mesh is a no-op.
     while round.report.repairs() > 0 && report.rounds < MAX_ROUNDS {
-        round = clean_once(&round.mesh, params, &round.origin, &mut flipped, &mut cut);
+        round = clean_once(&round.mesh, params, &round.origin, &mut flipped, &mut memo);
         report.absorb(&round.report, round.removed_area);
         report.rounds += 1;
     }
@@ -284,7 +285,7 @@ fn clean_once(
     params: &CleanParams,
     origin: &[u32],
     flipped: &mut refine::FlippedEdges,
-    cut: &mut intersect::CutPairs,
+    memo: &mut intersect::CutMemo,
 ) -> Round {
     let diagonal = mesh.referenced_diagonal();
     let weld_tol = params.weld_tolerance.resolve(diagonal);
@@ -292,6 +293,8 @@ fn clean_once(
     let zip_tol = params.zip_tolerance.resolve(diagonal);
     let cos_hard_edge = params.hard_edge_angle_deg.to_radians().cos();
     let sliver_rad = (params.sliver_min_angle_deg as f64).to_radians();
+    // A contact within the weld tolerance counts (never below 1e-9 of the diagonal).
+    let contact_tol = (weld_tol as f64).max(1e-9 * diagonal as f64);
 
     let mut r = CleanReport {
         input_triangles: mesh.triangle_count(),
@@ -317,7 +320,13 @@ fn clean_once(
         true => (weld::Seams::Keep, weld::Seams::Split),
         false => (weld::Seams::Ignore, weld::Seams::Ignore),
     };
-    r.welded_vertices = merge(&mut work, cos_hard_edge, keep, &mut r);
+    // The cut lines of a cut mesh, found again by their geometry: never welded across.
+    let seams = |work: &Work| match params.cut_intersections {
+        true => intersect::find_seams(work, contact_tol),
+        false => weld::SeamEdges::new(),
+    };
+    let step1_seams = seams(&work);
+    r.welded_vertices = merge(&mut work, cos_hard_edge, keep, &step1_seams, &mut r);
     r.boundary_edges_before = count_boundary_and_non_manifold(&work).0;
 
     // 2-4. Remove redundant triangles.
@@ -341,14 +350,28 @@ fn clean_once(
     }
 
     // 5b. Cut where triangles cross (after zipping: cracks closed, copies gone).
-    if params.cut_intersections {
-        // A contact within the weld tolerance counts (never below 1e-9 of the diagonal).
-        let contact_tol = (weld_tol as f64).max(1e-9 * diagonal as f64);
-        let c = intersect::cut_intersections(&mut work, plane_tol as f64, contact_tol, zip_tol as f64, cut, origin);
-        r.intersections_cut = c.segments;
+    let mut cut_seams = weld::SeamEdges::new();
+    // Once per clean: the rounds after it meet the cut's own pieces, whose
+    // points f32 rounded off their lines, and cutting those again made new
+    // slivers for the next round to remove (20 thin triangles crossing at a
+    // point: 5,285 triangles, not converged after 8 rounds).
+    if params.cut_intersections && !memo.has_cut() {
+        let tolerances =
+            intersect::CutTolerances { plane: plane_tol as f64, contact: contact_tol, min_length: zip_tol as f64, min_angle: sliver_rad };
+        let c = intersect::cut_intersections(&mut work, &tolerances, memo);
+        r.crossing_pairs = c.pairs;
+        r.intersections_cut = c.pieces;
         r.triangles_cut = c.triangles_cut;
         r.cut_crossings_unshared = c.unshared_splits;
         r.cut_failures = c.dropped_pieces + c.failed_triangles;
+        r.cut_points_added = c.refinement_points;
+        r.cut_lines_separated = c.lines_separated;
+        r.cut_shared_edges_left = c.shared_left;
+        if c.triangles_cut > 0 {
+            r.cut_min_angle_deg = Some(c.min_angle.to_degrees() as f32);
+            r.cut_replaced_min_angle_deg = Some(c.replaced_min_angle.to_degrees() as f32);
+        }
+        cut_seams.extend(c.seams);
     }
 
     // 6. Orient (before refining: flips need consistent winding).
@@ -359,7 +382,8 @@ fn clean_once(
         r.unorientable_component_count = o.unorientable_count;
     }
     // Zipping and orienting make vertices agree; merged vertices let edges flip.
-    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &mut r);
+    cut_seams.extend(seams(&work));
+    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &cut_seams, &mut r);
 
     // 7. Refine.
     let slivers_before = refine::count_slivers(&work, sliver_rad);
@@ -370,7 +394,8 @@ fn clean_once(
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
 
     // 8. Weld again and write out.
-    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &mut r);
+    let step8_seams = seams(&work);
+    r.welded_vertices += merge(&mut work, cos_hard_edge, split, &step8_seams, &mut r);
     work.compact_triangles();
     let (boundary, non_manifold) = count_boundary_and_non_manifold(&work);
     r.boundary_edges_after = boundary;
@@ -392,8 +417,8 @@ fn clean_once(
 
 /// Merges vertices (steps 1, 6 and 8), keeping or splitting wedges apart
 /// (`seams`), so cut lines stay hard. Returns the vertices merged.
-fn merge(work: &mut Work, cos_hard_edge: f32, seams: weld::Seams, r: &mut CleanReport) -> usize {
-    let (merged, split) = weld::merge_vertices(work, cos_hard_edge, seams);
+fn merge(work: &mut Work, cos_hard_edge: f32, seams: weld::Seams, cut_seams: &weld::SeamEdges, r: &mut CleanReport) -> usize {
+    let (merged, split) = weld::merge_vertices(work, cos_hard_edge, seams, cut_seams);
     r.seam_vertices_split += split;
     merged
 }
@@ -411,7 +436,8 @@ fn remove_degenerate_and_duplicates(work: &mut Work, input: &Mesh, weld_tol: f32
 
 /// Step 4; adds to the report's counts, replaces its overlaps, returns the area removed.
 fn remove_covered(work: &mut Work, plane_tol: f32, params: &CleanParams, r: &mut CleanReport) -> f64 {
-    let cop = coplanar::remove_covered_coplanar(work, plane_tol, params.keep_two_sided, params.remove_covered);
+    let max_sine = params.cut_intersections.then_some(intersect::MIN_CUT_SINE);
+    let cop = coplanar::remove_covered_coplanar(work, plane_tol, params.keep_two_sided, params.remove_covered, max_sine);
     r.covered_coplanar_removed += cop.removed;
     r.partial_overlaps = cop.partial;
     r.partial_overlap_count = cop.partial_count;

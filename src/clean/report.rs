@@ -80,21 +80,38 @@ pub struct CleanReport {
     pub tjunctions_fixed: usize,
     /// Edges split because they were longer than `max_edge`.
     pub edges_split: usize,
-    /// Intersection segments cut into the mesh (one per pair of crossing
-    /// triangles; `cut_intersections`).
+    /// Pairs of triangles found crossing (`cut_intersections`); their
+    /// segments are merged into the pieces below.
+    pub crossing_pairs: usize,
+    /// Pieces of intersection lines cut into the mesh: straight pieces
+    /// between the points where a line meets edges or other lines, each
+    /// counted once however many pairs found it (`cut_intersections`).
     pub intersections_cut: usize,
-    /// Triangles replaced by their pieces along those segments (with the edge
-    /// neighbours that took a point of a segment, so no T-junction appears).
+    /// Triangles replaced by the re-triangulation of their plane along those
+    /// pieces (with the edge neighbours that took a point of a piece, so no
+    /// T-junction appears).
     pub triangles_cut: usize,
     /// Vertex copies made so that no vertex spans a cut line or another
     /// non-manifold edge (with `cut_intersections`).
     pub seam_vertices_split: usize,
-    /// Crossings of two segments that one triangle's triangulation found and
-    /// split alone (normally 0: three triangles meeting at a point share it).
+    /// Crossings of two pieces that a plane's triangulation found and split
+    /// alone (normally 0: three triangles meeting at a point share it).
     pub cut_crossings_unshared: usize,
-    /// Segment pieces the triangulation could not insert, and triangles whose
+    /// Pieces the triangulation could not insert, and triangles whose
     /// triangulation failed (left uncut; normally 0).
     pub cut_failures: usize,
+    /// Points the re-triangulation of cut planes added (inside the planes and
+    /// on the cut lines) so that no triangle is a sliver where the input allows.
+    pub cut_points_added: usize,
+    /// Pieces of cut lines given a point so that the two surfaces meeting
+    /// along a line do not share an edge of it (no new non-manifold edge).
+    pub cut_lines_separated: usize,
+    /// Pieces too short for that: shared edges the cut left (normally 0).
+    pub cut_shared_edges_left: usize,
+    /// Smallest angle (degrees) of the triangles the cut made, and of the
+    /// triangles they replaced, over all rounds (`None` when nothing was cut).
+    pub cut_min_angle_deg: Option<f32>,
+    pub cut_replaced_min_angle_deg: Option<f32>,
     /// Slivers before refinement minus slivers after.
     pub slivers_fixed: usize,
     /// Edge flips made to improve slivers.
@@ -142,7 +159,7 @@ const LISTED_EDGE_FRACTION: f32 = 0.5;
 
 impl CleanReport {
     /// Every repair count by name, as in the JSON report.
-    pub fn repair_counts(&self) -> [(&'static str, usize); 12] {
+    pub fn repair_counts(&self) -> [(&'static str, usize); 14] {
         [
             ("welded_vertices", self.welded_vertices),
             ("degenerate_removed", self.degenerate_removed),
@@ -152,6 +169,8 @@ impl CleanReport {
             ("zipped_edges", self.zipped_edges),
             ("tjunctions_fixed", self.tjunctions_fixed),
             ("intersections_cut", self.intersections_cut),
+            ("cut_points_added", self.cut_points_added),
+            ("cut_lines_separated", self.cut_lines_separated),
             ("seam_vertices_split", self.seam_vertices_split),
             ("edges_split", self.edges_split),
             ("sliver_flips", self.sliver_flips),
@@ -175,7 +194,17 @@ impl CleanReport {
         self.covered_coplanar_removed += later.covered_coplanar_removed;
         self.zipped_edges += later.zipped_edges;
         self.tjunctions_fixed += later.tjunctions_fixed;
+        self.crossing_pairs += later.crossing_pairs;
         self.intersections_cut += later.intersections_cut;
+        self.cut_points_added += later.cut_points_added;
+        self.cut_lines_separated += later.cut_lines_separated;
+        self.cut_shared_edges_left += later.cut_shared_edges_left;
+        let least = |a: Option<f32>, b: Option<f32>| match (a, b) {
+            (Some(x), Some(y)) => Some(x.min(y)),
+            (x, y) => x.or(y),
+        };
+        self.cut_min_angle_deg = least(self.cut_min_angle_deg, later.cut_min_angle_deg);
+        self.cut_replaced_min_angle_deg = least(self.cut_replaced_min_angle_deg, later.cut_replaced_min_angle_deg);
         self.triangles_cut += later.triangles_cut;
         self.seam_vertices_split += later.seam_vertices_split;
         self.cut_crossings_unshared += later.cut_crossings_unshared;
@@ -227,9 +256,21 @@ impl CleanReport {
         let _ = writeln!(s, "zipped edges           {} ({} T-junctions)", self.zipped_edges, self.tjunctions_fixed);
         let _ = writeln!(
             s,
-            "intersections cut      {} ({} triangles cut, {} seam vertices split; {} crossings unshared, {} failures)",
-            self.intersections_cut, self.triangles_cut, self.seam_vertices_split, self.cut_crossings_unshared, self.cut_failures
+            "intersections cut      {} ({} crossing pairs, {} triangles cut, {} seam vertices split; {} crossings unshared, {} failures)",
+            self.intersections_cut,
+            self.crossing_pairs,
+            self.triangles_cut,
+            self.seam_vertices_split,
+            self.cut_crossings_unshared,
+            self.cut_failures
         );
+        if let (Some(made), Some(replaced)) = (self.cut_min_angle_deg, self.cut_replaced_min_angle_deg) {
+            let _ = writeln!(
+                s,
+                "cut quality            {} points added, {} lines separated ({} shared edges left); smallest angle {made:.3}° (replaced triangles: {replaced:.3}°)",
+                self.cut_points_added, self.cut_lines_separated, self.cut_shared_edges_left
+            );
+        }
         let _ = writeln!(s, "edges split            {}", self.edges_split);
         let _ = writeln!(s, "slivers fixed          {} ({} flips)", self.slivers_fixed, self.sliver_flips);
         let _ = writeln!(

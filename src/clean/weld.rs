@@ -9,7 +9,7 @@
 use super::spatial::{cluster_points, find, union};
 use super::work::{edge_runs, sorted_edges, EdgeUse, Work};
 use crate::mesh::Mesh;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// Two vertices at one point keep separate UVs when these differ by more (UV units).
 pub(crate) const UV_WELD_TOLERANCE: f32 = 1e-4;
@@ -75,9 +75,9 @@ pub(crate) enum Seams {
 ///
 /// Greedy and deterministic: within a point, vertices are visited by index and each
 /// joins the first earlier representative it agrees with (so agreement never chains).
-pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32, seams: Seams) -> (usize, usize) {
-    let split = if seams == Seams::Split { split_wedges(work) } else { 0 };
-    let wedge = if seams == Seams::Ignore { vec![0; work.vertex_point.len()] } else { vertex_wedges(work) };
+pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32, seams: Seams, cut_seams: &SeamEdges) -> (usize, usize) {
+    let split = if seams == Seams::Split { split_wedges(work, cut_seams) } else { 0 };
+    let wedge = if seams == Seams::Ignore { vec![0; work.vertex_point.len()] } else { vertex_wedges(work, cut_seams) };
     let mut used = vec![false; work.vertex_point.len()];
     for (tri, _) in work.tris.iter().zip(&work.tri_alive).filter(|(_, &alive)| alive) {
         tri.iter().for_each(|&v| used[v as usize] = true);
@@ -106,13 +106,18 @@ pub(crate) fn merge_vertices(work: &mut Work, cos_hard_edge: f32, seams: Seams) 
     (merged, split)
 }
 
+/// Point edges along which a cut separates a surface (lower point id first):
+/// wedges do not join across them ([`super::intersect::find_seams`]).
+pub(crate) type SeamEdges = HashSet<(u32, u32)>;
+
 /// Wedges: around each point, the corners of the live triangles joined across
-/// manifold edges (exactly two users). A cut line is an edge of three or more
-/// triangles (the two sides of the cut surface and the cutting one), so it
-/// separates wedges, as a boundary does; so does any other non-manifold edge
-/// or a bow-tie point. Returns the wedge of every corner (`3 t + c`) as the
-/// smallest corner index in it; collapsed triangles' corners are wedges of their own.
-pub(crate) fn corner_wedges(work: &Work) -> Vec<u32> {
+/// manifold edges (exactly two users) that are not in `cut_seams`. A cut
+/// line is such a seam (the cut surface's two sides share it, the cutting
+/// surface does not), so it separates wedges, as a boundary does; so does a
+/// non-manifold edge or a bow-tie point. Returns the wedge of every corner
+/// (`3 t + c`) as the smallest corner index in it; collapsed triangles'
+/// corners are wedges of their own.
+pub(crate) fn corner_wedges(work: &Work, cut_seams: &SeamEdges) -> Vec<u32> {
     let mut parent: Vec<u32> = (0..3 * work.tris.len() as u32).collect();
     let edges = sorted_edges(work);
     let corner_at = |e: &EdgeUse, p: u32| {
@@ -122,7 +127,7 @@ pub(crate) fn corner_wedges(work: &Work) -> Vec<u32> {
     };
     for run in edge_runs(&edges) {
         if let [e, f] = run {
-            if collapsed(work, e.tri as usize) || collapsed(work, f.tri as usize) {
+            if collapsed(work, e.tri as usize) || collapsed(work, f.tri as usize) || cut_seams.contains(&(e.lo, e.hi)) {
                 continue;
             }
             for p in [e.lo, e.hi] {
@@ -137,8 +142,8 @@ pub(crate) fn corner_wedges(work: &Work) -> Vec<u32> {
 /// extra wedge (the wedge of its first corner keeps it), so that no vertex
 /// spans a cut line; returns the number of copies. Collapsed triangles are
 /// left alone (they are about to be removed).
-pub(crate) fn split_wedges(work: &mut Work) -> usize {
-    let wedge = corner_wedges(work);
+pub(crate) fn split_wedges(work: &mut Work, cut_seams: &SeamEdges) -> usize {
+    let wedge = corner_wedges(work, cut_seams);
     let mut first_wedge: Vec<u32> = vec![u32::MAX; work.vertex_point.len()];
     let mut copies: HashMap<(u32, u32), u32> = HashMap::new();
     let mut split = 0;
@@ -166,8 +171,8 @@ pub(crate) fn split_wedges(work: &mut Work) -> usize {
 
 /// The wedge of each vertex: that of its first live corner ([`corner_wedges`]),
 /// `u32::MAX` for a vertex no live triangle uses.
-fn vertex_wedges(work: &Work) -> Vec<u32> {
-    let wedge = corner_wedges(work);
+fn vertex_wedges(work: &Work, cut_seams: &SeamEdges) -> Vec<u32> {
+    let wedge = corner_wedges(work, cut_seams);
     let mut of = vec![u32::MAX; work.vertex_point.len()];
     for t in (0..work.tris.len()).filter(|&t| work.tri_alive[t]) {
         for c in 0..3 {
@@ -220,11 +225,11 @@ mod tests {
         // 90 degrees apart: same point, two vertices.
         let mut w = weld_points(&two_vertices(Vec3::Y, Vec3::X), 1e-6);
         assert_eq!(w.vertex_point[0], w.vertex_point[1]);
-        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore), (0, 0));
+        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore, &SeamEdges::new()), (0, 0));
         // 30 degrees apart: merged into the smaller index, which keeps its normal.
         let n2 = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
         let mut w = weld_points(&two_vertices(Vec3::Y, n2), 1e-6);
-        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore), (1, 0));
+        assert_eq!(merge_vertices(&mut w, cos60, Seams::Ignore, &SeamEdges::new()), (1, 0));
         assert_eq!(w.tris[1][0], 0);
         assert_eq!(w.normals[0], Vec3::Y);
     }

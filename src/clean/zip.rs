@@ -15,7 +15,11 @@
 //!    onto the edge when the edge is older (its end points have smaller ids),
 //!    otherwise it stays and the edge bends to it; so the older patch never moves
 //!    and the area it describes is kept. Repeated until nothing splits, since a
-//!    triangle splits one edge per pass.
+//!    triangle splits one edge per pass. An edge along which the other
+//!    boundary edges overlap each other (two or more layers on one line:
+//!    coplanar copies stacked along a base, fins on one axis) takes no point:
+//!    that is no crack, and zipping every layer into every other made n²
+//!    pieces of n layers.
 
 use super::spatial::{cluster_points_limited, Aabb, AabbTree};
 use super::work::{count_boundary_and_non_manifold, edge_runs, sorted_edges, EdgeUse, Work};
@@ -137,6 +141,7 @@ fn split_tjunctions(work: &mut Work, tol: f32) -> usize {
     let tol = tol as f64;
     let mut splits: Vec<Split> = Vec::new();
     let mut found = Vec::new();
+    let mut layered: Vec<Option<bool>> = vec![None; boundary.len()];
     for &v in &points {
         let pv = work.points[v as usize];
         found.clear();
@@ -162,7 +167,11 @@ fn split_tjunctions(work: &mut Work, tol: f32) -> usize {
             let projection = a + ab * s;
             let dist = pv.distance(projection);
             let interior = s * len > tol && (1.0 - s) * len > tol;
-            if dist <= tol && interior && !matches!(best, Some((d, _)) if d <= dist) {
+            if dist <= tol
+                && interior
+                && !matches!(best, Some((d, _)) if d <= dist)
+                && !*layered[i as usize].get_or_insert_with(|| is_layered(work, &boundary, &tree, i as usize, tol))
+            {
                 best = Some((dist, Split { tri: e.tri, corner: e.corner, s, point: v, projection }));
             }
         }
@@ -180,6 +189,47 @@ fn split_tjunctions(work: &mut Work, tol: f32) -> usize {
         inserted += split_triangle_edge(work, &edge_splits);
     }
     inserted
+}
+
+/// True when the other boundary edges lying along boundary edge `i`
+/// (collinear with it and overlapping it, within `tol`) overlap each other:
+/// two or more layers run along the line (coplanar triangles stacked along
+/// one edge, fins on one axis), not the single patch across a crack. Their
+/// corners are then not inserted into the edge: each layer's corners going
+/// into every other layer's edges made n² pieces (and n⁴ partial overlaps)
+/// of n layers. Along a crack the other patch's edges follow each other.
+fn is_layered(work: &Work, boundary: &[EdgeUse], tree: &AabbTree, i: usize, tol: f64) -> bool {
+    let ends = |e: &EdgeUse| [work.points[e.lo as usize].as_dvec3(), work.points[e.hi as usize].as_dvec3()];
+    let [a, b] = ends(&boundary[i]);
+    let len = a.distance(b);
+    if len <= tol {
+        return false;
+    }
+    let dir = (b - a) / len;
+    let off_line = |p: glam::DVec3| (p - a - dir * (p - a).dot(dir)).length();
+    let mut found = Vec::new();
+    tree.query(&Aabb::of_points(&[a.as_vec3(), b.as_vec3()], tol as f32), &mut found);
+    // Parameter intervals along the edge of the other edges on its line.
+    let mut spans: Vec<(f64, f64)> = found
+        .into_iter()
+        .map(|j| j as usize)
+        .filter(|&j| j != i && boundary[j].tri != boundary[i].tri)
+        .filter_map(|j| {
+            let [c, d] = ends(&boundary[j]);
+            let (sc, sd) = ((c - a).dot(dir), (d - a).dot(dir));
+            let on_line = off_line(c) <= tol && off_line(d) <= tol;
+            (on_line && sc.max(sd).min(len) - sc.min(sd).max(0.0) > tol).then_some((sc.min(sd), sc.max(sd)))
+        })
+        .collect();
+    spans.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.total_cmp(&y.1)));
+    let mut reach = f64::NEG_INFINITY;
+    for (start, end) in spans {
+        if start < reach - tol {
+            return true;
+        }
+        reach = reach.max(end);
+    }
+    false
 }
 
 /// Fans triangle `splits[0].tri` from its opposite corner through the split points
