@@ -570,7 +570,10 @@ fn step_reports_end_with_where_the_time_went() {
     write_scene_obj(&obj);
     let (cleaned, baked, sunned) = (dir.path("clean.glb"), dir.path("s.prtb"), dir.path("sun.prtb"));
     let runs: [(Vec<&str>, &[&str]); 3] = [
-        (vec!["clean", obj.to_str().unwrap(), "-o", cleaned.to_str().unwrap()], &["load", "clean", "write"]),
+        (
+            vec!["clean", obj.to_str().unwrap(), "-o", cleaned.to_str().unwrap()],
+            &["load", "clean: weld", "clean: duplicates and overlaps", "clean: zip", "clean: orient", "write"],
+        ),
         (
             vec!["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "16", "--bounces", "1"],
             &["bounce 0 (traced)", "write"],

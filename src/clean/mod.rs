@@ -85,6 +85,8 @@ mod zip;
 pub use report::{CleanReport, DefectKind, DefectReport, OverlapReport, UnorientableComponent};
 pub use split::{split_edges, EdgeSplit};
 
+use std::time::Instant;
+
 use crate::mesh::Mesh;
 use work::{count_boundary_and_non_manifold, Work};
 
@@ -240,6 +242,11 @@ pub enum CleanError {
 /// normal, UV or colour; [`CleanError::InvalidMesh`] for a broken invariant;
 /// [`CleanError::InvalidParams`] for a parameter out of range.
 pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanReport), CleanError> {
+    clean_mesh_timed(mesh, params).map(|(mesh, report, _)| (mesh, report))
+}
+
+/// [`clean_mesh`], with the seconds each step took over all rounds.
+pub fn clean_mesh_timed(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanReport, StepTimes), CleanError> {
     params.validate()?;
     check_input(mesh)?;
     if let Some(max_edge) = params.max_edge {
@@ -250,17 +257,23 @@ pub fn clean_mesh(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, CleanRepor
     let mut memo = intersect::CutMemo::default();
     let mut round = clean_once(mesh, params, &identity, &mut flipped, &mut memo);
     let mut report = round.report.clone();
+    let mut times = round.times.clone();
     report.rounds = 1;
     // Repeat until a round repairs nothing, so that cleaning a cleaned mesh is a no-op.
     while round.report.repairs() > 0 && report.rounds < MAX_ROUNDS {
         round = clean_once(&round.mesh, params, &round.origin, &mut flipped, &mut memo);
         report.absorb(&round.report, round.removed_area);
+        times.absorb(&round.times);
         report.rounds += 1;
     }
     report.converged = round.report.repairs() == 0;
     report.retriggered = round.report.repair_counts().iter().filter(|&&(_, n)| n > 0).map(|&(name, n)| (name.to_string(), n)).collect();
+    report.ready_to_bake = report.converged || report.last_round_share() <= report::READY_SHARE;
     // Canonical order: what `bake --clean` bakes is what a cleaned file loads as.
-    Ok((round.mesh.into_canonical_order(), report))
+    let mut clock = Instant::now();
+    let mesh = round.mesh.into_canonical_order();
+    times.lap("weld again and report", &mut clock);
+    Ok((mesh, report, times))
 }
 
 /// Upper bound on clean-up rounds. Measured: the Ferrari (359k triangles) converges
@@ -275,6 +288,37 @@ struct Round {
     origin: Vec<u32>,
     /// Area of the redundant triangles removed (degenerate, duplicate, covered).
     removed_area: f64,
+    /// Seconds each step took.
+    times: StepTimes,
+}
+
+/// Seconds each step of the clean-up took, summed over its rounds: where a
+/// slow clean spends its time (`clean`'s time line). Kept out of
+/// [`CleanReport`], which holds only what the same input always gives.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepTimes {
+    /// Steps in pipeline order: (name, seconds).
+    pub steps: Vec<(&'static str, f64)>,
+}
+
+impl StepTimes {
+    fn add(&mut self, name: &'static str, seconds: f64) {
+        match self.steps.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, t)) => *t += seconds,
+            None => self.steps.push((name, seconds)),
+        }
+    }
+
+    /// Adds the time since `*since` to step `name` and restarts the clock.
+    fn lap(&mut self, name: &'static str, since: &mut Instant) {
+        let now = Instant::now();
+        self.add(name, (now - *since).as_secs_f64());
+        *since = now;
+    }
+
+    fn absorb(&mut self, later: &StepTimes) {
+        later.steps.iter().for_each(|&(name, t)| self.add(name, t));
+    }
 }
 
 /// One pass of the pipeline over a validated mesh. `origin` maps `mesh`'s triangles
@@ -295,6 +339,8 @@ fn clean_once(
     let sliver_rad = (params.sliver_min_angle_deg as f64).to_radians();
     // A contact within the weld tolerance counts (never below 1e-9 of the diagonal).
     let contact_tol = (weld_tol as f64).max(1e-9 * diagonal as f64);
+    let mut times = StepTimes::default();
+    let mut clock = Instant::now();
 
     let mut r = CleanReport {
         input_triangles: mesh.triangle_count(),
@@ -328,12 +374,14 @@ fn clean_once(
     let step1_seams = seams(&work);
     r.welded_vertices = merge(&mut work, cos_hard_edge, keep, &step1_seams, &mut r);
     r.boundary_edges_before = count_boundary_and_non_manifold(&work).0;
+    times.lap("weld", &mut clock);
 
     // 2-4. Remove redundant triangles.
     let mut removed_area = remove_degenerate_and_duplicates(&mut work, mesh, weld_tol, params, &mut r);
     work.compact_triangles();
     removed_area += remove_covered(&mut work, plane_tol, params, &mut r);
     work.compact_triangles();
+    times.lap("duplicates and overlaps", &mut clock);
 
     // 5. Zip.
     if params.zip {
@@ -348,6 +396,7 @@ fn clean_once(
         }
         work.compact_triangles();
     }
+    times.lap("zip", &mut clock);
 
     // 5b. Cut where triangles cross (after zipping: cracks closed, copies gone).
     let mut cut_seams = weld::SeamEdges::new();
@@ -373,6 +422,7 @@ fn clean_once(
         }
         cut_seams.extend(c.seams);
     }
+    times.lap("cut", &mut clock);
 
     // 6. Orient (before refining: flips need consistent winding).
     if params.orient {
@@ -384,6 +434,7 @@ fn clean_once(
     // Zipping and orienting make vertices agree; merged vertices let edges flip.
     cut_seams.extend(seams(&work));
     r.welded_vertices += merge(&mut work, cos_hard_edge, split, &cut_seams, &mut r);
+    times.lap("orient", &mut clock);
 
     // 7. Refine.
     let slivers_before = refine::count_slivers(&work, sliver_rad);
@@ -392,6 +443,7 @@ fn clean_once(
     }
     r.sliver_flips = refine::flip_slivers(&mut work, sliver_rad, plane_tol, weld_tol, params.max_edge, flipped);
     r.slivers_fixed = slivers_before.saturating_sub(refine::count_slivers(&work, sliver_rad));
+    times.lap("slivers and long edges", &mut clock);
 
     // 8. Weld again and write out.
     let step8_seams = seams(&work);
@@ -412,7 +464,8 @@ fn clean_once(
     r.partial_overlaps.iter_mut().for_each(|o| (o.tri_a, o.tri_b) = (to_input(o.tri_a), to_input(o.tri_b)));
     r.unorientable_components.iter_mut().for_each(|c| c.seed_triangle = to_input(c.seed_triangle));
     let origin = work.tri_origin.iter().map(|&t| to_input(t)).collect();
-    Round { mesh: out, report: r, origin, removed_area }
+    times.lap("weld again and report", &mut clock);
+    Round { mesh: out, report: r, origin, removed_area, times }
 }
 
 /// Merges vertices (steps 1, 6 and 8), keeping or splitting wedges apart

@@ -141,6 +141,10 @@ pub struct CleanReport {
     pub converged: bool,
     /// When not converged: the repairs the last round still made, by name and count.
     pub retriggered: Vec<(String, usize)>,
+    /// Converged, or the last round's repairs are at most [`READY_SHARE`] of
+    /// the output's triangles: local edits a bake does not see as a change of
+    /// surface. False: the mesh was still changing; check it before baking.
+    pub ready_to_bake: bool,
     /// Work done: candidate pairs the coplanar broad phase enumerated, all rounds.
     /// Near-linear in triangles at any valence (a fan's triangles all share a box).
     pub coplanar_pairs_enumerated: usize,
@@ -149,6 +153,10 @@ pub struct CleanReport {
     pub coplanar_tolerance: f32,
     pub zip_tolerance: f32,
 }
+
+/// An unconverged clean is ready to bake when its last round's repairs are
+/// at most this share of the output's triangles (1 in 100).
+pub const READY_SHARE: f64 = 0.01;
 
 /// Defects listed per kind.
 const WORST_PER_KIND: usize = 5;
@@ -227,13 +235,36 @@ impl CleanReport {
         self.worst = later.worst.clone();
     }
 
-    /// "converged", or which repairs kept re-triggering in the last round.
+    /// The last round's repairs per output triangle (0 when converged).
+    pub fn last_round_share(&self) -> f64 {
+        let repairs: usize = self.retriggered.iter().map(|(_, n)| n).sum();
+        repairs as f64 / self.output_triangles.max(1) as f64
+    }
+
+    /// "converged", or which repairs kept re-triggering in the last round
+    /// and whether the output is ready to bake ([`CleanReport::ready_to_bake`]).
     pub fn convergence(&self) -> String {
         if self.converged {
             return "converged".into();
         }
         let names: Vec<String> = self.retriggered.iter().map(|(name, n)| format!("{name} {n}")).collect();
-        format!("NOT converged; still repairing in the last round: {}", names.join(", "))
+        let share = 100.0 * self.last_round_share();
+        let remaining = format!(
+            "{} partial overlaps, {} non-manifold and {} boundary edges remain",
+            self.partial_overlap_count, self.non_manifold_edges, self.boundary_edges_after
+        );
+        let verdict = if self.ready_to_bake {
+            format!(
+                "safe to bake: those repairs are {share:.2}% of the {} triangles, local edits that change no surface a bake sees; {remaining}",
+                self.output_triangles
+            )
+        } else {
+            format!(
+                "check before baking: those repairs are {share:.1}% of the {} triangles, so the mesh was still changing; clean the output again, or find the parts that keep changing with `prtbake inspect`; {remaining}",
+                self.output_triangles
+            )
+        };
+        format!("NOT converged; still repairing in the last round: {}; {verdict}", names.join(", "))
     }
 
     /// A human-readable multi-line summary.

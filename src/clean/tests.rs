@@ -380,6 +380,12 @@ fn an_unconverged_clean_names_what_kept_retriggering() {
         assert!(names.contains(&name.as_str()) && *count > 0, "{name} {count}");
         assert!(summary.contains(&format!("{name} {count}")), "{summary}");
     }
+    // It says whether the output is ready to bake, by the share the last round still changed.
+    let repairs: usize = r.retriggered.iter().map(|(_, n)| n).sum();
+    let ready = repairs as f64 <= 0.01 * r.output_triangles as f64;
+    assert_eq!(r.ready_to_bake, ready, "{summary}");
+    assert!(summary.contains(if ready { "safe to bake" } else { "check before baking" }), "{summary}");
+    assert!(summary.contains(&format!("{} non-manifold", r.non_manifold_edges)), "{summary}");
 }
 
 /// (boundary edges, their length, non-manifold edges, their length) on exact positions.
@@ -679,4 +685,30 @@ fn the_cut_grows_with_its_pieces_on_thin_crossings_and_fins() {
         );
         assert_eq!(out.triangle_count(), triangles, "{n} thin");
     }
+}
+
+/// An unconverged clean says whether its output is ready to bake: the last
+/// round's repairs at most 1% of the output's triangles are local edits
+/// ("safe to bake"), more mean the mesh was still changing ("check before
+/// baking"); either way it names what remains.
+#[test]
+fn an_unconverged_clean_says_whether_its_output_is_ready_to_bake() {
+    let report = |repairs: usize| {
+        let mut r =
+            CleanReport { converged: false, rounds: MAX_ROUNDS, output_triangles: 10_000, non_manifold_edges: 7, ..Default::default() };
+        r.retriggered = vec![("zipped_edges".to_string(), repairs)];
+        r.ready_to_bake = r.last_round_share() <= super::report::READY_SHARE;
+        r
+    };
+    let few = report(100);
+    assert!(few.ready_to_bake);
+    let text = few.convergence();
+    assert!(text.contains("zipped_edges 100") && text.contains("safe to bake") && text.contains("1.00% of the 10000 triangles"), "{text}");
+    assert!(text.contains("7 non-manifold"), "{text}");
+    let many = report(101);
+    assert!(!many.ready_to_bake);
+    let text = many.convergence();
+    assert!(text.contains("check before baking") && text.contains("clean the output again"), "{text}");
+    let done = CleanReport { converged: true, ready_to_bake: true, ..Default::default() };
+    assert_eq!(done.convergence(), "converged");
 }

@@ -92,7 +92,7 @@ pub fn load_for_bake(config: &BakeConfig, outputs: &[Output]) -> anyhow::Result<
     let clean_start = std::time::Instant::now();
     let mut meta = json!({ "source": config.input.file_name().map(|n| n.to_string_lossy().to_string()) });
     if let Some(params) = &config.clean {
-        let (cleaned, report) = super::clean_cmd::clean_loaded(&mesh, params, &config.input)?;
+        let (cleaned, report, _) = super::clean_cmd::clean_loaded(&mesh, params, &config.input)?;
         if !config.params.quiet {
             eprintln!("clean: {}", report.summary());
         }
