@@ -113,6 +113,11 @@ struct BakeArgs {
     /// path tracer's two-sided diffuse; window mode reflects from both sides already).
     #[arg(long = "one-sided", value_name = "PATTERN")]
     one_sided: Vec<String>,
+    /// Bounces read the light at a ray's hit from a fit to the hit triangle's own points instead of
+    /// its corner vertices' one-ring means: less bias where light bends within a one-ring (corners),
+    /// more noise per hit (docs/speed-accuracy.md). Not with --shard or --refine.
+    #[arg(long)]
+    gather_fit: bool,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -721,9 +726,16 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         window_sampling: a.window_sampling,
         keep_outside_sides: a.keep_outside_sides,
         hit_cache_bytes: hit_cache_bytes(a.hit_cache_mib),
+        gather_fit: a.gather_fit,
         ..BakeParams::default()
     };
     params.check()?;
+    if a.gather_fit && a.shard.is_some() {
+        anyhow::bail!("--gather-fit with --shard: a sharded bake's layers hold vertex rows only (bake it in one process)");
+    }
+    if a.gather_fit && (a.refine.refine.is_some() || a.refine.max_vertices.is_some()) {
+        anyhow::bail!("--gather-fit with --refine: refinement's partial re-bakes gather from vertex rows (bake the refined mesh again with --gather-fit)");
+    }
     if let Some(e) = a.max_error {
         if !(e.is_finite() && e >= 0.0) {
             anyhow::bail!("--max-error {e}: expected a finite error ≥ 0 (e.g. 0.01 for 1%)");

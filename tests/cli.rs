@@ -608,3 +608,47 @@ fn step_reports_end_with_where_the_time_went() {
         assert!((shares - 100.0).abs() <= 0.5 * parsed.len() as f64 + 0.5, "{}: shares {shares}", args[0]);
     }
 }
+
+/// `bake --gather-fit`: bounces read each hit triangle's own fit. The same
+/// bytes at any thread count, the choice recorded in META (and absent from a
+/// bake without it), bounce 0 unchanged by it, and refused with `--shard`,
+/// `--refine` or `--sampling vertex` (exit 2, nothing written).
+#[test]
+fn gather_fit_is_deterministic_recorded_and_refused_where_it_cannot_apply() {
+    let dir = Scratch::new("gather-fit");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let bake = |out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "32", "--bounces", "2", "--quiet"];
+        args.extend_from_slice(extra);
+        (prtbake(&args), out)
+    };
+    let (o1, one) = bake("one.prtb", &["--gather-fit", "--threads", "1", "--store-bounces"]);
+    assert!(o1.status.success(), "{}", String::from_utf8_lossy(&o1.stderr));
+    let (o2, two) = bake("two.prtb", &["--gather-fit", "--threads", "2", "--store-bounces"]);
+    assert!(o2.status.success());
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "--gather-fit differs between 1 and 2 threads");
+    let (o3, plain) = bake("plain.prtb", &["--store-bounces"]);
+    assert!(o3.status.success());
+    let read = |p: &std::path::Path| prtbake::bundle::read_bundle(p).unwrap();
+    let (fitted, vertex) = (read(&one), read(&plain));
+    assert_eq!(fitted.meta["params"]["gather_fit"], true);
+    assert!(vertex.meta["params"].get("gather_fit").is_none(), "a bake without it records nothing");
+    let (tf, tv) = (fitted.transfer.unwrap(), vertex.transfer.unwrap());
+    let layer = |t: &prtbake::bundle::Transfer, b: u32| {
+        t.layers.iter().find(|l| l.kind == prtbake::bundle::LayerKind::Bounce(b)).map(|l| l.data.clone()).unwrap()
+    };
+    assert_eq!(layer(&tf, 0), layer(&tv, 0), "bounce 0 gathers nothing");
+    assert_ne!(layer(&tf, 1), layer(&tv, 1), "bounce 1 reads the fit");
+    for extra in [
+        &["--gather-fit", "--shard", "0/2"][..],
+        &["--gather-fit", "--refine", "0.1"],
+        &["--gather-fit", "--sampling", "vertex", "--adaptive", "0"],
+    ] {
+        let (o, out) = bake("refused.prtb", extra);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--gather-fit"), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(!out.exists());
+    }
+}

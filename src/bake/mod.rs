@@ -115,6 +115,11 @@ pub struct BakeParams {
     /// face brings nothing back (bakes recorded before this field existed).
     #[serde(default)]
     pub two_sided: bool,
+    /// Bounces ≥ 1 read the previous bounce at a hit from a fit to the hit
+    /// triangle's own points (`bake::transfer::fit`) instead of its corner
+    /// vertices' one-ring means; off by default (`--gather-fit`).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub gather_fit: bool,
     /// No progress line on stderr (not part of the bake: never stored).
     #[serde(skip, default = "quiet_by_default")]
     pub quiet: bool,
@@ -153,6 +158,7 @@ impl Default for BakeParams {
             keep_outside_sides: false,
             inside_distance: 0.05,
             two_sided: true,
+            gather_fit: false,
             quiet: true,
             hit_cache_bytes: transfer::HIT_CACHE_BUDGET_BYTES,
         }
@@ -177,6 +183,9 @@ impl BakeParams {
         if self.adaptive > 0.0 && self.sampling == Sampling::Vertex {
             // It adds points inside triangles; vertex sampling has one point per vertex.
             return Err(BakeError::Params("adaptive allocation adds interior samples: it needs --sampling interior".into()));
+        }
+        if self.gather_fit && self.sampling == Sampling::Vertex {
+            return Err(BakeError::Params("--gather-fit fits the points inside each triangle: it needs --sampling interior".into()));
         }
         if self.bounces > 16 {
             return Err(BakeError::Params(format!("{} bounces is more than 16", self.bounces)));
@@ -343,6 +352,10 @@ pub fn bake_mesh_with(
     let build_seconds = scene.build_time.as_secs_f64();
     let result = bake_transfer(mesh, &scene, &surfaces, params)?;
     Ok((result, surfaces, build_seconds))
+}
+
+fn is_false(x: &bool) -> bool {
+    !*x
 }
 
 fn is_zero(x: &f32) -> bool {

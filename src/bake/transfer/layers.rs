@@ -61,6 +61,7 @@ pub(crate) fn bake_layers(
     let mut source = SourceRows::empty();
     let mut layers: Vec<Vec<f32>> = Vec::new();
     let mut back_layers: Vec<Vec<f32>> = Vec::new();
+    let mut fit: Option<super::fit::FitMatrices> = None;
     // The mesh's own vertices; the plan's rows past them are its back sides'.
     let vertex_count = mesh.vertex_count();
     let stride = channels * coeffs;
@@ -117,7 +118,19 @@ pub(crate) fn bake_layers(
                     source_from_layer(&mut source, &layer, pass_channels, channels, coeffs);
                 }
             }
-            None if bounce < params.bounces => normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs),
+            None if bounce < params.bounces => {
+                normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs);
+                if !sums.item_sums.is_empty() {
+                    // The next bounce reads each hit triangle's own fit (`--gather-fit`).
+                    let fit = fit.get_or_insert_with(|| super::fit::fit_matrices(&plan.mesh, &plan.items, params, &rejected));
+                    let stride = pass_channels * coeffs;
+                    let (rows, corners) =
+                        super::fit::corner_table(&plan.mesh, &plan.items, fit, &sums.item_sums, source.rows.as_slice(), stride);
+                    source.rows = crate::bake::gather::RowBuffer::zeroed(rows.len());
+                    source.rows.as_mut_slice().copy_from_slice(&rows);
+                    source.corner_indices = corners;
+                }
+            }
             None => {}
         }
         add_layer(&mut total, &layer[..vertex_count * stride]);

@@ -23,6 +23,7 @@ use crate::mesh::Mesh;
 use crate::trace::scene::Scene;
 
 pub(crate) mod adaptive;
+pub(crate) mod fit;
 pub(crate) mod items;
 mod layers;
 mod normalise;

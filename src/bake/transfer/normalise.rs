@@ -12,11 +12,14 @@ pub(crate) struct SourceRows {
     pub(crate) rows: RowBuffer,
     /// 1 after bounce 0, else the bake's channels.
     pub(crate) channels: usize,
+    /// The row of each triangle corner, when the rows are per triangle
+    /// corner (`--gather-fit`, [`super::fit`]); empty: the mesh's vertex indices.
+    pub(crate) corner_indices: Vec<u32>,
 }
 
 impl SourceRows {
     pub(crate) fn empty() -> SourceRows {
-        SourceRows { rows: RowBuffer::zeroed(0), channels: 1 }
+        SourceRows { rows: RowBuffer::zeroed(0), channels: 1, corner_indices: Vec::new() }
     }
 }
 
@@ -51,6 +54,7 @@ pub(crate) fn normalise_source_into(source: &mut SourceRows, sums: &[f32], weigh
         source.rows = RowBuffer::zeroed(weights.len() * stride);
     }
     source.channels = pass_channels;
+    source.corner_indices.clear();
     normalise_rows(source.rows.as_mut_slice(), sums, weights, stride);
 }
 
@@ -63,6 +67,7 @@ pub(crate) fn source_from_layer(source: &mut SourceRows, layer: &[f32], pass_cha
         source.rows = RowBuffer::zeroed(vertices * stride);
     }
     source.channels = pass_channels;
+    source.corner_indices.clear();
     source
         .rows
         .as_mut_slice()

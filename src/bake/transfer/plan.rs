@@ -96,7 +96,8 @@ impl<'a> Plan<'a> {
         record_hits: bool,
     ) -> Pass<'p> {
         let gather = (bounce > 0).then(|| {
-            Gather::new(&self.mesh.indices, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels)
+            let corners = if source.corner_indices.is_empty() { &self.mesh.indices } else { &source.corner_indices };
+            Gather::new(corners, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels)
         });
         Pass {
             bounce,

@@ -143,6 +143,8 @@ pub(crate) struct RangeSums {
     pub(crate) traced: u64,
     /// Bounce 0's hit records of the range's points, in point order, when recorded.
     pub(crate) hits: Vec<u64>,
+    /// `--gather-fit`: each item's three corner sums, `[item][corner][channel][coeff]`.
+    pub(crate) item_sums: Vec<f32>,
 }
 
 /// (a) and (b): evaluates every point of the items in `range` for `pass`'s
@@ -230,6 +232,10 @@ impl RangeSums {
             rays: 0,
             traced: 0,
             hits: Vec::new(),
+            item_sums: match pass.items {
+                Items::Interior { .. } if pass.params.gather_fit => vec![0.0; pass.items.len() * 3 * pass.channels * pass.coeffs],
+                _ => Vec::new(),
+            },
         }
     }
 
@@ -243,6 +249,9 @@ impl RangeSums {
         let stride = pass.channels * pass.coeffs;
         let with_weights = pass.bounce == 0;
         for (local, corner_sums) in task.sums.chunks_exact(corners * stride).enumerate() {
+            if !self.item_sums.is_empty() {
+                self.item_sums[(task_start + local) * corners * stride..][..corners * stride].copy_from_slice(corner_sums);
+            }
             let vertices = pass.items.corner_vertices(pass.mesh, task_start + local);
             for (corner, sums) in corner_sums.chunks_exact(stride).enumerate() {
                 let v = vertices[corner] as usize;
