@@ -6,7 +6,7 @@
 //! (and in round 0 its hit records) through `files::Staged`, so a failed or
 //! interrupted shard leaves nothing, and a re-run writes the same bytes.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use serde_json::json;
@@ -17,9 +17,7 @@ use super::Output;
 use crate::bake::SunStats;
 use crate::bundle::bundle_meta;
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
-use crate::files::Staged;
-use crate::shards::run::{decode, read_shard_file};
-use crate::shards::{self, FileKind, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, Shard, ShardRun, Stage, SunKey, TransferKey};
+use crate::shards::{self, FileKind, Shard, ShardRun, Stage, SunKey, TransferKey};
 use crate::sky;
 use crate::trace::{BuildQuality, Scene};
 
@@ -29,72 +27,28 @@ pub const HITS_FORMAT: &[&str] = &["prth"];
 pub const LAYER_FORMAT: &[&str] = &["prtl"];
 pub const PILOT_FORMAT: &[&str] = &["prta"];
 
-/// Bakes one shard's part of one transfer round and prints what it wrote.
+/// Bakes one shard's part of one transfer round and prints what it wrote:
+/// the arguments checked, the mesh loaded as a whole bake loads it, then
+/// [`ShardRun`]'s library calls (inputs, bake, write).
 pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let (shard, round, bounces) = (run.shard, run.round, config.params.bounces);
-    let stage = if run.pilot_stage { Stage::Pilot } else { Stage::Round(round) };
-    let adaptive = config.params.adaptive > 0.0;
-    match (stage, adaptive, &run.pilot) {
-        (Stage::Pilot, false, _) => anyhow::bail!("--round pilot is adaptive allocation's stage; this bake has --adaptive 0"),
-        (Stage::Pilot, true, Some(p)) => anyhow::bail!("--pilot {}: the pilot stage makes the pilot; rounds 0 and later read it", p.display()),
-        (Stage::Round(r), true, None) => anyhow::bail!(
-            "--round {r} of an adaptive bake needs --pilot, the merged pilot (run --round pilot on every shard, then prtbake merge … -o PILOT.prta; docs/scale.md)"
-        ),
-        (Stage::Round(_), false, Some(p)) => anyhow::bail!("--pilot {}: this bake has --adaptive 0 and no pilot stage", p.display()),
-        _ => {}
-    }
+    run.check(bounces, config.params.adaptive > 0.0)?;
     if config.view_box.is_some() {
         anyhow::bail!("--view-box with --shard: sharded bakes store every triangle (bake the view box in one process)");
     }
-    if round > bounces {
-        anyhow::bail!("--round {round}: a bake of {bounces} bounce(s) has rounds 0..={bounces}");
-    }
-    match (round, &run.layer) {
-        (0, Some(layer)) => anyhow::bail!("--layer {}: round 0 traces from scratch and takes no layer", layer.display()),
-        (r, None) if r > 0 => {
-            anyhow::bail!("--round {r} needs --layer, the merged layer of round {} (prtbake merge … -o LAYER.prtl)", r - 1)
-        }
-        _ => {}
-    }
     let hits_path = run.hits_path(&config.output);
-    let writes_hits = stage == Stage::Round(0) && bounces > 0;
     let mut outputs = vec![Output::new(&config.output, PART_FORMAT)];
-    if writes_hits {
+    if run.writes_hits(bounces) {
         outputs.push(Output::new(&hits_path, HITS_FORMAT));
     }
+    let read = run.inputs(&config.output);
     let mut inputs: Vec<&Path> = vec![&config.input];
-    if let Some(layer) = &run.layer {
-        inputs.extend([layer.as_path(), hits_path.as_path()]);
-    }
-    if let Some(pilot) = &run.pilot {
-        inputs.push(pilot.as_path());
-    }
+    inputs.extend(read.iter().map(PathBuf::as_path));
     super::check_outputs(&inputs, &outputs, config.force)?;
     super::check_threads(config.threads)?;
     let loaded = load_for_bake(config, &outputs)?;
     // The inputs of later rounds are read (and checked) before any ray.
-    let layer_path = run.layer.clone().unwrap_or_default();
-    let input = match &run.layer {
-        None => None,
-        Some(layer_path) => {
-            let bytes = read_shard_file(layer_path)?;
-            let (layer, layer_crc): (LayerFile, u32) = decode(layer_path, &bytes, LayerFile::decode)?;
-            drop(bytes);
-            let bytes = read_shard_file(&hits_path).with_context(|| {
-                format!("shard {shard}'s hit records from round 0 (--shard-dir names their folder; round 0 writes them)")
-            })?;
-            let hits: HitFile = decode(&hits_path, &bytes, HitFile::decode)?;
-            Some((layer, layer_crc, hits))
-        }
-    };
-    let pilot_path = run.pilot.clone().unwrap_or_default();
-    let pilot = match &run.pilot {
-        None => None,
-        Some(path) => {
-            let bytes = read_shard_file(path)?;
-            Some(decode(path, &bytes, PilotFile::decode)?)
-        }
-    };
+    let files = run.read_inputs(&config.output)?;
     let key = TransferKey {
         params: config.params,
         window_patterns: config.window_patterns.clone(),
@@ -103,34 +57,21 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
         max_error: config.storage.max_error,
     };
     let mesh = &loaded.mesh;
-    let (output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+    let (mut output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = super::bake_cmd::surfaces_of(mesh, config)?;
         check_windows(config, &surfaces)?;
-        // Rounds ≥ 1 gather from round 0's hit records and trace nothing.
-        let scene = match stage {
-            Stage::Round(r) if r > 0 => Scene::without_bvh(mesh),
-            _ => Scene::build(mesh, BuildQuality::Sah),
-        }
-        .with_context(|| config.input.display().to_string())?;
-        let input =
-            input.map(|(layer, layer_crc, hits)| RoundInput { hits_path: &hits_path, hits, layer_path: &layer_path, layer, layer_crc });
-        let pilot = pilot.map(|(pilot, crc)| PilotInput { path: &pilot_path, pilot, crc });
-        let output = shards::bake_transfer_shard(mesh, &scene, &surfaces, &key, config.params.quiet, shard, stage, input, pilot)?;
+        let scene = run.scene(mesh).with_context(|| config.input.display().to_string())?;
+        let output = run.bake(mesh, &scene, &surfaces, &key, config.params.quiet, files, &config.output)?;
         Ok((output, surfaces, scene.build_time.as_secs_f64()))
     })??;
-    let mut part = output.part;
-    if stage == Stage::Round(bounces) && shard.index == 0 {
+    if run.stage() == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
         let meta = bundle_meta(loaded.meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
         let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None };
-        part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
+        output.part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
     }
-    let mut staged = Staged::new();
-    staged.stage(&config.output, |w| part.write_to(w).map(drop)).with_context(|| format!("cannot write {}", config.output.display()))?;
-    if let Some(hits) = &output.hits {
-        staged.stage(&hits_path, |w| hits.write_to(w).map(drop)).with_context(|| format!("cannot write {}", hits_path.display()))?;
-    }
-    staged.commit().with_context(|| format!("cannot write {}", config.output.display()))?;
+    run.write(&output, &config.output)?;
+    let part = &output.part;
 
     let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
     let hits_written = output.hits.is_some().then_some(hits_path.as_path());

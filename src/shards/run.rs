@@ -6,9 +6,22 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
-use super::{codec, hit_file_name, Shard, ShardError};
+use super::{
+    codec, hit_file_name, HitFile, LayerFile, PilotFile, PilotInput, RoundInput, RoundOutput, Shard, ShardError, Stage, TransferKey,
+};
+use crate::bake::Surfaces;
 use crate::files::read::{read_head, read_tail};
-use crate::files::Limit;
+use crate::files::{Limit, Staged};
+use crate::mesh::Mesh;
+use crate::trace::{BuildQuality, Scene, SceneError};
+
+/// A round's merged inputs, read and checked before any ray: the layer of
+/// the round before with this shard's hit records (rounds ≥ 1), and the
+/// pilot (every round of an adaptive bake), each with its CRC.
+pub struct RoundFiles {
+    layer: Option<(LayerFile, u32, HitFile)>,
+    pilot: Option<(PilotFile, u32)>,
+}
 
 /// What `bake --shard` asks of one run.
 #[derive(Clone, Debug)]
@@ -34,6 +47,130 @@ impl ShardRun {
             None => part.parent().map(Path::to_path_buf).unwrap_or_default(),
         };
         dir.join(hit_file_name(self.shard))
+    }
+
+    /// The stage this run bakes.
+    pub fn stage(&self) -> Stage {
+        if self.pilot_stage {
+            Stage::Pilot
+        } else {
+            Stage::Round(self.round)
+        }
+    }
+
+    /// Refuses a run whose stage, inputs and parameters do not go together
+    /// (`bounces`, and whether the bake has adaptive allocation), with the
+    /// command-line words a user fixes them with.
+    pub fn check(&self, bounces: u32, adaptive: bool) -> anyhow::Result<()> {
+        match (self.stage(), adaptive, &self.pilot) {
+            (Stage::Pilot, false, _) => anyhow::bail!("--round pilot is adaptive allocation's stage; this bake has --adaptive 0"),
+            (Stage::Pilot, true, Some(p)) => anyhow::bail!("--pilot {}: the pilot stage makes the pilot; rounds 0 and later read it", p.display()),
+            (Stage::Round(r), true, None) => anyhow::bail!(
+                "--round {r} of an adaptive bake needs --pilot, the merged pilot (run --round pilot on every shard, then prtbake merge … -o PILOT.prta; docs/scale.md)"
+            ),
+            (Stage::Round(_), false, Some(p)) => anyhow::bail!("--pilot {}: this bake has --adaptive 0 and no pilot stage", p.display()),
+            _ => {}
+        }
+        if self.round > bounces {
+            anyhow::bail!("--round {}: a bake of {bounces} bounce(s) has rounds 0..={bounces}", self.round);
+        }
+        match (self.round, &self.layer) {
+            (0, Some(layer)) => anyhow::bail!("--layer {}: round 0 traces from scratch and takes no layer", layer.display()),
+            (r, None) if r > 0 => {
+                anyhow::bail!("--round {r} needs --layer, the merged layer of round {} (prtbake merge … -o LAYER.prtl)", r - 1)
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Whether this run writes hit records beside its part (round 0 of a bake with bounces).
+    pub fn writes_hits(&self, bounces: u32) -> bool {
+        self.stage() == Stage::Round(0) && bounces > 0
+    }
+
+    /// The files this run reads besides the mesh (for the output checks).
+    pub fn inputs(&self, part: &Path) -> Vec<PathBuf> {
+        let mut inputs = Vec::new();
+        if let Some(layer) = &self.layer {
+            inputs.extend([layer.clone(), self.hits_path(part)]);
+        }
+        inputs.extend(self.pilot.clone());
+        inputs
+    }
+
+    /// Reads and checks the round's merged inputs (`part`: where the part
+    /// goes, beside which the hit records are by default).
+    pub fn read_inputs(&self, part: &Path) -> anyhow::Result<RoundFiles> {
+        let layer = match &self.layer {
+            None => None,
+            Some(layer_path) => {
+                let bytes = read_shard_file(layer_path)?;
+                let (layer, crc): (LayerFile, u32) = decode(layer_path, &bytes, LayerFile::decode)?;
+                drop(bytes);
+                let hits_path = self.hits_path(part);
+                let bytes = read_shard_file(&hits_path).with_context(|| {
+                    format!("shard {}'s hit records from round 0 (--shard-dir names their folder; round 0 writes them)", self.shard)
+                })?;
+                Some((layer, crc, decode(&hits_path, &bytes, HitFile::decode)?))
+            }
+        };
+        let pilot = match &self.pilot {
+            None => None,
+            Some(path) => {
+                let bytes = read_shard_file(path)?;
+                Some(decode(path, &bytes, PilotFile::decode)?)
+            }
+        };
+        Ok(RoundFiles { layer, pilot })
+    }
+
+    /// The scene this run traces: without a BVH in rounds ≥ 1, which gather
+    /// from round 0's hit records and trace nothing (building it would be
+    /// most of their time).
+    pub fn scene(&self, mesh: &Mesh) -> Result<Scene, SceneError> {
+        match self.stage() {
+            Stage::Round(r) if r > 0 => Scene::without_bvh(mesh),
+            _ => Scene::build(mesh, BuildQuality::Sah),
+        }
+    }
+
+    /// Bakes this shard's part of its stage: the estimator over the shard's
+    /// items, from the round's merged inputs.
+    pub fn bake(
+        &self,
+        mesh: &Mesh,
+        scene: &Scene,
+        surfaces: &Surfaces,
+        key: &TransferKey,
+        quiet: bool,
+        files: RoundFiles,
+        part: &Path,
+    ) -> Result<RoundOutput, ShardError> {
+        let stage = self.stage();
+        let hits_path = self.hits_path(part);
+        let (layer_path, pilot_path) = (self.layer.clone().unwrap_or_default(), self.pilot.clone().unwrap_or_default());
+        let input = files.layer.map(|(layer, layer_crc, hits)| RoundInput {
+            hits_path: &hits_path,
+            hits,
+            layer_path: &layer_path,
+            layer,
+            layer_crc,
+        });
+        let pilot = files.pilot.map(|(pilot, crc)| PilotInput { path: &pilot_path, pilot, crc });
+        super::bake_transfer_shard(mesh, scene, surfaces, key, quiet, self.shard, stage, input, pilot)
+    }
+
+    /// Writes the part and its hit records, together or not at all.
+    pub fn write(&self, output: &RoundOutput, part: &Path) -> anyhow::Result<()> {
+        let hits_path = self.hits_path(part);
+        let mut staged = Staged::new();
+        staged.stage(part, |w| output.part.write_to(w).map(drop)).with_context(|| format!("cannot write {}", part.display()))?;
+        if let Some(hits) = &output.hits {
+            staged.stage(&hits_path, |w| hits.write_to(w).map(drop)).with_context(|| format!("cannot write {}", hits_path.display()))?;
+        }
+        staged.commit().with_context(|| format!("cannot write {}", part.display()))?;
+        Ok(())
     }
 }
 
