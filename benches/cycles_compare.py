@@ -5,7 +5,7 @@
 
 Optional for users; it needs ../shared/data/room-grey-white and Blender's
 `bpy` from PyPI. bpy 4.5 LTS has CPython 3.11 wheels, which Debian 12's
-python3 is; newer bpy wheels need CPython 3.13. The script installs bpy into
+python3 is (so does bpy 5.0.1; only 5.1 and later need CPython 3.13). The script installs bpy into
 a virtualenv (target/cycles-venv) on its first run and re-runs itself there.
 
 Both bake the same cleaned mesh (`prtbake clean` → OBJ, whose vertices are
