@@ -389,3 +389,103 @@ fn a_sheet_lit_from_behind_reflects_what_it_reflects_from_the_front() {
     assert!(one_sided.abs() < 1e-6, "{one_sided}");
     assert_eq!(bounce1(&scene(true), &["wall".to_string()]), front, "the front side is the same either way");
 }
+
+/// A bounce's bias, against the one-ring means it should estimate: an
+/// open-top box (floor and four walls facing in, albedo 0.8, 6 × 6 cells a
+/// face) under a constant sky, bounce 1 only. The reference traces, for each
+/// floor vertex, points over its one-ring weighted by the hat, cosine rays
+/// from them, and at every hit the hit point's own bounce 0 (cosine rays
+/// from the hit: the share that reaches the sky, times y₀₀); no vertex
+/// values anywhere. The bake reads bounce 0 at a hit from the hit
+/// triangle's corner vertices (one-ring means, which smooth the corner's
+/// darkening) or, with `--gather-fit`, from the triangle's own fit; the
+/// second must be the closer, and both within a few percent.
+#[test]
+fn a_bounce_reads_the_hit_point_and_gather_fit_lowers_the_bias() {
+    use prtbake::fixtures::builder::MeshBuilder;
+    use prtbake::mesh::Material;
+    use rayon::prelude::*;
+    const CELLS: u32 = 6;
+    let mut b = MeshBuilder::new(vec![Material::opaque("box", 0.8)]);
+    let m = b.material("box");
+    let o = Vec3::ZERO;
+    // Unit box, open at y = 1; every face's normal points in.
+    b.grid("floor", o, Vec3::Z, Vec3::X, CELLS, CELLS, |_, _| m);
+    b.grid("x0", o, Vec3::Y, Vec3::Z, CELLS, CELLS, |_, _| m);
+    b.grid("x1", Vec3::X, Vec3::Z, Vec3::Y, CELLS, CELLS, |_, _| m);
+    b.grid("z0", o, Vec3::X, Vec3::Y, CELLS, CELLS, |_, _| m);
+    b.grid("z1", Vec3::Z, Vec3::Y, Vec3::X, CELLS, CELLS, |_, _| m);
+    let mesh = b.mesh;
+    mesh.validate().unwrap();
+    let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+    let y00 = 0.5 / std::f64::consts::PI.sqrt();
+    let hash = |k: u64| {
+        let mut z = k.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    // Bounce 0 at a point: the cosine-weighted share of rays that reach the sky, times y00.
+    let direct = |p: Vec3, n: Vec3, key: u64, rays: u64| {
+        let open = (0..rays)
+            .filter(|&r| {
+                let d = prtbake::sampling::cosine_hemisphere(n, hash(key ^ (2 * r + 1) << 20), hash(key ^ (2 * r + 2) << 20));
+                scene.closest_hit(scene.offset_origin(p, n, d), d, f32::INFINITY).is_none()
+            })
+            .count();
+        y00 * open as f64 / rays as f64
+    };
+    let floor: Vec<usize> = (0..mesh.vertex_count()).filter(|&v| mesh.positions[v].y == 0.0 && mesh.normals[v].y > 0.5).collect();
+    let reference: Vec<f64> = floor
+        .par_iter()
+        .map(|&v| {
+            let (mut sum, mut weight) = (0.0f64, 0.0f64);
+            for t in (0..mesh.triangle_count()).filter(|&t| mesh.triangle(t).contains(&(v as u32))) {
+                let corners = mesh.triangle(t);
+                let [pa, pb, pc] = mesh.triangle_positions(t);
+                let n = scene.face_normal(t as u32);
+                let area = 0.5 * (pb - pa).cross(pc - pa).length() as f64;
+                const POINTS: u64 = 128;
+                for s in 0..POINTS {
+                    let key = ((v as u64) << 40) ^ ((t as u64) << 20) ^ (s << 8);
+                    let (r1, r2) = (hash(key).sqrt(), hash(key ^ 0xabc));
+                    let bary = [1.0 - r1, r1 * (1.0 - r2), r1 * r2];
+                    let p = pa * bary[0] + pb * bary[1] + pc * bary[2];
+                    let hat = bary[corners.iter().position(|&c| c as usize == v).unwrap()] as f64;
+                    let mut gathered = 0.0f64;
+                    const RAYS: u64 = 32;
+                    for r in 0..RAYS {
+                        let d = prtbake::sampling::cosine_hemisphere(n, hash(key ^ (r << 1) ^ 0x5), hash(key ^ (r << 1) ^ 0x6));
+                        if let Some(hit) = scene.closest_hit(scene.offset_origin(p, n, d), d, f32::INFINITY) {
+                            let hn = scene.face_normal(hit.triangle);
+                            let hp = scene.offset_origin(p + d * hit.t, hn, -d);
+                            gathered += 0.8 * direct(hp, hn, key ^ (r << 4) ^ 0x77, 64);
+                        }
+                    }
+                    let w = hat * area / POINTS as f64;
+                    sum += w * gathered / RAYS as f64;
+                    weight += w;
+                }
+            }
+            sum / weight
+        })
+        .collect();
+    let error = |gather_fit: bool| {
+        let params = BakeParams { order: 1, rays: 256, bounces: 1, store_bounces: true, gather_fit, ..BakeParams::default() };
+        let (r, _, _) = bake_mesh(&mesh, &params, &[]).unwrap();
+        let (mut d2, mut m2, mut sum_p, mut sum_m) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (&v, &m) in floor.iter().zip(&reference) {
+            let p = r.bounces[1][v] as f64;
+            (d2 += (p - m) * (p - m), m2 += m * m, sum_p += p, sum_m += m);
+        }
+        ((d2 / m2).sqrt(), sum_p / sum_m)
+    };
+    let (vertex, vertex_mean) = error(false);
+    let (fitted, fitted_mean) = error(true);
+    eprintln!("floor bounce 1 against the hit-point reference: vertex rows {vertex:.4} (mean ratio {vertex_mean:.4}), fit {fitted:.4} ({fitted_mean:.4})");
+    // The vertex rows read the corners bright (their one-rings reach past the
+    // darkening); the fit reads less of that, in the mean and per vertex.
+    assert!(vertex_mean > 1.008, "the vertex rows' bias {vertex_mean} is gone: the test no longer sees it");
+    assert!((fitted_mean - 1.0).abs() < 0.6 * (vertex_mean - 1.0), "mean ratio: fit {fitted_mean}, vertex rows {vertex_mean}");
+    assert!(fitted < vertex && vertex < 0.05, "relative RMS: fit {fitted}, vertex rows {vertex}");
+}
