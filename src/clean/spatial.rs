@@ -97,23 +97,10 @@ impl AabbTree {
 
     /// Appends to `out` the index of every box overlapping `query` (in tree order).
     pub fn query(&self, query: &Aabb, out: &mut Vec<u32>) {
-        if self.nodes.is_empty() {
-            return;
-        }
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
-            let node = self.nodes[n as usize];
-            if !node.bounds.overlaps(query) {
-                continue;
-            }
-            if node.count > 0 {
-                let items = &self.items[node.first as usize..(node.first + node.count) as usize];
-                out.extend(items.iter().copied().filter(|&i| self.boxes[i as usize].overlaps(query)));
-            } else {
-                stack.push(node.first + 1);
-                stack.push(node.first);
-            }
-        }
+        self.any(query, |i| {
+            out.push(i);
+            false
+        });
     }
 
     /// True when `hit` holds for the index of some box overlapping `query`;
