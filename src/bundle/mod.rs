@@ -45,7 +45,7 @@ pub use export_gltf::{
     export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX,
 };
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
-pub use types::{Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
 pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};

@@ -27,9 +27,14 @@ impl Bundle {
 
     /// The bake's `--window` patterns META records (`window_patterns`); none when absent.
     pub fn window_patterns(&self) -> Vec<String> {
-        let patterns = self.meta.get("window_patterns").and_then(|p| p.as_array());
-        patterns.map(|list| list.iter().filter_map(|p| p.as_str().map(str::to_string)).collect()).unwrap_or_default()
+        window_patterns_in(&self.meta)
     }
+}
+
+/// The `window_patterns` a bake's META object (or its `sun` part) records; none when absent.
+pub fn window_patterns_in(meta: &serde_json::Value) -> Vec<String> {
+    let patterns = meta.get("window_patterns").and_then(|p| p.as_array());
+    patterns.map(|list| list.iter().filter_map(|p| p.as_str().map(str::to_string)).collect()).unwrap_or_default()
 }
 
 /// Per-vertex SH transfer vectors, one layer per stored bounce (and/or the total).

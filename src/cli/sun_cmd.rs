@@ -190,11 +190,7 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
 fn recorded_windows(meta: &serde_json::Value, had_transfer: bool) -> Option<(Mode, Vec<String>)> {
     let from = if had_transfer { meta } else { meta.get("sun")? };
     let mode: Mode = serde_json::from_value(from.pointer("/params/mode")?.clone()).ok()?;
-    let patterns = from
-        .get("window_patterns")
-        .and_then(|p| p.as_array())
-        .map_or_else(Vec::new, |a| a.iter().filter_map(|p| p.as_str().map(String::from)).collect());
-    Some((mode, patterns))
+    Some((mode, crate::bundle::window_patterns_in(from)))
 }
 
 /// `config` with the window setup of the input bundle: a `sun` given

@@ -39,24 +39,19 @@ pub(crate) struct FitMatrices {
 /// `M + λI` of every item of an interior layout, over its points not
 /// `rejected` (the points a bounce adds to its corner sums).
 pub(crate) fn fit_matrices(mesh: &Mesh, items: &Items, params: &BakeParams, rejected: &[bool]) -> FitMatrices {
-    let Items::Interior { triangles, counts, first_sample, first_index, weight_count } = items else {
-        return FitMatrices { normal: Vec::new(), lambda: Vec::new() };
-    };
     let seed = params.point_seed.unwrap_or(params.seed);
-    let (normal, lambda) = (0..triangles.len())
+    let (normal, lambda) = (0..items.len())
         .into_par_iter()
+        .filter_map(|item| items.samples(item))
         .map(|item| {
-            let t = triangles[item];
-            let n = weight_count.get(item).copied().unwrap_or(counts[item]).max(1);
-            let w = f64::from(triangle_area(mesh, t)) / f64::from(n);
-            let corners = mesh.triangle(t as usize);
-            let first = first_index.get(item).copied().unwrap_or(0);
+            let w = f64::from(triangle_area(mesh, item.triangle)) / f64::from(item.weight_count.max(1));
+            let corners = mesh.triangle(item.triangle as usize);
             let mut m = [0.0f64; 6];
-            for s in 0..counts[item] {
-                if rejected.get((first_sample[item] + s) as usize).copied().unwrap_or(false) {
+            for s in 0..item.count {
+                if rejected.get((item.first_sample + s) as usize).copied().unwrap_or(false) {
                     continue;
                 }
-                let b = triangle_sample(params.pattern, seed, t, corners, first + s).map(f64::from);
+                let b = triangle_sample(params.pattern, seed, item.triangle, corners, item.first_index + s).map(f64::from);
                 let entries = [b[0] * b[0], b[0] * b[1], b[0] * b[2], b[1] * b[1], b[1] * b[2], b[2] * b[2]];
                 m.iter_mut().zip(entries).for_each(|(m, e)| *m += w * e);
             }
@@ -68,50 +63,47 @@ pub(crate) fn fit_matrices(mesh: &Mesh, items: &Items, params: &BakeParams, reje
     FitMatrices { normal, lambda }
 }
 
-/// The corner rows a bounce gathers from, one per triangle corner
-/// (`3 · triangles` rows of `stride`), and the corner indices that read
-/// them (`0, 1, 2, …`). `item_sums`: each item's three corner sums `S_k`
-/// from the bounce just run; `vertex_rows`: that bounce's vertex rows `V`.
-pub(crate) fn corner_table(
+/// Fills `rows` (`3 · triangles` rows of `stride`) with the corner rows a
+/// bounce gathers from, one per triangle corner, and returns the corner
+/// indices that read them (`0, 1, 2, …`). `item_sums`: each item's three
+/// corner sums `S_k` from the bounce just run; `vertex_rows`: that
+/// bounce's vertex rows `V`, which a triangle without an item keeps.
+pub(crate) fn fill_corner_table(
+    rows: &mut [f32],
     mesh: &Mesh,
     items: &Items,
     fit: &FitMatrices,
     item_sums: &[f32],
     vertex_rows: &[f32],
     stride: usize,
-) -> (Vec<f32>, Vec<u32>) {
+) -> Vec<u32> {
     let triangle_count = mesh.triangle_count();
-    let mut rows = vec![0.0f32; 3 * triangle_count * stride];
-    // Every triangle starts from its vertex rows; fitted ones are overwritten.
-    rows.par_chunks_mut(3 * stride).enumerate().for_each(|(t, dst)| {
-        for (k, &v) in mesh.triangle(t).iter().enumerate() {
-            dst[k * stride..][..stride].copy_from_slice(&vertex_rows[v as usize * stride..][..stride]);
-        }
-    });
-    if let Items::Interior { triangles, .. } = items {
-        let fitted: Vec<(u32, Vec<f32>)> = (0..triangles.len())
-            .into_par_iter()
-            .map(|item| {
-                let t = triangles[item];
-                let corners = mesh.triangle(t as usize);
-                let inverse = symmetric_inverse(&fit.normal[item]);
-                let sums = &item_sums[item * 3 * stride..][..3 * stride];
-                let mut out = vec![0.0f32; 3 * stride];
-                for c in 0..stride {
-                    let s = std::array::from_fn(|l| f64::from(sums[l * stride + c]));
-                    let prior = std::array::from_fn(|l| f64::from(vertex_rows[corners[l] as usize * stride + c]));
-                    for (k, value) in fit_corners(&inverse, fit.lambda[item], s, prior).into_iter().enumerate() {
-                        out[k * stride + c] = value as f32;
-                    }
-                }
-                (t, out)
-            })
-            .collect();
-        for (t, out) in fitted {
-            rows[t as usize * 3 * stride..][..3 * stride].copy_from_slice(&out);
+    let mut item_of = vec![u32::MAX; triangle_count];
+    for item in 0..items.len() {
+        if let Some(samples) = items.samples(item) {
+            item_of[samples.triangle as usize] = item as u32;
         }
     }
-    (rows, (0..3 * triangle_count as u32).collect())
+    rows.par_chunks_mut(3 * stride).zip(item_of.par_iter()).enumerate().for_each(|(t, (dst, &item))| {
+        let corners = mesh.triangle(t);
+        let prior = |l: usize, c: usize| f64::from(vertex_rows[corners[l] as usize * stride + c]);
+        if item == u32::MAX {
+            for (k, &v) in corners.iter().enumerate() {
+                dst[k * stride..][..stride].copy_from_slice(&vertex_rows[v as usize * stride..][..stride]);
+            }
+            return;
+        }
+        let item = item as usize;
+        let inverse = symmetric_inverse(&fit.normal[item]);
+        let sums = &item_sums[item * 3 * stride..][..3 * stride];
+        for c in 0..stride {
+            let s = std::array::from_fn(|l| f64::from(sums[l * stride + c]));
+            for (k, value) in fit_corners(&inverse, fit.lambda[item], s, std::array::from_fn(|l| prior(l, c))).into_iter().enumerate() {
+                dst[k * stride + c] = value as f32;
+            }
+        }
+    });
+    (0..3 * triangle_count as u32).collect()
 }
 
 /// The corner values `C = (M + λI)⁻¹ (S + λV)` of one coefficient, from the

@@ -18,7 +18,7 @@ pub(crate) enum Items {
     /// `first_index[k]..first_index[k] + counts[k]` (empty: from 0) of
     /// `weight_count[k]` in all (empty: `counts[k]`), which sets each
     /// sample's weight: a triangle can be split over two items when
-    /// adaptive allocation (`bake::adaptive`) adds samples to it.
+    /// adaptive allocation (`bake::transfer::adaptive`) adds samples to it.
     Interior {
         triangles: Vec<u32>,
         counts: Vec<u32>,
@@ -31,7 +31,29 @@ pub(crate) enum Items {
     },
 }
 
+/// One interior item's samples: samples `first_index..first_index + count`
+/// of triangle `triangle`'s sequence, at global points `first_sample..`,
+/// each weighing `area / weight_count`.
+pub(crate) struct ItemSamples {
+    pub(crate) triangle: u32,
+    pub(crate) count: u32,
+    pub(crate) first_sample: u32,
+    pub(crate) first_index: u32,
+    pub(crate) weight_count: u32,
+}
+
 impl Items {
+    /// Item `item`'s samples, for an interior layout.
+    pub(crate) fn samples(&self, item: usize) -> Option<ItemSamples> {
+        let Items::Interior { triangles, counts, first_sample, first_index, weight_count } = self else { return None };
+        Some(ItemSamples {
+            triangle: triangles[item],
+            count: counts[item],
+            first_sample: first_sample[item],
+            first_index: first_index.get(item).copied().unwrap_or(0),
+            weight_count: weight_count.get(item).copied().unwrap_or(counts[item]),
+        })
+    }
     /// Adaptive allocation's layout: the interior `base` items with `extra[k]`
     /// more samples each, one item of `n + e` points per triangle (samples
     /// 0..n + e of its Sobol sequence, each weighing area / (n + e)), point

@@ -124,11 +124,18 @@ pub(crate) fn bake_layers(
                     // The next bounce reads each hit triangle's own fit (`--gather-fit`).
                     let fit = fit.get_or_insert_with(|| super::fit::fit_matrices(&plan.mesh, &plan.items, params, &rejected));
                     let stride = pass_channels * coeffs;
-                    let (rows, corners) =
-                        super::fit::corner_table(&plan.mesh, &plan.items, fit, &sums.item_sums, source.rows.as_slice(), stride);
-                    source.rows = crate::bake::gather::RowBuffer::zeroed(rows.len());
-                    source.rows.as_mut_slice().copy_from_slice(&rows);
-                    source.corner_indices = corners;
+                    let mut rows = crate::bake::gather::RowBuffer::zeroed(3 * plan.mesh.triangle_count() * stride);
+                    let vertex_rows = source.rows.as_slice();
+                    source.corner_indices = super::fit::fill_corner_table(
+                        rows.as_mut_slice(),
+                        &plan.mesh,
+                        &plan.items,
+                        fit,
+                        &sums.item_sums,
+                        vertex_rows,
+                        stride,
+                    );
+                    source.rows = rows;
                 }
             }
             None => {}

@@ -375,17 +375,17 @@ impl Pass<'_> {
                     out.weights[local] = 1.0;
                     out.sums[local * stride..(local + 1) * stride].copy_from_slice(&point_result);
                 }
-                Items::Interior { triangles, counts, first_sample, first_index, weight_count } => {
-                    let t = triangles[item];
-                    let first_index = first_index.get(item).copied().unwrap_or(0);
-                    let weight_count = weight_count.get(item).copied().unwrap_or(counts[item]);
+                Items::Interior { .. } => {
+                    let Some(ItemSamples { triangle: t, count, first_sample, first_index, weight_count }) = self.items.samples(item) else {
+                        unreachable!("an interior layout's item")
+                    };
                     let [ia, ib, ic] = self.mesh.triangle(t as usize);
                     let [pa, pb, pc] = self.mesh.triangle_positions(t as usize);
                     let [na, nb, nc] = [ia, ib, ic].map(|i| self.mesh.normals[i as usize]);
                     let face_normal = self.face_normal(t);
                     let area = triangle_area(self.mesh, t);
-                    for s in 0..counts[item] {
-                        let global = first_sample[item] + s;
+                    for s in 0..count {
+                        let global = first_sample + s;
                         if bounce > 0 && self.rejected[global as usize] {
                             continue;
                         }
