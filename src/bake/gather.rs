@@ -67,11 +67,11 @@ impl RowBuffer {
 
 /// What a bounce gathers from.
 pub(crate) struct Gather<'a> {
-    /// Corner indices per triangle (3 per triangle).
+    /// Per triangle, the three receivers a hit reads (`Receivers::hit_table`).
     indices: &'a [u32],
     /// Per-channel albedo per triangle.
     albedo: &'a [[f32; 3]],
-    /// The previous bounce per vertex, `[vertex][source channel][coeff]`.
+    /// The previous bounce per receiver, `[receiver][source channel][coeff]`.
     rows: &'a [f32],
     coeffs: usize,
     /// Channels of `rows`: 1 when every output channel reads the same row

@@ -7,6 +7,7 @@ pub(crate) mod enclosure;
 pub(crate) mod gather;
 pub(crate) mod noise;
 pub mod progress;
+pub(crate) mod receivers;
 pub mod sun;
 pub mod surfaces;
 pub mod transfer;

@@ -1,6 +1,6 @@
 //! The noise of a vertex's estimate, from its points' spread. A vertex's
 //! value is a ratio Σ w·x / Σ w over its one-ring's points
-//! (`transfer::sample_weights`); its variance is estimated by the delta
+//! (`receivers::point_weights`); its variance is estimated by the delta
 //! method, `Var ≈ Σ w² (x − m)² / (Σ w)²`, from per-point moments that a
 //! whole bake and a merge of shards sum alike. `adaptive` allocates points
 //! by it; every bounce adds its share to the bake's noise estimate.

@@ -35,8 +35,9 @@ use rayon::prelude::*;
 
 use super::enclosure::{side_is_outside, Sides, SIDE_PROBE_RAYS};
 use super::progress::Progress;
+use super::receivers::{point_weights, Adjacency, Receivers};
 use super::surfaces::Surfaces;
-use super::transfer::{interior_layout, sample_weights, sampled_triangles, triangle_area, triangle_sample, InteriorLayout};
+use super::transfer::{interior_layout, sampled_triangles, triangle_area, triangle_sample, InteriorLayout};
 use super::{BakeError, DirectionPattern, Mode};
 use crate::mesh::Mesh;
 use crate::trace::scene::Scene;
@@ -378,9 +379,10 @@ impl<'a> SunPlan<'a> {
                 sample_bits.len()
             )));
         }
-        // Vote: each vertex sums its samples' weights in adjacency order.
-        let adjacency = VertexAdjacency::build(mesh, &self.layout);
-        let vertex_count = mesh.vertex_count();
+        // Vote: each receiver sums its samples' weights in adjacency order.
+        let receivers = Receivers::vertices(mesh);
+        let adjacency = Adjacency::build(&receivers, &self.layout.triangles);
+        let vertex_count = receivers.count();
         let mut masks = vec![0u32; vertex_count * words];
         let mut split = vec![0u32; vertex_count * words];
         let without: u64 = masks
@@ -398,7 +400,7 @@ impl<'a> SunPlan<'a> {
                         without += 1;
                         continue;
                     }
-                    let normal = mesh.normals[v];
+                    let normal = receivers.normal(v);
                     for (k, sun) in self.suns.iter().enumerate() {
                         let Some(s) = sun else { continue };
                         let facing = params.mode == Mode::Window || normal.dot(*s) > 0.0;
@@ -443,16 +445,15 @@ impl<'a> SunPlan<'a> {
     /// The weights are the transfer's (hat value times the area a sample
     /// stands for), so the vote estimates whether the sunlit part of the
     /// hat-weighted one-ring is a majority, whatever the sample counts.
-    fn vote(&self, v: usize, adjacency: &VertexAdjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
+    fn vote(&self, v: usize, adjacency: &Adjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
         lit_weight.fill(0.0);
         let mut total = 0.0f32;
-        let range = adjacency.offsets[v] as usize..adjacency.offsets[v + 1] as usize;
-        for &(item, corner) in &adjacency.entries[range] {
+        for &(item, corner) in adjacency.of(v) {
             let item = item as usize;
             let first = self.layout.first_sample[item] as usize;
             let (count, area) = (self.layout.counts[item], triangle_area(self.mesh, self.layout.triangles[item]));
             for s in 0..count {
-                let w = sample_weights(self.barycentrics(item, s), area, count)[corner as usize];
+                let w = point_weights(self.barycentrics(item, s), area, count)[corner as usize];
                 total += w;
                 let bits = &sample_bits[(first + s as usize) * self.words..][..self.words];
                 for (word_index, &word) in bits.iter().enumerate() {
@@ -474,38 +475,6 @@ impl<'a> SunPlan<'a> {
 fn sample_barycentrics(mesh: &Mesh, params: &SunParams, layout: &InteriorLayout, item: usize, s: u32) -> [f32; 3] {
     let t = layout.triangles[item];
     triangle_sample(DirectionPattern::Sobol, params.seed, t, mesh.triangle(t as usize), s)
-}
-
-/// For each vertex, the (layout item, corner) pairs of the sampled triangles around it, in item order.
-struct VertexAdjacency {
-    /// `entries[offsets[v]..offsets[v+1]]` belong to vertex v.
-    offsets: Vec<u32>,
-    /// `(item, corner)`.
-    entries: Vec<(u32, u8)>,
-}
-
-impl VertexAdjacency {
-    fn build(mesh: &Mesh, layout: &InteriorLayout) -> VertexAdjacency {
-        let mut offsets = vec![0u32; mesh.vertex_count() + 1];
-        for &t in &layout.triangles {
-            for v in mesh.triangle(t as usize) {
-                offsets[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..mesh.vertex_count() {
-            offsets[v + 1] += offsets[v];
-        }
-        let mut fill = offsets.clone();
-        let mut entries = vec![(0u32, 0u8); offsets[mesh.vertex_count()] as usize];
-        for (item, &t) in layout.triangles.iter().enumerate() {
-            for (corner, v) in mesh.triangle(t as usize).into_iter().enumerate() {
-                let slot = &mut fill[v as usize];
-                entries[*slot as usize] = (item as u32, corner as u8);
-                *slot += 1;
-            }
-        }
-        VertexAdjacency { offsets, entries }
-    }
 }
 
 /// Shared read-only state of the tracing pass.

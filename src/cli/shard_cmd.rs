@@ -133,23 +133,6 @@ pub fn print_plan(shards: u32, output: &Path, params: Option<&crate::bake::BakeP
     Ok(())
 }
 
-/// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
-/// metadata without its stats: what every shard of one sun bake must share.
-fn day_crc(steps: &[SunStep], meta_without_stats: &serde_json::Value) -> u32 {
-    let mut h = crc32fast::Hasher::new();
-    for s in steps {
-        h.update(&s.unix_time_utc.to_le_bytes());
-        let floats = s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).chain(s.sky_sh.iter().flatten());
-        for f in floats {
-            h.update(&f.to_le_bytes());
-        }
-        h.update(&[s.night as u8]);
-        h.update(&(s.sky_sh.len() as u64).to_le_bytes());
-    }
-    h.update(&serde_json::to_vec(meta_without_stats).unwrap_or_default());
-    h.finalize()
-}
-
 /// The stats a sun part's frame carries until the merge counts them: only the step count is known.
 fn placeholder_stats(steps: &[SunStep]) -> SunStats {
     SunStats { steps: steps.len() as u64, ..SunStats::default() }
@@ -168,12 +151,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
         if let Some(m) = meta.as_object_mut() {
             m.remove("stats");
         }
-        let key = SunKey {
-            params: config.params,
-            window_patterns: config.window_patterns.clone(),
-            steps: steps.len() as u32,
-            day_crc: day_crc(&steps, &meta),
-        };
+        let key = SunKey::of_day(config.params, config.window_patterns.clone(), &steps, &meta);
         let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &sky::day_directions(&steps), &key, config.params.quiet, shard)?;
         Ok((part, steps))
     })??;

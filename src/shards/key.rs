@@ -5,6 +5,7 @@
 use super::codec::Reader;
 use crate::bake::{BakeParams, Channels, DirectionPattern, Mode, Sampling, SunParams};
 use crate::bundle::Quantization;
+use crate::sky::SunStep;
 
 /// What a transfer bake's result and bundle depend on besides the mesh.
 #[derive(Clone, Debug, PartialEq)]
@@ -29,6 +30,23 @@ pub struct SunKey {
     /// CRC-32 of the day (every step's time, direction, sun colour and sky)
     /// and of the sun metadata (site, date, north, turbidity, …).
     pub day_crc: u32,
+}
+
+/// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
+/// metadata without its stats: what every shard of one sun bake must share.
+fn day_crc(steps: &[SunStep], meta_without_stats: &serde_json::Value) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    for s in steps {
+        h.update(&s.unix_time_utc.to_le_bytes());
+        let floats = s.direction.iter().chain([&s.elevation_deg, &s.azimuth_deg]).chain(&s.sun_rgb).chain(s.sky_sh.iter().flatten());
+        for f in floats {
+            h.update(&f.to_le_bytes());
+        }
+        h.update(&[s.night as u8]);
+        h.update(&(s.sky_sh.len() as u64).to_le_bytes());
+    }
+    h.update(&serde_json::to_vec(meta_without_stats).unwrap_or_default());
+    h.finalize()
 }
 
 fn mode_code(mode: Mode) -> u8 {
@@ -235,6 +253,12 @@ impl TransferKey {
 }
 
 impl SunKey {
+    /// The key of a sun bake of `steps` (the whole day, nights included)
+    /// whose bundle metadata without its stats is `meta_without_stats`.
+    pub fn of_day(params: SunParams, window_patterns: Vec<String>, steps: &[SunStep], meta_without_stats: &serde_json::Value) -> SunKey {
+        SunKey { params, window_patterns, steps: steps.len() as u32, day_crc: day_crc(steps, meta_without_stats) }
+    }
+
     /// The canonical block (docs/scale.md "Sun parameter block").
     pub fn encode(&self) -> Vec<u8> {
         let p = &self.params;

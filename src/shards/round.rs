@@ -159,7 +159,7 @@ pub fn bake_transfer_shard(
         Stage::Round(r) => format!("shard {shard}, round {r}/{}", params.bounces),
     };
     let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
-    let first_items = plan.items.first_items(&plan.mesh);
+    let first_items = plan.items.first_items(&plan.receivers());
     let sums = match (&base_items, round) {
         // Adaptive round 0: the base points again (the same bits as the
         // pilot's), then the extras, combined item by item as a whole bake does.
@@ -231,7 +231,7 @@ pub fn bake_transfer_shard(
         tracks_noise,
         pilot: stage == Stage::Pilot,
         late: VertexRows {
-            vertices: sums.late.vertices,
+            vertices: sums.late.receivers,
             rows: sums.late.rows,
             weights: sums.late.weights,
             moments: sums.late.moments.iter().map(|m| m.to_array()).collect(),

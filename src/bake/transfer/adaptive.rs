@@ -4,7 +4,7 @@
 //! noisiest vertices, and every later bounce runs over all the points.
 //!
 //! A vertex's value is a ratio Σ w·x / Σ w over its one-ring's points
-//! (`transfer::sample_weights`). Its noise is estimated from the points'
+//! (`receivers::point_weights`). Its noise is estimated from the points'
 //! DC by the delta method, `Var ≈ Σ w² (x − m)² / (Σ w)²`, whose per-point
 //! spread `σ² = Σ w² (x − m)² / Σ w²` does not depend on how many points
 //! there are. The squared error summed over vertices, which is what a

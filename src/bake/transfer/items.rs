@@ -1,6 +1,7 @@
 //! What a bake traces: its work items (triangles with their sample counts,
 //! or vertices), where sample points lie in a triangle and what each weighs.
 
+use crate::bake::receivers::Receivers;
 use crate::bake::surfaces::Surfaces;
 use crate::bake::twins::Twins;
 use crate::bake::{BakeError, BakeParams, Mode, Sampling};
@@ -123,20 +124,20 @@ impl Items {
             Items::Vertex { vertices } => vec![1; vertices.len()],
         }
     }
-    /// The vertices item `item`'s corners add to (a vertex item: itself, thrice).
-    pub(crate) fn corner_vertices(&self, mesh: &Mesh, item: usize) -> [u32; 3] {
+    /// The receivers item `item`'s corners add to (a vertex item: its vertex, thrice).
+    pub(crate) fn corner_receivers(&self, receivers: &Receivers, item: usize) -> [u32; 3] {
         match self {
-            Items::Interior { triangles, .. } => mesh.triangle(triangles[item] as usize),
+            Items::Interior { triangles, .. } => receivers.of_triangle(triangles[item]),
             Items::Vertex { vertices } => [vertices[item]; 3],
         }
     }
-    /// The first item that adds to each vertex (`u32::MAX`: none): a range
-    /// of items holds a vertex's first sums exactly when it holds this item.
-    pub(crate) fn first_items(&self, mesh: &Mesh) -> Vec<u32> {
-        let mut first = vec![u32::MAX; mesh.vertex_count()];
+    /// The first item that adds to each receiver (`u32::MAX`: none): a range
+    /// of items holds a receiver's first sums exactly when it holds this item.
+    pub(crate) fn first_items(&self, receivers: &Receivers) -> Vec<u32> {
+        let mut first = vec![u32::MAX; receivers.count()];
         for item in 0..self.len() {
-            for &v in &self.corner_vertices(mesh, item)[..self.corners()] {
-                let slot = &mut first[v as usize];
+            for &r in &self.corner_receivers(receivers, item)[..self.corners()] {
+                let slot = &mut first[r as usize];
                 *slot = (*slot).min(item as u32);
             }
         }
@@ -299,7 +300,7 @@ pub(crate) fn check_point_count(points: u64) -> Result<(), BakeError> {
 /// nearest multiple of three, at least three (one rotation triple, see
 /// [`triangle_sample`]) and at most `max` rounded down to a multiple of
 /// three (but three when `max` is smaller). The count sets only the noise:
-/// each sample is weighted by the area it stands for ([`sample_weights`]),
+/// each sample is weighted by the area it stands for ([`crate::bake::receivers::point_weights`]),
 /// and a whole triple gives each corner exactly a third of that area, so
 /// the normalising weights are exact at every density. (A lone uniform
 /// point would leave its weight to chance: a ratio estimator's bias and
@@ -340,18 +341,6 @@ pub(crate) fn triangle_sample(pattern: crate::sampling::DirectionPattern, seed: 
         out[corner] = sorted[rank];
     }
     out
-}
-
-/// What a sample at barycentrics `b`, one of `count` in a triangle of area
-/// `area`, adds to each corner's weight: its hat value there times the area
-/// it stands for. Over the samples, Σ w·t / Σ w estimates each vertex's
-/// hat-weighted mean of the transfer over its one-ring (docs/conventions.md,
-/// "Per-vertex transfer"), whatever the sample counts; the transfer and the
-/// sun vote share it.
-#[inline]
-pub(crate) fn sample_weights(b: [f32; 3], area: f32, count: u32) -> [f32; 3] {
-    let share = area / count as f32;
-    b.map(|x| x * share)
 }
 
 pub(crate) fn triangle_area(mesh: &Mesh, t: u32) -> f32 {

@@ -10,7 +10,7 @@
 //!
 //! Points: stratified samples inside each triangle (seed 000 §4.1.1) whose
 //! results go to the triangle's vertices by barycentric weight times the area
-//! each sample stands for ([`sample_weights`]): a vertex's value estimates the
+//! each sample stands for ([`crate::bake::receivers::point_weights`]): a vertex's value estimates the
 //! hat-weighted mean of the transfer over its one-ring (docs/conventions.md),
 //! whatever the sample density. Or the vertices
 //! themselves (`Sampling::Vertex`, kept for comparison: it leaks shadows where

@@ -7,6 +7,7 @@ use super::run::*;
 use crate::bake::gather::Gather;
 use crate::bake::noise::VertexDc;
 use crate::bake::progress::Progress;
+use crate::bake::receivers::Receivers;
 use crate::bake::surfaces::Surfaces;
 use crate::bake::twins::Twins;
 use crate::bake::window_light::WindowLights;
@@ -96,12 +97,13 @@ impl<'a> Plan<'a> {
         record_hits: bool,
     ) -> Pass<'p> {
         let gather = (bounce > 0).then(|| {
-            let corners = if source.corner_indices.is_empty() { &self.mesh.indices } else { &source.corner_indices };
+            let corners = if source.corner_indices.is_empty() { self.receivers().hit_table() } else { &source.corner_indices };
             Gather::new(corners, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels)
         });
         Pass {
             bounce,
             mesh: &self.mesh,
+            receivers: self.receivers(),
             scene: self.scene,
             surfaces: &self.surfaces,
             twins: &self.twins,
@@ -121,6 +123,11 @@ impl<'a> Plan<'a> {
 }
 
 impl Plan<'_> {
+    /// What the bake's points add to: the vertices of the plan's mesh.
+    pub(crate) fn receivers(&self) -> Receivers<'_> {
+        Receivers::vertices(&self.mesh)
+    }
+
     /// The extra points per base item that the pilot `pilot` (bounce 0's
     /// base points, every vertex) asks for: about `params.adaptive` × the
     /// base points, in whole rotation triples (`bake::adaptive`).

@@ -11,6 +11,7 @@ use crate::bake::enclosure::Sides;
 use crate::bake::gather::{decode_hit, encode_hit, Gather, NO_HIT};
 use crate::bake::noise::Moments;
 use crate::bake::progress::Progress;
+use crate::bake::receivers::{point_weights, Receivers};
 use crate::bake::surfaces::Surfaces;
 use crate::bake::twins::{Twins, NO_TWIN};
 use crate::bake::window_light::WindowLights;
@@ -63,6 +64,8 @@ pub(crate) struct Pass<'a> {
     pub(crate) bounce: u32,
     /// The plan's mesh (twins included); rays are traced in `scene`, built on the mesh's own triangles.
     pub(crate) mesh: &'a Mesh,
+    /// What the points add to.
+    pub(crate) receivers: Receivers<'a>,
     pub(crate) scene: &'a Scene,
     pub(crate) surfaces: &'a Surfaces,
     pub(crate) twins: &'a Twins,
@@ -112,13 +115,13 @@ pub(crate) struct HitRecords<'a> {
     pub(crate) first_point: u64,
 }
 
-/// Contributions of a range of items to vertices whose first item lies
+/// Contributions of a range of items to receivers whose first item lies
 /// before the range, in item and corner order: added after the earlier
-/// ranges' sums, they keep each vertex's sum order that of a whole bake.
+/// ranges' sums, they keep each receiver's sum order that of a whole bake.
 #[derive(Default)]
 pub(crate) struct LateSums {
-    pub(crate) vertices: Vec<u32>,
-    /// One row per entry of `vertices`.
+    pub(crate) receivers: Vec<u32>,
+    /// One row per entry of `receivers`.
     pub(crate) rows: Vec<f32>,
     /// One weight per entry (bounce 0), else empty.
     pub(crate) weights: Vec<f32>,
@@ -128,12 +131,12 @@ pub(crate) struct LateSums {
 
 /// One bounce's sums over a range of items (a whole bake is one range).
 pub(crate) struct RangeSums {
-    /// `[vertex][channel][coeff]` for every vertex; filled for the vertices
-    /// whose first item is in the range (all of them in a whole bake).
+    /// `[receiver][channel][coeff]` for every receiver; filled for the
+    /// receivers whose first item is in the range (all of them in a whole bake).
     pub(crate) sums: Vec<f32>,
-    /// Bounce 0: each vertex's summed sample weight ([`sample_weights`]), as `sums`.
+    /// Bounce 0: each receiver's summed sample weight ([`point_weights`]), as `sums`.
     pub(crate) weights: Vec<f32>,
-    /// Bounce 0 (interior sampling): each vertex's [`Moments`] of its
+    /// Bounce 0 (interior sampling): each receiver's [`Moments`] of its
     /// points' DC, as `weights` but for the vertices `late` holds.
     pub(crate) moments: Vec<Moments>,
     pub(crate) late: LateSums,
@@ -149,9 +152,9 @@ pub(crate) struct RangeSums {
 
 /// (a) and (b): evaluates every point of the items in `range` for `pass`'s
 /// bounce, in tasks of [`ITEMS_PER_TASK`] items, and adds each item's corner
-/// sums to its vertices in item order. `first_items` (see
+/// sums to its receivers in item order. `first_items` (see
 /// [`Items::first_items`]) is given for a range that is not the whole bake:
-/// contributions to vertices first touched before it go to
+/// contributions to receivers first touched before it go to
 /// [`RangeSums::late`] instead.
 pub(crate) fn run_range(pass: &Pass, range: std::ops::Range<usize>, first_items: Option<&[u32]>, progress: &Progress) -> RangeSums {
     let mut out = RangeSums::empty(pass);
@@ -222,11 +225,11 @@ pub(crate) fn trace_tasks(
 
 impl RangeSums {
     pub(crate) fn empty(pass: &Pass) -> RangeSums {
-        let vertex_count = pass.mesh.vertex_count();
+        let count = pass.receivers.count();
         RangeSums {
-            sums: vec![0.0; vertex_count * pass.channels * pass.coeffs],
-            weights: vec![0.0; vertex_count],
-            moments: if pass.track_noise { vec![Moments::default(); vertex_count] } else { Vec::new() },
+            sums: vec![0.0; count * pass.channels * pass.coeffs],
+            weights: vec![0.0; count],
+            moments: if pass.track_noise { vec![Moments::default(); count] } else { Vec::new() },
             late: LateSums::default(),
             rejected: Vec::new(),
             rays: 0,
@@ -240,7 +243,7 @@ impl RangeSums {
     }
 
     /// Adds one task's item sums, in item and corner order. `late_before`:
-    /// vertices whose first item is before this item index go to `late`.
+    /// receivers whose first item is before this item index go to `late`.
     pub(crate) fn add_task(&mut self, pass: &Pass, task_start: usize, task: &TaskOutput, late_before: Option<(&[u32], usize)>) {
         self.rays += task.rays;
         self.traced += task.traced;
@@ -252,12 +255,12 @@ impl RangeSums {
             if !self.item_sums.is_empty() {
                 self.item_sums[(task_start + local) * corners * stride..][..corners * stride].copy_from_slice(corner_sums);
             }
-            let vertices = pass.items.corner_vertices(pass.mesh, task_start + local);
+            let receivers = pass.items.corner_receivers(&pass.receivers, task_start + local);
             for (corner, sums) in corner_sums.chunks_exact(stride).enumerate() {
-                let v = vertices[corner] as usize;
+                let v = receivers[corner] as usize;
                 let weight = task.weights[local * corners + corner];
                 if late_before.is_some_and(|(first, start)| (first[v] as usize) < start) {
-                    self.late.vertices.push(v as u32);
+                    self.late.receivers.push(v as u32);
                     self.late.rows.extend_from_slice(sums);
                     if with_weights {
                         self.late.weights.push(weight);
@@ -410,7 +413,7 @@ impl Pass<'_> {
                             continue;
                         }
                         let dc = point_result[0];
-                        for (corner, w) in sample_weights(b, area, weight_count).into_iter().enumerate() {
+                        for (corner, w) in point_weights(b, area, weight_count).into_iter().enumerate() {
                             out.weights[local * 3 + corner] += w;
                             if let Some(moments) = out.moments.get_mut(local * 3 + corner) {
                                 moments.add(w, dc);
