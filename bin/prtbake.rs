@@ -118,6 +118,11 @@ struct BakeArgs {
     /// more noise per hit (docs/speed-accuracy.md). Not with --shard or --refine.
     #[arg(long)]
     gather_fit: bool,
+    /// Filter the baked vertices, guided by the bake's own noise estimate: neighbours whose
+    /// difference the noise explains are averaged, edges several standard errors high stay
+    /// (K: strength in standard errors; 0 = off). Not with --shard or --refine.
+    #[arg(long, value_name = "K", default_value_t = 0.0)]
+    denoise: f32,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -727,6 +732,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
         keep_outside_sides: a.keep_outside_sides,
         hit_cache_bytes: hit_cache_bytes(a.hit_cache_mib),
         gather_fit: a.gather_fit,
+        denoise: a.denoise,
         ..BakeParams::default()
     };
     params.check()?;
@@ -735,6 +741,16 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     }
     if a.gather_fit && (a.refine.refine.is_some() || a.refine.max_vertices.is_some()) {
         anyhow::bail!("--gather-fit with --refine: refinement's partial re-bakes gather from vertex rows (bake the refined mesh again with --gather-fit)");
+    }
+    if a.denoise > 0.0 && a.shard.is_some() {
+        anyhow::bail!(
+            "--denoise with --shard: the filter needs the whole mesh's vertices (denoise is not yet run by merge; bake in one process)"
+        );
+    }
+    if a.denoise > 0.0 && (a.refine.refine.is_some() || a.refine.max_vertices.is_some()) {
+        anyhow::bail!(
+            "--denoise with --refine: refinement's partial re-bakes keep vertices as baked (bake the refined mesh again with --denoise)"
+        );
     }
     if let Some(e) = a.max_error {
         if !(e.is_finite() && e >= 0.0) {

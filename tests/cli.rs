@@ -652,3 +652,52 @@ fn gather_fit_is_deterministic_recorded_and_refused_where_it_cannot_apply() {
         assert!(!out.exists());
     }
 }
+
+/// `bake --denoise K`: the same bytes at any thread count, the strength
+/// recorded in META (absent from a bake without it), the filtered values
+/// neither above the largest nor below the smallest of the unfiltered ones
+/// (a weighted mean of neighbours), and refused with `--shard`, `--refine`
+/// or `--sampling vertex` (exit 2, nothing written).
+#[test]
+fn denoise_is_deterministic_recorded_bounded_and_refused_where_it_cannot_apply() {
+    let dir = Scratch::new("denoise");
+    let obj = dir.path("scene.obj");
+    write_scene_obj(&obj);
+    let bake = |out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "16", "--bounces", "1", "--quiet"];
+        args.extend_from_slice(extra);
+        (prtbake(&args), out)
+    };
+    let (o1, one) = bake("one.prtb", &["--denoise", "2", "--threads", "1", "--quantize", "f32"]);
+    assert!(o1.status.success(), "{}", String::from_utf8_lossy(&o1.stderr));
+    let (o2, two) = bake("two.prtb", &["--denoise", "2", "--threads", "2", "--quantize", "f32"]);
+    assert!(o2.status.success());
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "--denoise differs between 1 and 2 threads");
+    let (o3, plain) = bake("plain.prtb", &["--quantize", "f32"]);
+    assert!(o3.status.success());
+    let read = |p: &std::path::Path| prtbake::bundle::read_bundle(p).unwrap();
+    let (filtered, raw) = (read(&one), read(&plain));
+    assert_eq!(filtered.meta["params"]["denoise"], 2.0);
+    assert!(raw.meta["params"].get("denoise").is_none(), "a bake without it records nothing");
+    let dc = |b: &prtbake::bundle::Bundle| {
+        let t = b.transfer.as_ref().unwrap();
+        let layer = t.layers.iter().find(|l| l.kind == prtbake::bundle::LayerKind::Total).unwrap();
+        let stride = t.channels as usize * (t.order * t.order) as usize;
+        layer.data.chunks_exact(stride).map(|row| row[0]).collect::<Vec<f32>>()
+    };
+    let (f, r) = (dc(&filtered), dc(&raw));
+    assert_ne!(f, r, "the filter moved nothing");
+    let (lo, hi) = r.iter().fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+    assert!(f.iter().all(|&x| x >= lo - 1e-6 && x <= hi + 1e-6), "a weighted mean left the range {lo}..{hi}");
+    for extra in [
+        &["--denoise", "2", "--shard", "0/2"][..],
+        &["--denoise", "2", "--refine", "0.1"],
+        &["--denoise", "2", "--sampling", "vertex", "--adaptive", "0"],
+    ] {
+        let (o, out) = bake("refused.prtb", extra);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("denoise"), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(!out.exists());
+    }
+}

@@ -3,6 +3,7 @@
 //! arrays and statistics.
 
 pub mod cull;
+pub mod denoise;
 pub(crate) mod enclosure;
 pub(crate) mod gather;
 pub(crate) mod noise;
@@ -121,6 +122,11 @@ pub struct BakeParams {
     /// vertices' one-ring means; off by default (`--gather-fit`).
     #[serde(default, skip_serializing_if = "is_false")]
     pub gather_fit: bool,
+    /// Strength of the noise-guided filter run over the baked vertices
+    /// (`bake::denoise`; a neighbour differing by k standard errors keeps
+    /// e^(−1/2) of its weight); 0 = off.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub denoise: f32,
     /// No progress line on stderr (not part of the bake: never stored).
     #[serde(skip, default = "quiet_by_default")]
     pub quiet: bool,
@@ -160,6 +166,7 @@ impl Default for BakeParams {
             inside_distance: 0.05,
             two_sided: true,
             gather_fit: false,
+            denoise: 0.0,
             quiet: true,
             hit_cache_bytes: transfer::HIT_CACHE_BUDGET_BYTES,
         }
@@ -187,6 +194,12 @@ impl BakeParams {
         }
         if self.gather_fit && self.sampling == Sampling::Vertex {
             return Err(BakeError::Params("--gather-fit fits the points inside each triangle: it needs --sampling interior".into()));
+        }
+        if !(0.0..=16.0).contains(&self.denoise) {
+            return Err(BakeError::Params(format!("denoise strength {} is outside 0..=16 (0 = off)", self.denoise)));
+        }
+        if self.denoise > 0.0 && self.sampling == Sampling::Vertex {
+            return Err(BakeError::Params("--denoise is guided by the noise interior points measure: it needs --sampling interior".into()));
         }
         if self.bounces > 16 {
             return Err(BakeError::Params(format!("{} bounces is more than 16", self.bounces)));

@@ -153,6 +153,9 @@ pub(crate) fn bake_layers(
         }
     }
     noise.truncate(vertex_count);
+    if params.denoise > 0.0 && kept.is_none() {
+        crate::bake::denoise::denoise(mesh, &mut total, &mut layers, &mut noise, stride, params.denoise);
+    }
 
     stats.points_rejected = rejected.iter().filter(|&&r| r).count() as u64;
     let re_baked = |v: usize| kept.is_none_or(|k| !k.vertices[v]);
