@@ -38,19 +38,9 @@ def load(path):
         import trimesh
         scene = trimesh.load(path, force="mesh", process=False)
         return np.asarray(scene.vertices, dtype=np.float32), np.asarray(scene.faces, dtype=np.uint32)
-    positions, tris = [], []
-    with open(path) as f:
-        for line in f:
-            parts = line.split()
-            if not parts:
-                continue
-            if parts[0] == "v":
-                positions.append([float(x) for x in parts[1:4]])
-            elif parts[0] == "f":
-                ids = [int(p.split("/")[0]) for p in parts[1:]]
-                ids = [i - 1 if i > 0 else len(positions) + i for i in ids]
-                tris.extend([ids[0], ids[k], ids[k + 1]] for k in range(1, len(ids) - 1))
-    return np.array(positions, dtype=np.float32), np.array(tris, dtype=np.uint32)
+    from pathtracer_compare import load_obj_rgb  # the OBJ read as the pixel comparison reads it
+    positions, tris, _, _ = load_obj_rgb(path)
+    return positions, tris
 
 
 def surface_area(positions, tris):

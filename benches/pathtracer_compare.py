@@ -295,7 +295,7 @@ def main():
         a, b = tonemap(ref, key), tonemap(ours, key)
         a[~mask] = 0
         b[~mask] = 0
-        error_map, mean_flip, _ = flip.evaluate(a, b, "LDR")
+        error_map, _, _ = flip.evaluate(a, b, "LDR")
         save_png(mi, np.asarray(error_map, dtype=np.float32), os.path.join(args.out, f"flip_{name}.png"))
         flip_plain, _, _ = flip.evaluate(a, b, "LDR", applyMagma=False)
         mean_flip = float(np.asarray(flip_plain)[mask].mean())

@@ -119,12 +119,13 @@ pub fn denoise(mesh: &Mesh, total: &mut [f32], layers: &mut [Vec<f32>], noise: &
                 out
             })
             .collect();
+        let sums: Vec<f32> = weights.iter().map(|w| w.iter().map(|&(_, w)| w).sum()).collect();
         let filter = |values: &[f32]| -> Vec<f32> {
             let mut out = vec![0.0f32; values.len()];
             out.par_chunks_mut(stride * PER_TASK).enumerate().for_each(|(chunk, rows)| {
                 for (local, row) in rows.chunks_exact_mut(stride).enumerate() {
                     let v = chunk * PER_TASK + local;
-                    let sum: f32 = weights[v].iter().map(|&(_, w)| w).sum();
+                    let sum = sums[v];
                     if sum <= 0.0 {
                         row.copy_from_slice(&values[v * stride..][..stride]);
                         continue;
@@ -147,7 +148,7 @@ pub fn denoise(mesh: &Mesh, total: &mut [f32], layers: &mut [Vec<f32>], noise: &
             .into_par_iter()
             .with_min_len(PER_TASK)
             .map(|v| {
-                let sum: f32 = weights[v].iter().map(|&(_, w)| w).sum();
+                let sum = sums[v];
                 if sum <= 0.0 {
                     return noise[v];
                 }
