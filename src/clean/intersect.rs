@@ -54,6 +54,11 @@
 //!    Delaunay refinement, points added inside the plane and on the pieces,
 //!    never moving either). New vertices interpolate the attributes of the
 //!    original triangle they lie in.
+//! 7. *No shared edge, again*: two regions that both hold the ends of a short
+//!    piece (or two points merged within the tolerance) may each join them by
+//!    an unconstrained Delaunay edge; every surface but the first takes a
+//!    point on such an edge, and one too short for a point the weld would
+//!    keep is collapsed (the dining room's cut left 430 such edges; none now).
 //!
 //! Limits: a segment is straight in each triangle, so curved intersections
 //! are cut as polylines at the tessellation's resolution. A region's outline,
@@ -92,6 +97,8 @@ pub(crate) struct CutOutcome {
     pub lines_separated: usize,
     /// Pieces still shared (too short to take a point): non-manifold edges left.
     pub shared_left: usize,
+    /// Triangles removed by collapsing an edge of two surfaces too short to split.
+    pub edges_collapsed: usize,
     /// Smallest angle (radians) of the triangles made, and of those they replaced.
     pub min_angle: f64,
     pub replaced_min_angle: f64,
@@ -122,6 +129,10 @@ pub(crate) const MIN_CUT_SINE: f64 = 0.05;
 /// the middle half (no short piece) and not at a dyadic fraction, where
 /// refinement splits pieces (midpoints).
 const SEPARATION_OFFSET: f64 = 0.618_034;
+
+/// Passes of [`unshare_made_edges`]; each separates every shared edge whose
+/// triangles no other edge of the pass changed.
+const MAX_UNSHARE_PASSES: usize = 8;
 
 /// Faces whose shortest side is under this many plane tolerances are not
 /// refined: near a point where many lines meet (thin triangles crossing at
@@ -318,9 +329,13 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
     separate_shared_pieces(work, &mut plans, &edge_users, &mut out, tol.contact);
 
     // 6. Triangulate.
+    let first_new = work.tris.len();
     for plan in &plans {
         triangulate_region(work, &corners, plan, tol, &mut out);
     }
+    // 7. No edge of two surfaces made by the triangulations themselves.
+    let made = |t: u32| t as usize >= first_new || plans.iter().any(|p| p.region.tris.binary_search(&t).is_ok());
+    unshare_made_edges(work, made, &mut out, tol.contact);
     out.seams.extend(seams);
     out.seams.sort_unstable();
     out.seams.dedup();
@@ -759,6 +774,111 @@ fn separate_shared_pieces(work: &mut Work, plans: &mut [Plan], edge_users: &Edge
     }
 }
 
+/// Separates, in every surface but one, each point edge that the
+/// triangulations gave to two surfaces (the users of an edge made by the cut,
+/// `made`, paired by facing: opposite directions and the nearest normals).
+/// Step 5 separates the pieces two regions both insert; this catches the
+/// rest: two points that both regions hold (the ends of a short piece of a
+/// line crossing both, points merged within the contact tolerance) joined by
+/// an unconstrained Delaunay edge in each. A point goes on the edge, off the
+/// midpoint, in the two triangles of each later surface, which then meets the
+/// first along the line without sharing an edge there. An edge too short for
+/// a point farther than `2 tol` from both ends (the weld would merge it back)
+/// is collapsed instead: it lies on both planes, so its ends are one point of
+/// the line, and the triangles on it vanish.
+fn unshare_made_edges(work: &mut Work, made: impl Fn(u32) -> bool, out: &mut CutOutcome, tol: f64) {
+    let unit_normal = |work: &Work, t: u32| work.tri_cross(t as usize).normalize_or_zero();
+    // A triangle split once is not split again in the same pass (its uses are stale).
+    for _ in 0..MAX_UNSHARE_PASSES {
+        let edges = sorted_edges(work);
+        let shared: Vec<Vec<EdgeUse>> = super::work::edge_runs(&edges)
+            .filter(|run| run.len() > 2 && run.iter().any(|e| made(e.tri)))
+            .map(<[EdgeUse]>::to_vec)
+            .collect();
+        if shared.is_empty() {
+            return;
+        }
+        let mut changed: HashSet<u32> = HashSet::new();
+        let mut collapse: Vec<(u32, u32)> = Vec::new();
+        for run in shared {
+            if run.iter().any(|e| changed.contains(&e.tri)) {
+                continue;
+            }
+            changed.extend(run.iter().map(|e| e.tri));
+            let mut groups: Vec<Vec<EdgeUse>> = Vec::new();
+            let mut left: Vec<EdgeUse> = run;
+            while !left.is_empty() {
+                let e = left.remove(0);
+                let n = unit_normal(work, e.tri);
+                let partner = (0..left.len())
+                    .filter(|&i| left[i].forward != e.forward)
+                    .max_by(|&i, &j| n.dot(unit_normal(work, left[i].tri)).total_cmp(&n.dot(unit_normal(work, left[j].tri))));
+                match partner {
+                    Some(i) => groups.push(vec![e, left.remove(i)]),
+                    None => groups.push(vec![e]),
+                }
+            }
+            let (lo, hi) = (groups[0][0].lo, groups[0][0].hi);
+            let (a, b) = (work.points[lo as usize].as_dvec3(), work.points[hi as usize].as_dvec3());
+            let later = (groups.len() - 1) as f64;
+            if a.distance(b) * 0.5 * SEPARATION_OFFSET.min(1.0 - SEPARATION_OFFSET) / later <= 2.0 * tol {
+                collapse.push((lo, hi));
+                continue;
+            }
+            let is_seam = out.seams.contains(&(lo, hi));
+            for (k, group) in groups.into_iter().enumerate().skip(1) {
+                let s = 0.25 + 0.5 * (k as f64 - 1.0 + SEPARATION_OFFSET) / later;
+                let m = work.push_point(a.lerp(b, s).as_vec3());
+                let mut mid_vertex: HashMap<(u32, u32), u32> = HashMap::new();
+                for e in group {
+                    let t = e.tri as usize;
+                    let c = e.corner as usize;
+                    let v = work.tris[t];
+                    let (va, vb, vo) = (v[c], v[(c + 1) % 3], v[(c + 2) % 3]);
+                    let (v_lo, v_hi) = if e.forward { (va, vb) } else { (vb, va) };
+                    let mid = *mid_vertex.entry((v_lo, v_hi)).or_insert_with(|| work.push_vertex_lerp(v_lo, v_hi, s as f32, m));
+                    work.tris[t] = [va, mid, vo];
+                    work.push_tri_like([mid, vb, vo], t);
+                    for tri in [[va, mid, vo], [mid, vb, vo]] {
+                        let p = tri.map(|x| work.points[work.vertex_point[x as usize] as usize].as_dvec3());
+                        out.min_angle = out.min_angle.min(super::work::min_angle(p));
+                    }
+                }
+                out.lines_separated += 1;
+                if is_seam {
+                    out.seams.extend([edge_key(lo, m), edge_key(m, hi)]);
+                }
+            }
+        }
+        if !collapse.is_empty() {
+            let mut remap: Vec<u32> = (0..work.points.len() as u32).collect();
+            let root = |remap: &Vec<u32>, mut p: u32| {
+                while remap[p as usize] != p {
+                    p = remap[p as usize];
+                }
+                p
+            };
+            for (lo, hi) in collapse {
+                let (r_lo, r_hi) = (root(&remap, lo), root(&remap, hi));
+                remap[r_lo.max(r_hi) as usize] = r_lo.min(r_hi);
+            }
+            let remap: Vec<u32> = (0..remap.len() as u32).map(|p| root(&remap, p)).collect();
+            work.remap_points(&remap);
+            for t in 0..work.tris.len() {
+                let [p, q, r] = work.tri_points(t);
+                if work.tri_alive[t] && (p == q || q == r || r == p) {
+                    work.tri_alive[t] = false;
+                    out.edges_collapsed += 1;
+                }
+            }
+            for seam in &mut out.seams {
+                *seam = edge_key(remap[seam.0 as usize], remap[seam.1 as usize]);
+            }
+            out.seams.retain(|s| s.0 != s.1);
+        }
+    }
+}
+
 /// Re-triangulates one region ([`super::planar`]) and writes its triangles
 /// over the region's (new vertices interpolate the original triangle they lie in).
 fn triangulate_region(work: &mut Work, corners: &[[DVec3; 3]], plan: &Plan, tol: &CutTolerances, out: &mut CutOutcome) {
@@ -1078,6 +1198,51 @@ mod tests {
         let (lo, hi) = if p.z < q.z { (p, q) } else { (q, p) };
         assert!(lo.distance(DVec3::new(0.3, 0.0, 0.2)) < 1e-12, "{lo}");
         assert!(hi.distance(DVec3::new(0.3, 0.0, 0.5)) < 1e-12, "{hi}");
+    }
+
+    /// Two surfaces whose triangulations both hold the edge from (0,0,0) to
+    /// (len,0,0): A in z = 0, B in y = 0, two triangles each on the edge.
+    fn two_surfaces_on_one_edge(len: f32) -> Work {
+        let p = [[0.0, 0.0, 0.0], [len, 0.0, 0.0], [0.5, 1.0, 0.0], [0.5, -1.0, 0.0], [0.5, 0.0, 1.0], [0.5, 0.0, -1.0]];
+        let mesh = crate::mesh::Mesh {
+            positions: p.iter().map(|&q| glam::Vec3::from(q)).collect(),
+            normals: vec![glam::Vec3::Z; 6],
+            indices: vec![0, 1, 2, 1, 0, 3, 0, 1, 4, 1, 0, 5],
+            tri_material: vec![0; 4],
+            tri_group: vec![0; 4],
+            ..crate::mesh::Mesh::default()
+        };
+        super::super::weld::weld_points(&mesh, 0.0)
+    }
+
+    #[test]
+    fn an_edge_of_two_surfaces_is_split_in_the_second_only() {
+        let mut work = two_surfaces_on_one_edge(1.0);
+        let area = work.total_area();
+        let mut out = CutOutcome { min_angle: f64::INFINITY, ..CutOutcome::default() };
+        unshare_made_edges(&mut work, |_| true, &mut out, 1e-6);
+        assert_eq!(super::super::work::count_boundary_and_non_manifold(&work).1, 0);
+        assert_eq!((work.tris.len(), out.lines_separated, out.edges_collapsed), (6, 1, 0));
+        assert!((work.total_area() - area).abs() < 1e-12 * area, "area {} against {area}", work.total_area());
+        // The first surface (z = 0) keeps its edge; the second (y = 0) holds the new point on it.
+        let on_plane = |axis: usize| (0..work.tris.len()).filter(|&t| work.tri_positions(t).iter().all(|q| q[axis] == 0.0)).count();
+        assert_eq!((on_plane(2), on_plane(1)), (2, 4));
+        let m = work.points[6];
+        assert!(m.y == 0.0 && m.z == 0.0 && m.x > 0.25 && m.x < 0.75, "{m}");
+    }
+
+    #[test]
+    fn an_edge_of_two_surfaces_too_short_to_split_is_collapsed() {
+        // 3 µm against a 1 µm tolerance: no point on it is 2 µm from both ends.
+        let mut work = two_surfaces_on_one_edge(3e-6);
+        let mut out = CutOutcome { min_angle: f64::INFINITY, ..CutOutcome::default() };
+        unshare_made_edges(&mut work, |_| true, &mut out, 1e-6);
+        assert_eq!((out.lines_separated, out.edges_collapsed), (0, 4));
+        assert_eq!((0..4).filter(|&t| work.tri_alive[t]).count(), 0);
+        // Made edges only: untouched triangles' shared edges are left alone.
+        let mut work = two_surfaces_on_one_edge(1.0);
+        unshare_made_edges(&mut work, |_| false, &mut out, 1e-6);
+        assert_eq!(super::super::work::count_boundary_and_non_manifold(&work).1, 1);
     }
 
     #[test]

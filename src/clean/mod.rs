@@ -416,6 +416,7 @@ fn clean_once(
         r.cut_points_added = c.refinement_points;
         r.cut_lines_separated = c.lines_separated;
         r.cut_shared_edges_left = c.shared_left;
+        r.cut_edges_collapsed = c.edges_collapsed;
         if c.triangles_cut > 0 {
             r.cut_min_angle_deg = Some(c.min_angle.to_degrees() as f32);
             r.cut_replaced_min_angle_deg = Some(c.replaced_min_angle.to_degrees() as f32);

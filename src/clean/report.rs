@@ -108,6 +108,9 @@ pub struct CleanReport {
     pub cut_lines_separated: usize,
     /// Pieces too short for that: shared edges the cut left (normally 0).
     pub cut_shared_edges_left: usize,
+    /// Triangles removed with an edge two surfaces shared that was too short
+    /// to take a point (its two ends became one point of the line).
+    pub cut_edges_collapsed: usize,
     /// Smallest angle (degrees) of the triangles the cut made, and of the
     /// triangles they replaced, over all rounds (`None` when nothing was cut).
     pub cut_min_angle_deg: Option<f32>,
@@ -207,6 +210,7 @@ impl CleanReport {
         self.cut_points_added += later.cut_points_added;
         self.cut_lines_separated += later.cut_lines_separated;
         self.cut_shared_edges_left += later.cut_shared_edges_left;
+        self.cut_edges_collapsed += later.cut_edges_collapsed;
         let least = |a: Option<f32>, b: Option<f32>| match (a, b) {
             (Some(x), Some(y)) => Some(x.min(y)),
             (x, y) => x.or(y),
@@ -298,8 +302,8 @@ impl CleanReport {
         if let (Some(made), Some(replaced)) = (self.cut_min_angle_deg, self.cut_replaced_min_angle_deg) {
             let _ = writeln!(
                 s,
-                "cut quality            {} points added, {} lines separated ({} shared edges left); smallest angle {made:.3}° (replaced triangles: {replaced:.3}°)",
-                self.cut_points_added, self.cut_lines_separated, self.cut_shared_edges_left
+                "cut quality            {} points added, {} lines separated ({} shared edges left, {} triangles collapsed with a too short one); smallest angle {made:.3}° (replaced triangles: {replaced:.3}°)",
+                self.cut_points_added, self.cut_lines_separated, self.cut_shared_edges_left, self.cut_edges_collapsed
             );
         }
         let _ = writeln!(s, "edges split            {}", self.edges_split);
