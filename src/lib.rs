@@ -5,6 +5,7 @@
 //! bakes against closed forms; [`cli`] is the command-line glue. See
 //! ARCHITECTURE.md.
 
+pub mod atlas;
 pub mod bake;
 pub mod brdf;
 pub mod bundle;

@@ -1,0 +1,184 @@
+//! Lightmap atlas: each triangle's place in a texture whose texels hold light
+//! where vertices cannot (a 3 cm slat shadow on a 4 m wall, a big CAD
+//! triangle's contact shadow).
+//!
+//! Why xatlas: measured against the pure-Rust `uvunwrap` on the room, the
+//! dining room and the Ferrari (benches/atlas_compare.py,
+//! docs/image-accuracy.md), `uvunwrap` cut shorter seams on the two rooms
+//! at the same texel use, but had not unwrapped the Ferrari after 12 min
+//! where xatlas took 4 s. It is the unwrapper Godot ships. It is
+//! vendored (vendor/xatlas, built by build.rs, single-threaded so an atlas
+//! is the same on every machine) because the crates.io binding does not
+//! link on Linux.
+//!
+//! The atlas is in texel units: texel `(x, y)` is the square
+//! `[x, x+1) × [y, y+1)`, `texel_size` world units on a side. Charts are
+//! packed [`PADDING`] texels apart with room for bilinear reads, so a texel
+//! is touched by one chart only ([`coverage`]).
+
+pub mod coverage;
+mod xatlas_ffi;
+
+use crate::mesh::Mesh;
+use glam::Vec2;
+
+/// Empty texels between charts: a chart's bilinear reads and its dilation
+/// ring stay its own.
+pub const PADDING: u32 = 2;
+/// Most texels an atlas may have (a 16k × 16k texture); more is refused
+/// before unwrapping, with the texel size that would fit.
+pub const MAX_TEXELS: f64 = (1u64 << 28) as f64;
+
+/// Why an atlas could not be made.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum AtlasError {
+    #[error("texel size {0} is not a positive finite length")]
+    BadTexelSize(f32),
+    #[error("texel size {asked} would need about {texels:.3e} texels, more than {MAX_TEXELS:.3e}: choose {fits:.4} or more")]
+    TooManyTexels { asked: f32, texels: f64, fits: f32 },
+    #[error("the mesh has no triangle to unwrap")]
+    Empty,
+    #[error("xatlas refused the mesh: {0}")]
+    Refused(String),
+    #[error("xatlas returned {got} triangles for {expected}")]
+    Incomplete { got: usize, expected: usize },
+}
+
+/// A mesh's lightmap atlas (struct of arrays, `u32` indices).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Atlas {
+    /// Size in texels.
+    pub width: u32,
+    pub height: u32,
+    /// World units per texel side.
+    pub texel_size: f32,
+    /// Atlas vertices: position in texels, and the mesh vertex each copies
+    /// (a mesh vertex on a chart seam has one atlas vertex per chart).
+    pub uv: Vec<Vec2>,
+    pub source_vertex: Vec<u32>,
+    /// Three atlas vertices per mesh triangle, in the mesh's order.
+    pub indices: Vec<u32>,
+    /// The chart each triangle lies in; [`NO_CHART`] for a triangle xatlas
+    /// left out (zero area), which has no texel.
+    pub triangle_chart: Vec<u32>,
+    pub chart_count: u32,
+}
+
+/// [`Atlas::triangle_chart`] of a triangle in no chart.
+pub const NO_CHART: u32 = u32::MAX;
+
+impl Atlas {
+    /// Unwraps `mesh` with xatlas at `texel_size` world units per texel.
+    pub fn unwrap(mesh: &Mesh, texel_size: f32) -> Result<Atlas, AtlasError> {
+        if !(texel_size.is_finite() && texel_size > 0.0) {
+            return Err(AtlasError::BadTexelSize(texel_size));
+        }
+        if mesh.triangle_count() == 0 {
+            return Err(AtlasError::Empty);
+        }
+        // The charts' own area in texels: a lower bound that refuses a texel
+        // size a thousand times too small before any work.
+        let area: f64 = (0..mesh.triangle_count())
+            .map(|t| {
+                let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum();
+        let texels = area / (texel_size as f64).powi(2);
+        if texels > MAX_TEXELS {
+            let fits = (area / MAX_TEXELS).sqrt() as f32;
+            return Err(AtlasError::TooManyTexels { asked: texel_size, texels, fits });
+        }
+        let has_normals = mesh.normals.len() == mesh.positions.len();
+        // SAFETY: the declaration points into `mesh`, which outlives the
+        // calls (xatlas copies it in AddMesh); the atlas is read before it is
+        // destroyed, and every array is read within the counts xatlas gives.
+        unsafe {
+            use xatlas_ffi as x;
+            let mut decl = std::mem::MaybeUninit::<x::MeshDecl>::uninit();
+            x::xatlasMeshDeclInit(decl.as_mut_ptr());
+            let mut decl = decl.assume_init();
+            decl.vertexPositionData = mesh.positions.as_ptr().cast();
+            decl.vertexPositionStride = 12;
+            decl.vertexCount = mesh.vertex_count() as u32;
+            if has_normals {
+                decl.vertexNormalData = mesh.normals.as_ptr().cast();
+                decl.vertexNormalStride = 12;
+            }
+            decl.indexData = mesh.indices.as_ptr().cast();
+            decl.indexCount = mesh.indices.len() as u32;
+            decl.indexFormat = x::INDEX_FORMAT_UINT32;
+            let handle = x::xatlasCreate();
+            let error = x::xatlasAddMesh(handle, &decl, 1);
+            if error != x::ADD_MESH_SUCCESS {
+                let text = std::ffi::CStr::from_ptr(x::xatlasAddMeshErrorString(error)).to_string_lossy().into_owned();
+                x::xatlasDestroy(handle);
+                return Err(AtlasError::Refused(text));
+            }
+            let mut charts = std::mem::MaybeUninit::<x::ChartOptions>::uninit();
+            x::xatlasChartOptionsInit(charts.as_mut_ptr());
+            let charts = charts.assume_init();
+            let mut pack = std::mem::MaybeUninit::<x::PackOptions>::uninit();
+            x::xatlasPackOptionsInit(pack.as_mut_ptr());
+            let mut pack = pack.assume_init();
+            pack.texelsPerUnit = 1.0 / texel_size;
+            pack.padding = PADDING;
+            pack.bilinear = true;
+            // One texture, however large: the bundle holds one atlas.
+            pack.resolution = 0;
+            pack.maxChartSize = 0;
+            x::xatlasGenerate(handle, &charts, &pack);
+            let atlas = &*handle;
+            let result = Self::read(atlas, mesh.triangle_count(), texel_size);
+            x::xatlasDestroy(handle);
+            result
+        }
+    }
+
+    /// Copies xatlas's output out of its memory.
+    unsafe fn read(atlas: &xatlas_ffi::Atlas, triangles: usize, texel_size: f32) -> Result<Atlas, AtlasError> {
+        if atlas.meshCount != 1 || atlas.atlasCount > 1 {
+            return Err(AtlasError::Incomplete { got: 0, expected: triangles });
+        }
+        let out = &*atlas.meshes;
+        let slice = |p: *const u32, n: u32| if n == 0 { &[][..] } else { std::slice::from_raw_parts(p, n as usize) };
+        let indices = slice(out.indexArray, out.indexCount).to_vec();
+        if indices.len() != 3 * triangles {
+            return Err(AtlasError::Incomplete { got: indices.len() / 3, expected: triangles });
+        }
+        let vertices = if out.vertexCount == 0 { &[][..] } else { std::slice::from_raw_parts(out.vertexArray, out.vertexCount as usize) };
+        let uv = vertices.iter().map(|v| Vec2::from(v.uv)).collect();
+        let source_vertex = vertices.iter().map(|v| v.xref).collect();
+        let mut triangle_chart = vec![NO_CHART; triangles];
+        let charts = if out.chartCount == 0 { &[][..] } else { std::slice::from_raw_parts(out.chartArray, out.chartCount as usize) };
+        for (k, chart) in charts.iter().enumerate() {
+            for &face in slice(chart.faceArray, chart.faceCount) {
+                if let Some(c) = triangle_chart.get_mut(face as usize) {
+                    *c = k as u32;
+                }
+            }
+        }
+        Ok(Atlas {
+            width: atlas.width,
+            height: atlas.height,
+            texel_size,
+            uv,
+            source_vertex,
+            indices,
+            triangle_chart,
+            chart_count: out.chartCount,
+        })
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Triangle `t`'s corners in texels.
+    pub fn triangle_uv(&self, t: usize) -> [Vec2; 3] {
+        [0, 1, 2].map(|k| self.uv[self.indices[3 * t + k] as usize])
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,128 @@
+use super::coverage::{clip_to_texel, polygon_area, Coverage};
+use super::*;
+use crate::verify::shapes;
+
+fn uv_area(atlas: &Atlas, t: usize) -> f64 {
+    let [a, b, c] = atlas.triangle_uv(t).map(|p| p.as_dvec2());
+    0.5 * (b - a).perp_dot(c - a).abs()
+}
+
+fn world_area(mesh: &Mesh, t: usize) -> f64 {
+    let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// A plane (one flat chart) and a sphere (curved charts) side by side.
+fn plane_and_sphere() -> Mesh {
+    let mut mesh = shapes::plane_grid(6, 2.0);
+    let mut sphere = shapes::icosphere(2);
+    shapes::transform(&mut sphere, 0.5, glam::Vec3::new(0.0, 0.6, 0.0));
+    shapes::append(&mut mesh, &sphere);
+    mesh
+}
+
+#[test]
+fn a_flat_chart_keeps_the_texel_size() {
+    // On a plane the unwrap is a rigid map: each triangle's area in texels
+    // is its world area over the texel's (xatlas packs at the scale asked).
+    let mesh = shapes::plane_grid(6, 2.0);
+    let size = 0.05;
+    let atlas = Atlas::unwrap(&mesh, size).unwrap();
+    assert_eq!(atlas.triangle_count(), mesh.triangle_count());
+    for t in 0..mesh.triangle_count() {
+        let expected = world_area(&mesh, t) / (size as f64).powi(2);
+        assert!((uv_area(&atlas, t) / expected - 1.0).abs() < 1e-3, "triangle {t}: {} texels, expected {expected}", uv_area(&atlas, t));
+    }
+    // 2 m at 5 cm: 40 texels across, plus the padding.
+    assert!(atlas.width >= 40 && atlas.width <= 40 + 4 * PADDING + 2, "{} x {}", atlas.width, atlas.height);
+    assert!(atlas.uv.iter().all(|p| p.x >= 0.0 && p.y >= 0.0 && p.x <= atlas.width as f32 && p.y <= atlas.height as f32));
+}
+
+#[test]
+fn coverage_conserves_each_triangles_area_and_misses_no_texel() {
+    let mesh = plane_and_sphere();
+    let atlas = Atlas::unwrap(&mesh, 0.04).unwrap();
+    let cover = Coverage::of(&atlas);
+    let mut summed = vec![0.0f64; atlas.triangle_count()];
+    for i in 0..cover.len() {
+        for e in cover.start[i] as usize..cover.start[i + 1] as usize {
+            summed[cover.triangle[e] as usize] += cover.area[e] as f64;
+            assert!(cover.area[e] > 0.0 && cover.area[e] <= 1.0 + 1e-6, "area {}", cover.area[e]);
+        }
+    }
+    for t in 0..atlas.triangle_count() {
+        let a = uv_area(&atlas, t);
+        assert!((summed[t] - a).abs() <= 1e-5 * a.max(1.0), "triangle {t}: texels sum to {}, triangle {a}", summed[t]);
+    }
+    // Points inside each triangle fall in a texel listed for it.
+    let listed = |texel: u32, t: u32| {
+        cover.texels.binary_search(&texel).is_ok_and(|i| cover.triangle[cover.start[i] as usize..cover.start[i + 1] as usize].contains(&t))
+    };
+    let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    for t in 0..atlas.triangle_count() {
+        let [a, b, c] = atlas.triangle_uv(t);
+        for _ in 0..16 {
+            let (mut u, mut v) = (next(), next());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let p = a + (b - a) * u + (c - a) * v;
+            let texel = p.y.floor() as u32 * atlas.width + p.x.floor() as u32;
+            assert!(listed(texel, t as u32), "triangle {t}: point {p} in texel {texel}, not listed");
+        }
+    }
+}
+
+#[test]
+fn no_texel_is_shared_by_two_charts() {
+    let mesh = plane_and_sphere();
+    let atlas = Atlas::unwrap(&mesh, 0.04).unwrap();
+    assert!(atlas.chart_count >= 2, "{} charts", atlas.chart_count);
+    let cover = Coverage::of(&atlas);
+    for i in 0..cover.len() {
+        let tris = &cover.triangle[cover.start[i] as usize..cover.start[i + 1] as usize];
+        let chart = atlas.triangle_chart[tris[0] as usize];
+        assert!(tris.iter().all(|&t| atlas.triangle_chart[t as usize] == chart), "texel {} has charts of {tris:?}", cover.texels[i]);
+    }
+}
+
+#[test]
+fn the_same_mesh_gives_the_same_atlas() {
+    let mesh = plane_and_sphere();
+    let first = Atlas::unwrap(&mesh, 0.04).unwrap();
+    let again = std::thread::spawn(move || Atlas::unwrap(&mesh, 0.04).unwrap()).join().unwrap();
+    assert_eq!(first, again);
+}
+
+#[test]
+fn bad_texel_sizes_and_empty_meshes_are_refused() {
+    let mesh = shapes::plane_grid(2, 2.0);
+    for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+        assert!(matches!(Atlas::unwrap(&mesh, bad), Err(AtlasError::BadTexelSize(_))), "{bad}");
+    }
+    // 4 m² at 0.1 mm: 4e8 texels, refused before unwrapping, naming a size that fits.
+    match Atlas::unwrap(&mesh, 1e-4) {
+        Err(AtlasError::TooManyTexels { fits, .. }) => {
+            assert!(fits > 1e-4 && (4.0 / (fits as f64).powi(2)) <= MAX_TEXELS * 1.001, "{fits}")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(Atlas::unwrap(&Mesh::default(), 0.1), Err(AtlasError::Empty));
+}
+
+#[test]
+fn clipping_a_triangle_to_texels_adds_up() {
+    // A right triangle with legs of 3 texels: 4.5 texels² over 9 texels.
+    let tri = [Vec2::new(0.0, 0.0), Vec2::new(3.0, 0.0), Vec2::new(0.0, 3.0)];
+    let total: f64 = (0..3).flat_map(|y| (0..3).map(move |x| (x, y))).map(|(x, y)| polygon_area(&clip_to_texel(tri, x, y))).sum();
+    assert!((total - 4.5).abs() < 1e-12, "{total}");
+    assert!((polygon_area(&clip_to_texel(tri, 0, 0)) - 1.0).abs() < 1e-12);
+    assert!((polygon_area(&clip_to_texel(tri, 1, 1)) - 0.5).abs() < 1e-12);
+    assert_eq!(polygon_area(&clip_to_texel(tri, 2, 2)), 0.0);
+}
