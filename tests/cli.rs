@@ -701,3 +701,60 @@ fn denoise_is_deterministic_recorded_bounded_and_refused_where_it_cannot_apply()
         assert!(!out.exists());
     }
 }
+
+/// An open-mode bake of a closed box (every wall faces in) says that almost
+/// nothing sees the sky and names `--window`; the same box with its lid
+/// off, which the sky lights, does not.
+#[test]
+fn an_open_mode_bake_of_a_closed_scene_says_so() {
+    let dir = Scratch::new("sealed");
+    let v = glam::Vec3::new;
+    // Six inward-facing quads of a 2 m box; `lid` adds the top.
+    let write_box = |name: &str, lid: bool| {
+        let mut mesh = prtbake::mesh::Mesh::default();
+        let mut quad = |c: [glam::Vec3; 4]| {
+            let base = mesh.positions.len() as u32;
+            let n = (c[1] - c[0]).cross(c[2] - c[0]).normalize();
+            mesh.positions.extend(c);
+            mesh.normals.extend([n; 4]);
+            mesh.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+            mesh.tri_material.extend([0; 2]);
+            mesh.tri_group.extend([0; 2]);
+        };
+        quad([v(0., 0., 0.), v(0., 0., 2.), v(2., 0., 2.), v(2., 0., 0.)]);
+        quad([v(0., 0., 0.), v(2., 0., 0.), v(2., 2., 0.), v(0., 2., 0.)]);
+        quad([v(0., 0., 2.), v(0., 2., 2.), v(2., 2., 2.), v(2., 0., 2.)]);
+        quad([v(0., 0., 0.), v(0., 2., 0.), v(0., 2., 2.), v(0., 0., 2.)]);
+        quad([v(2., 0., 0.), v(2., 0., 2.), v(2., 2., 2.), v(2., 2., 0.)]);
+        if lid {
+            quad([v(0., 2., 0.), v(2., 2., 0.), v(2., 2., 2.), v(0., 2., 2.)]);
+        }
+        mesh.materials = vec![prtbake::mesh::Material::opaque("wall", 0.5)];
+        mesh.groups = vec!["box".into()];
+        let path = dir.path(name);
+        prtbake::mesh::write_obj(&path, &mesh).unwrap();
+        path
+    };
+    let bake = |input: &std::path::Path| {
+        let out = dir.path("b.prtb");
+        let o = prtbake(&[
+            "bake",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--rays",
+            "16",
+            "--bounces",
+            "1",
+            "--one-sided",
+            "*",
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let closed = bake(&write_box("closed.obj", true));
+    assert!(closed.contains("see the sky") && closed.contains("--window PATTERN"), "{closed}");
+    let open = bake(&write_box("open.obj", false));
+    assert!(!open.contains("see the sky"), "{open}");
+}

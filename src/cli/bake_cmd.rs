@@ -145,6 +145,8 @@ pub struct BakeReport {
     pub build_seconds: f64,
     pub bundle_bytes: u64,
     pub window_names: Vec<String>,
+    /// Open mode: every ray that leaves the scene counts, glass is opaque.
+    pub open_mode: bool,
     pub load_seconds: f64,
     pub clean_seconds: Option<f64>,
     pub write_seconds: f64,
@@ -219,6 +221,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         build_seconds,
         bundle_bytes,
         window_names: surfaces.window_names,
+        open_mode: config.params.mode == bake::Mode::Open,
         load_seconds: 0.0,
         clean_seconds: None,
         write_seconds: write_start.elapsed().as_secs_f64(),
@@ -287,6 +290,36 @@ pub fn warn_rejected(s: &bake::BakeStats, output: &std::path::Path) {
     );
 }
 
+/// Share of vertices that see the sky below which an open-mode bake says
+/// the scene is closed.
+pub const SEALED_WARNING_SHARE: f64 = 0.02;
+
+/// Says on stderr when an open-mode bake lit almost no vertex: the sky
+/// reaches nothing inside, which is right for a closed room but is mostly a
+/// pane or a door baked as opaque (the dining room with its pane quad: 417
+/// of 135,681 vertices lit, a black picture and no word).
+pub fn warn_sealed(report: &BakeReport) {
+    let r = &report.result;
+    let stride = crate::sh::coeff_count(r.order) * r.channels;
+    if !report.open_mode || stride == 0 || r.total.is_empty() {
+        return;
+    }
+    let vertices = r.total.len() / stride;
+    let lit = r.total.chunks_exact(stride).filter(|v| v[0] > 0.0).count();
+    if (lit as f64) >= SEALED_WARNING_SHARE * vertices as f64 {
+        return;
+    }
+    let fix = match report.window_names.is_empty() {
+        true => "if light comes in through glass or a pane, bake with --window PATTERN (prtbake inspect MESH lists the materials and which look like glass)".to_string(),
+        false => format!("the mesh marks {} as windows, which open mode keeps opaque: --window-mode lets the light in through them", report.window_names.join(", ")),
+    };
+    eprintln!(
+        "warning: {}: only {lit} of {vertices} vertices ({:.1}%) see the sky: in open mode this scene is closed and its inside stays black; {fix}",
+        report.output.display(),
+        100.0 * lit as f64 / vertices.max(1) as f64
+    );
+}
+
 /// Where a bake's time went, one line: the phases and their seconds,
 /// the largest first named as such.
 pub fn time_line(report: &BakeReport) -> String {
@@ -314,6 +347,9 @@ pub fn time_line(report: &BakeReport) -> String {
 /// Prints the final stats line, or the JSON document with `--json`.
 pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     let s = &report.result.stats;
+    // Warnings go to stderr with or without --json.
+    warn_rejected(s, &report.output);
+    warn_sealed(report);
     if as_json {
         return super::print_json(&json!({
             "output": super::json_path(&report.output),
@@ -363,7 +399,6 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             s.back_sides, s.triangles
         );
     }
-    warn_rejected(s, &report.output);
     println!("{}", time_line(report));
     if let Some(c) = &report.storage {
         let s = &c.chosen;
