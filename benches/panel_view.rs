@@ -44,7 +44,8 @@ fn first_pass(c: &mut Criterion) {
     let data = vec![0.05f32; mesh.vertex_count() * 3 * 9];
     let layers = vec![TransferLayer { kind: LayerKind::Total, data }];
     let transfer = Transfer { order, channels: 3, quantization: Quantization::F32, layers };
-    let bundle = Bundle { meta: serde_json::json!({ "params": { "mode": "window" } }), mesh, transfer: Some(transfer), sun: None };
+    let bundle =
+        Bundle { meta: serde_json::json!({ "params": { "mode": "window" } }), mesh, transfer: Some(transfer), sun: None, texels: None };
     let mapping = PanelMapping::find(&bundle.mesh, Some("lcd_panel"), None, "cabin".as_ref()).unwrap().unwrap();
     let mut source = PanelSource::new(&bundle, &mapping, None).unwrap();
     // The viewer's default sky (no map, no time lapse), turned as the demo's sunny panel.

@@ -123,6 +123,14 @@ struct BakeArgs {
     /// (K: strength in standard errors; 0 = off). Not with --shard or --refine.
     #[arg(long, value_name = "K", default_value_t = 0.0)]
     denoise: f32,
+    /// Texel mode: also bake transfer per texel of a lightmap atlas (xatlas) at this size in
+    /// world units, for light that vertices cannot hold (slat and contact shadows on big
+    /// triangles). The vertices are baked as without it. Not with --shard, --refine, --view-box.
+    #[arg(long, value_name = "L")]
+    texel_size: Option<f32>,
+    /// With --texel-size: sample points per texel, spread over its footprint by area.
+    #[arg(long, value_name = "N", default_value_t = prtbake::bake::texels::POINTS_PER_TEXEL, requires = "texel_size")]
+    texel_points: u32,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -792,7 +800,33 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     if refine.is_some() && a.view_box.is_some() {
         anyhow::bail!("--refine/--max-vertices and --view-box cannot be combined: refine first, then cull");
     }
+    let texels = match a.texel_size {
+        Some(size) => {
+            if !(size.is_finite() && size > 0.0) {
+                anyhow::bail!("--texel-size {size}: expected a positive length in world units (e.g. 0.02 for 2 cm)");
+            }
+            if !(1..=256).contains(&a.texel_points) {
+                anyhow::bail!("--texel-points {}: expected 1..=256", a.texel_points);
+            }
+            let with = |flag: &str, why: &str| anyhow::anyhow!("--texel-size with {flag}: {why}");
+            if a.shard.is_some() {
+                return Err(with("--shard", "shards bake vertex items only (bake texels in one process)"));
+            }
+            if refine.is_some() {
+                return Err(with("--refine", "texels already resolve the light where vertices cannot; refine or bake texels"));
+            }
+            if a.view_box.is_some() {
+                return Err(with("--view-box", "culling compacts the vertices, not the atlas"));
+            }
+            if matches!(a.sampling, SamplingArg::Vertex) {
+                return Err(with("--sampling vertex", "texels sample inside their triangles"));
+            }
+            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points })
+        }
+        None => None,
+    };
     Ok(cli::bake_cmd::BakeConfig {
+        texels,
         refine,
         shard,
         input: a.mesh,

@@ -758,3 +758,50 @@ fn an_open_mode_bake_of_a_closed_scene_says_so() {
     let open = bake(&write_box("open.obj", false));
     assert!(!open.contains("see the sky"), "{open}");
 }
+
+/// `bake --texel-size` writes the atlas and texel transfer (ATLS, TXFR) next
+/// to unchanged vertices, the same bytes on 1 and 2 threads; `inspect`
+/// shows them; bad sizes and combinations it cannot do are refused (exit 2,
+/// nothing written).
+#[test]
+fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply() {
+    let dir = Scratch::new("texels");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &prtbake::verify::shapes::room_with_walls_running_past()).unwrap();
+    let bake = |out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "8", "--bounces", "1", "--quiet"];
+        args.extend(extra);
+        let o = prtbake(&args);
+        (o, out)
+    };
+    let (o, one) = bake("one.prtb", &["--texel-size", "0.25", "--threads", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, two) = bake("two.prtb", &["--texel-size", "0.25", "--threads", "2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "texel bundles differ across thread counts");
+    let (o, plain) = bake("plain.prtb", &["--threads", "1"]);
+    assert!(o.status.success());
+    let (texel, vertex) = (prtbake::bundle::read_bundle(&one).unwrap(), prtbake::bundle::read_bundle(&plain).unwrap());
+    assert_eq!(texel.transfer.as_ref().unwrap().layers, vertex.transfer.as_ref().unwrap().layers, "the vertices bake as without texels");
+    let t = texel.texels.as_ref().expect("texel section");
+    assert_eq!(t.atlas.triangle_count(), texel.mesh.triangle_count());
+    assert!(!t.texels.is_empty() && t.transfer.layers[0].data.len() == t.texels.len() * 9);
+    assert!(t.transfer.layers[0].data.iter().any(|&x| x > 0.0));
+    let shown = prtbake(&["inspect", one.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&shown.stdout);
+    assert!(text.contains("texels: atlas") && text.contains("ATLS") && text.contains("TXFR"), "{text}");
+    for (extra, what) in [
+        (vec!["--texel-size", "0"], "positive length"),
+        (vec!["--texel-size", "nan"], "positive length"),
+        (vec!["--texel-size", "0.25", "--refine", "0.1"], "--refine"),
+        (vec!["--texel-size", "0.25", "--sampling", "vertex"], "--sampling vertex"),
+        (vec!["--texel-size", "1e-6"], "texels"),
+    ] {
+        let (o, out) = bake("refused.prtb", &extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_ne!(o.status.code(), Some(0), "{extra:?} was accepted");
+        assert!(err.contains(what), "{extra:?}: {err}");
+        assert!(!out.exists(), "{extra:?} wrote its output");
+    }
+}

@@ -42,6 +42,7 @@ fn sample_bundle() -> Bundle {
         }),
         sun: Some(SunSeries { sky_order: 2, steps, words_per_vertex, masks }),
         mesh,
+        texels: None,
     }
 }
 

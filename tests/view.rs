@@ -55,6 +55,7 @@ pub fn bundle_of(mesh: Mesh, order: usize, transfer: Vec<f32>, sun: Option<SunSe
             layers: vec![TransferLayer { kind: LayerKind::Total, data: transfer }],
         }),
         sun,
+        texels: None,
     }
 }
 

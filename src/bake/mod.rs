@@ -11,6 +11,7 @@ pub mod progress;
 pub(crate) mod receivers;
 pub mod sun;
 pub mod surfaces;
+pub mod texels;
 pub mod transfer;
 pub(crate) mod twins;
 mod window_light;

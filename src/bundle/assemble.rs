@@ -84,6 +84,7 @@ pub fn make_bundle_stored(
             layers,
         }),
         sun: None,
+        texels: None,
     }
 }
 

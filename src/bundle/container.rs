@@ -44,6 +44,8 @@ pub(crate) const MATL: [u8; 4] = *b"MATL";
 pub(crate) const XFER: [u8; 4] = *b"XFER";
 pub(crate) const SUNM: [u8; 4] = *b"SUNM";
 pub(crate) const SUND: [u8; 4] = *b"SUND";
+pub(crate) const ATLS: [u8; 4] = *b"ATLS";
+pub(crate) const TXFR: [u8; 4] = *b"TXFR";
 /// Offset of the header CRC field; the CRC covers bytes `0..HEADER_CRC_AT` and the table.
 const HEADER_CRC_AT: usize = 28;
 

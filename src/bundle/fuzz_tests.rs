@@ -101,6 +101,7 @@ fn fuzz_bundle(seed: u64, quantization: Quantization) -> Bundle {
         mesh: random_mesh(&mut rng, vertices, triangles),
         transfer: Some(random_transfer(&mut rng, vertices, quantization)),
         sun: Some(random_sun(&mut rng, vertices, 5)),
+        texels: None,
     }
 }
 

@@ -7,7 +7,7 @@
 //! Little-endian everywhere. The byte layout is specified in docs/bundle-format.md.
 //!
 //! - `container`: header, section table, codecs, checksums (knows no content).
-//! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND.
+//! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND, ATLS, TXFR.
 //! - `quantize`: f32 / f16 / i16-with-per-vertex-scale transfer storage.
 //! - `export_gltf`: the mesh as GLB with transfer and sun masks as `_PRT_…` vertex attributes.
 //!
@@ -45,11 +45,11 @@ pub use export_gltf::{
     export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX,
 };
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
-pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Transfer, TransferLayer};
 pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};
-use sections::{ReadRules, MATL, MESH, META, SUND, SUNM, XFER};
+use sections::{ReadRules, ATLS, MATL, MESH, META, SUND, SUNM, TXFR, XFER};
 
 /// Encodes a bundle with the default options (zstd level 9 per section).
 ///
@@ -82,6 +82,10 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
     if let Some(sun) = &b.sun {
         parts.push((SUNM, sections::encode_sun_masks(sun, vertex_count)?));
         parts.push((SUND, sections::encode_sun_data(sun)?));
+    }
+    if let Some(t) = &b.texels {
+        parts.push((ATLS, sections::encode_atlas(t, &b.mesh)?));
+        parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), &t.transfer, TXFR)?));
     }
     write_container(&parts, options)
 }
@@ -128,7 +132,17 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
             Some(SunSeries { sky_order, steps, words_per_vertex, masks })
         }
     };
-    Ok(Bundle { meta, mesh, transfer, sun })
+    let texels = match (section(ATLS)?, section(TXFR)?) {
+        (None, None) => None,
+        (Some(_), None) => return Err(BundleError::MissingSection(Tag(TXFR))),
+        (None, Some(_)) => return Err(BundleError::MissingSection(Tag(ATLS))),
+        (Some(atlas_raw), Some(transfer_raw)) => {
+            let (atlas, texels) = sections::decode_atlas(&atlas_raw, &mesh, rules)?;
+            let transfer = sections::decode_transfer_of(&transfer_raw, texels.len(), rules, TXFR)?;
+            Some(TexelLayers { atlas, texels, transfer })
+        }
+    };
+    Ok(Bundle { meta, mesh, transfer, sun, texels })
 }
 
 /// Re-encodes the bundle `original` with new metadata and a new sun series,

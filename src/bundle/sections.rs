@@ -10,11 +10,11 @@ use glam::{Vec2, Vec3};
 use super::cursor::{pad_to, put_f32, put_f64, put_u16, put_u32, Cursor};
 use super::error::BundleError;
 use super::quantize::{decode_layer, encode_layer, layer_bytes};
-use super::types::{LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
+use super::types::{LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Transfer, TransferLayer};
 use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
-pub(crate) use super::container::{MATL, MESH, META, SUND, SUNM, XFER};
+pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TXFR, XFER};
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;
@@ -235,6 +235,11 @@ pub(crate) fn decode_materials(raw: &[u8], rules: ReadRules) -> Result<(Vec<Mate
 /// XFER: u32 order, u32 channels, u32 layer_count, u32 quantization; per layer
 /// u32 kind (0 total, 1 + b bounce b), u32 reserved, data (see `quantize`).
 pub(crate) fn encode_transfer(t: &Transfer, vertex_count: usize) -> Result<Vec<u8>, BundleError> {
+    encode_transfer_of(vertex_count, t, XFER)
+}
+
+/// XFER's layout over any receivers: the vertices (XFER) or the covered texels (TXFR).
+pub(crate) fn encode_transfer_of(vertex_count: usize, t: &Transfer, tag: [u8; 4]) -> Result<Vec<u8>, BundleError> {
     if t.order == 0 || t.channels == 0 || t.layers.is_empty() {
         return Err(invalid(format!(
             "transfer needs order ≥ 1, channels ≥ 1 and a layer (order {}, channels {}, {} layers)",
@@ -261,7 +266,7 @@ pub(crate) fn encode_transfer(t: &Transfer, vertex_count: usize) -> Result<Vec<u
                 layer.data.len()
             )));
         }
-        values::check_layer(i, &layer.data, stride).map_err(BundleError::invalid_value(XFER))?;
+        values::check_layer(i, &layer.data, stride).map_err(BundleError::invalid_value(tag))?;
         if matches!(t.quantization, Quantization::F16 | Quantization::F16Tinted) {
             if let Some(j) = layer.data.iter().position(|v| !half::f16::from_f32(*v).is_finite()) {
                 return Err(invalid(format!("transfer layer {i} value {j} ({}) overflows f16", layer.data[j])));
@@ -275,7 +280,12 @@ pub(crate) fn encode_transfer(t: &Transfer, vertex_count: usize) -> Result<Vec<u
 }
 
 pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules) -> Result<Transfer, BundleError> {
-    let mut cur = Cursor::new(raw, XFER);
+    decode_transfer_of(raw, vertex_count, rules, XFER)
+}
+
+/// [`decode_transfer`] over any receivers (see [`encode_transfer_of`]).
+pub(crate) fn decode_transfer_of(raw: &[u8], vertex_count: usize, rules: ReadRules, tag: [u8; 4]) -> Result<Transfer, BundleError> {
+    let mut cur = Cursor::new(raw, tag);
     let order = cur.u32("order")?;
     let channels = cur.u32("channels")?;
     let layer_count = cur.u32("layer count")? as u64;
@@ -304,7 +314,7 @@ pub(crate) fn decode_transfer(raw: &[u8], vertex_count: usize, rules: ReadRules)
             return Err(cur.error(format!("layer {kind} appears twice")));
         }
         let data = decode_layer(&mut cur, v, stride, channels as u64, quantization, i as usize)?;
-        values::check_layer(i as usize, &data, stride).map_err(BundleError::bad_value(XFER))?;
+        values::check_layer(i as usize, &data, stride).map_err(BundleError::bad_value(tag))?;
         layers.push(TransferLayer { kind, data });
     }
     cur.finish()?;
@@ -433,4 +443,99 @@ pub(crate) fn decode_sun_data(raw: &[u8], rules: ReadRules) -> Result<(u32, Vec<
     }
     cur.finish()?;
     Ok((sky_order, steps))
+}
+
+// ---------------------------------------------------------------- ATLS, TXFR
+
+/// ATLS: u32 width, u32 height, f32 texel_size, u32 chart_count, u32
+/// atlas_vertex_count V, u32 triangle_count T, u32 covered_count C, u32
+/// reserved; V × (f32 u, f32 v); V × u32 source vertex; T × 3 u32 atlas
+/// vertex; T × u32 chart (0xFFFFFFFF: none); C × u32 texel id, ascending.
+pub(crate) fn encode_atlas(t: &TexelLayers, mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
+    check_atlas(&t.atlas, &t.texels, mesh).map_err(invalid)?;
+    let a = &t.atlas;
+    let mut out = Vec::new();
+    put_u32(&mut out, a.width);
+    put_u32(&mut out, a.height);
+    put_f32(&mut out, a.texel_size);
+    put_u32(&mut out, a.chart_count);
+    put_u32(&mut out, count_u32(a.uv.len(), "atlas vertex count")?);
+    put_u32(&mut out, count_u32(a.triangle_count(), "atlas triangle count")?);
+    put_u32(&mut out, count_u32(t.texels.len(), "covered texel count")?);
+    put_u32(&mut out, 0);
+    a.uv.iter().for_each(|p| {
+        put_f32(&mut out, p.x);
+        put_f32(&mut out, p.y);
+    });
+    a.source_vertex.iter().for_each(|&v| put_u32(&mut out, v));
+    a.indices.iter().for_each(|&i| put_u32(&mut out, i));
+    a.triangle_chart.iter().for_each(|&c| put_u32(&mut out, c));
+    t.texels.iter().for_each(|&x| put_u32(&mut out, x));
+    Ok(out)
+}
+
+/// Decodes ATLS against the bundle's mesh; returns the atlas and the covered texels.
+pub(crate) fn decode_atlas(raw: &[u8], mesh: &Mesh, rules: ReadRules) -> Result<(crate::atlas::Atlas, Vec<u32>), BundleError> {
+    let mut cur = Cursor::new(raw, ATLS);
+    let width = cur.u32("width")?;
+    let height = cur.u32("height")?;
+    let texel_size = cur.f32("texel size")?;
+    let chart_count = cur.u32("chart count")?;
+    let vertices = cur.u32("atlas vertex count")? as u64;
+    let triangles = cur.u32("triangle count")? as u64;
+    let covered = cur.u32("covered texel count")? as u64;
+    let reserved = cur.u32("reserved")?;
+    if rules.reject_reserved && reserved != 0 {
+        return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
+    }
+    let expected = checked_len(&[(vertices, 12), (triangles, 16), (covered, 4)]);
+    check_exact_len(&cur, expected, || format!("{vertices} atlas vertices, {triangles} triangles and {covered} texels"))?;
+    let uv: Vec<Vec2> = cur.f32s(vertices * 2, "uv")?.chunks_exact(2).map(|p| Vec2::new(p[0], p[1])).collect();
+    let source_vertex = cur.u32s(vertices, "source vertex")?;
+    let indices = cur.u32s(triangles * 3, "atlas indices")?;
+    let triangle_chart = cur.u32s(triangles, "charts")?;
+    let texels = cur.u32s(covered, "texels")?;
+    cur.finish()?;
+    let atlas = crate::atlas::Atlas { width, height, texel_size, uv, source_vertex, indices, triangle_chart, chart_count };
+    check_atlas(&atlas, &texels, mesh).map_err(|e| BundleError::malformed(ATLS, e))?;
+    Ok((atlas, texels))
+}
+
+/// The atlas fits the mesh and itself: one entry per triangle, indices and
+/// charts in range, UVs finite and inside the texture, texels ascending and
+/// inside it, the texture no larger than [`crate::atlas::MAX_TEXELS`].
+fn check_atlas(a: &crate::atlas::Atlas, texels: &[u32], mesh: &Mesh) -> Result<(), String> {
+    if !(a.texel_size.is_finite() && a.texel_size > 0.0) {
+        return Err(format!("texel size {} is not a positive length", a.texel_size));
+    }
+    let area = a.width as f64 * a.height as f64;
+    if a.width == 0 || a.height == 0 || area > crate::atlas::MAX_TEXELS {
+        return Err(format!("{} × {} texels: each side ≥ 1, at most {:.3e} in all", a.width, a.height, crate::atlas::MAX_TEXELS));
+    }
+    if a.triangle_count() != mesh.triangle_count() || a.indices.len() % 3 != 0 || a.triangle_chart.len() != mesh.triangle_count() {
+        return Err(format!("{} triangles in the atlas, {} in the mesh", a.triangle_count(), mesh.triangle_count()));
+    }
+    if a.uv.len() != a.source_vertex.len() {
+        return Err(format!("{} atlas UVs for {} atlas vertices", a.uv.len(), a.source_vertex.len()));
+    }
+    if let Some(i) = a.indices.iter().position(|&i| i as usize >= a.uv.len()) {
+        return Err(format!("atlas index {i} is {}, past the {} atlas vertices", a.indices[i], a.uv.len()));
+    }
+    if let Some(v) = a.source_vertex.iter().position(|&s| s as usize >= mesh.vertex_count()) {
+        return Err(format!("atlas vertex {v} copies vertex {}, past the mesh's {}", a.source_vertex[v], mesh.vertex_count()));
+    }
+    if let Some(t) = a.triangle_chart.iter().position(|&c| c != crate::atlas::NO_CHART && c >= a.chart_count) {
+        return Err(format!("triangle {t} is in chart {}, past the {} charts", a.triangle_chart[t], a.chart_count));
+    }
+    let inside = |p: &Vec2| p.is_finite() && p.x >= 0.0 && p.y >= 0.0 && p.x <= a.width as f32 && p.y <= a.height as f32;
+    if let Some(v) = a.uv.iter().position(|p| !inside(p)) {
+        return Err(format!("atlas vertex {v}'s UV {} lies outside the {} × {} texture", a.uv[v], a.width, a.height));
+    }
+    if let Some(k) = texels.windows(2).position(|w| w[0] >= w[1]) {
+        return Err(format!("texel ids {} then {} are not ascending", texels[k], texels[k + 1]));
+    }
+    if let Some(&last) = texels.last().filter(|&&x| x as f64 >= area) {
+        return Err(format!("texel {last} lies past the {} × {} texture", a.width, a.height));
+    }
+    Ok(())
 }

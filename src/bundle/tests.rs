@@ -83,6 +83,7 @@ fn random_bundle(seed: u64, vertices: usize, triangles: usize, quantization: Qua
         mesh: random_mesh(&mut rng, vertices, triangles),
         transfer: Some(random_transfer(&mut rng, vertices, quantization)),
         sun: Some(random_sun(&mut rng, vertices, 92)),
+        texels: None,
     }
 }
 
@@ -102,6 +103,7 @@ pub(super) fn tiny_bundle() -> Bundle {
         },
         transfer: None,
         sun: None,
+        texels: None,
     }
 }
 
@@ -142,6 +144,7 @@ pub(super) fn small_regular_bundle() -> Bundle {
         mesh,
         transfer: Some(transfer),
         sun: Some(SunSeries { sky_order: 1, steps: vec![step(0), step(1)], words_per_vertex, masks }),
+        texels: None,
     }
 }
 
@@ -1008,4 +1011,65 @@ fn format_1_0_values_are_brought_into_range_but_nan_is_refused() {
     current[0x114..0x118].copy_from_slice(&1.25f32.to_le_bytes());
     reseal(&mut current);
     assert_bad_value(&current, b"MATL", "material 0 albedo is 1.25, outside [0, 1]");
+}
+
+/// A bundle with an atlas and texel transfer (sections ATLS and TXFR).
+fn texel_bundle() -> Bundle {
+    let mut bundle = random_bundle(7, 12, 10, Quantization::F32);
+    bundle.mesh = crate::verify::shapes::plane_grid(3, 1.0);
+    bundle.sun = None;
+    let coeffs = 4;
+    let vertex_values = (0..bundle.mesh.vertex_count() * coeffs).map(|i| (i as f32 * 0.1).sin()).collect();
+    bundle.transfer = Some(Transfer {
+        order: 2,
+        channels: 1,
+        quantization: Quantization::F32,
+        layers: vec![TransferLayer { kind: LayerKind::Total, data: vertex_values }],
+    });
+    let atlas = crate::atlas::Atlas::unwrap(&bundle.mesh, 0.05).unwrap();
+    let texels = crate::atlas::coverage::Coverage::of(&atlas).texels;
+    let data = (0..texels.len() * coeffs).map(|i| (i as f32 * 0.37).cos()).collect();
+    let transfer =
+        Transfer { order: 2, channels: 1, quantization: Quantization::F32, layers: vec![TransferLayer { kind: LayerKind::Total, data }] };
+    bundle.texels = Some(TexelLayers { atlas, texels, transfer });
+    bundle
+}
+
+#[test]
+fn texel_bundles_round_trip_and_refuse_a_broken_atlas() {
+    let bundle = texel_bundle();
+    let bytes = encode_bundle(&bundle).unwrap();
+    assert_eq!(decode_bundle(&bytes).unwrap(), bundle);
+    let raw = encode_bundle_with(&bundle, EncodeOptions { compression: Compression::None }).unwrap();
+    for len in (0..raw.len()).step_by(97) {
+        assert!(decode_bundle(&raw[..len]).is_err(), "prefix of {len} bytes decoded");
+    }
+    // The sections come as a pair.
+    let mesh = &bundle.mesh;
+    let t = bundle.texels.as_ref().unwrap();
+    let base = || {
+        vec![
+            (META, sections::encode_meta(&bundle.meta).unwrap()),
+            (MESH, sections::encode_mesh(mesh).unwrap()),
+            (MATL, sections::encode_materials(&mesh.materials, &mesh.groups).unwrap()),
+        ]
+    };
+    let atlas_raw = sections::encode_atlas(t, mesh).unwrap();
+    let mut only_atlas = base();
+    only_atlas.push((ATLS, atlas_raw.clone()));
+    let only_atlas = write_container(&only_atlas, EncodeOptions::default()).unwrap();
+    assert!(matches!(decode_bundle(&only_atlas), Err(BundleError::MissingSection(Tag(TXFR)))));
+    // An atlas index past the atlas vertices is refused, naming the section.
+    let first_index = 32 + t.atlas.uv.len() * 12;
+    let mut forged = atlas_raw.clone();
+    forged[first_index..first_index + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let mut parts = base();
+    parts.push((ATLS, forged));
+    parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), &t.transfer, TXFR).unwrap()));
+    let error = decode_bundle(&write_container(&parts, EncodeOptions::default()).unwrap()).unwrap_err().to_string();
+    assert!(error.contains("ATLS") && error.contains("atlas index"), "{error}");
+    // A transfer for the wrong number of texels is refused by the encoder.
+    let mut short = bundle.clone();
+    short.texels.as_mut().unwrap().texels.pop();
+    assert!(encode_bundle(&short).is_err());
 }

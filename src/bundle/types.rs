@@ -17,6 +17,19 @@ pub struct Bundle {
     pub transfer: Option<Transfer>,
     /// Sun masks and per-step sun/sky data, if baked.
     pub sun: Option<SunSeries>,
+    /// Texel mode: the lightmap atlas and transfer per covered texel, if baked.
+    pub texels: Option<TexelLayers>,
+}
+
+/// Texel mode's part of a bundle (sections ATLS and TXFR).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelLayers {
+    /// The mesh's atlas, triangle for triangle.
+    pub atlas: crate::atlas::Atlas,
+    /// The covered texels (`y * width + x`, ascending), one transfer row each.
+    pub texels: Vec<u32>,
+    /// Transfer per covered texel, laid out as a vertex transfer is per vertex.
+    pub transfer: Transfer,
 }
 
 impl Bundle {

@@ -37,6 +37,15 @@ pub struct BakeConfig {
     pub shard: Option<crate::shards::ShardRun>,
     /// Refine the mesh where its light changes (`--refine`, `--max-vertices`).
     pub refine: Option<RefineRequest>,
+    /// Texel mode: transfer per texel of an atlas too (`--texel-size`).
+    pub texels: Option<TexelRequest>,
+}
+
+/// `--texel-size L --texel-points N`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelRequest {
+    pub size: f32,
+    pub points: u32,
 }
 
 /// What the user asked of adaptive refinement ([`crate::refine`]); the
@@ -165,6 +174,9 @@ pub const BUNDLE_FORMAT: &[&str] = &["prtb"];
 /// outputs (it lands when the caller commits them); `extra_meta` is merged
 /// into the metadata.
 pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::Value, staged: &mut Staged) -> anyhow::Result<BakeReport> {
+    if let Some(request) = config.texels {
+        return bake_texels_to_bundle(mesh, config, request, extra_meta, staged);
+    }
     let (result, surfaces, build_seconds, cull, refined) =
         super::with_threads(config.threads, || bake_maybe_refined(mesh, config))?.with_context(|| config.input.display().to_string())?;
     check_windows(config, &surfaces)?;
@@ -228,6 +240,99 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         storage: choice,
         cull: cull.map(|c| c.1),
         refine,
+    })
+}
+
+/// Texel mode: unwraps the atlas, bakes vertices and texels together, and
+/// stages the bundle with its ATLS and TXFR sections (texels stored as f32;
+/// `--quantize`/`--max-error` apply to the vertices).
+fn bake_texels_to_bundle(
+    mesh: &Mesh,
+    config: &BakeConfig,
+    request: TexelRequest,
+    extra_meta: serde_json::Value,
+    staged: &mut Staged,
+) -> anyhow::Result<BakeReport> {
+    let input = config.input.display().to_string();
+    let quiet = config.params.quiet;
+    let baked = super::with_threads(config.threads, || -> anyhow::Result<_> {
+        let surfaces = surfaces_of(mesh, config).with_context(|| input.clone())?;
+        let clock = std::time::Instant::now();
+        let atlas = crate::atlas::Atlas::unwrap(mesh, request.size).with_context(|| format!("{input}: --texel-size"))?;
+        if !quiet {
+            eprintln!(
+                "atlas: {} × {} texels of {} (world units), {} charts, in {:.2} s",
+                atlas.width,
+                atlas.height,
+                request.size,
+                atlas.chart_count,
+                clock.elapsed().as_secs_f64()
+            );
+        }
+        let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).with_context(|| input.clone())?;
+        let (result, texels) =
+            bake::texels::bake_texels(mesh, &scene, &surfaces, &config.params, atlas, request.points).with_context(|| input.clone())?;
+        Ok((result, texels, surfaces, scene.build_time.as_secs_f64()))
+    })??;
+    let (result, texels, surfaces, build_seconds) = baked;
+    check_windows(config, &surfaces)?;
+    let write_start = std::time::Instant::now();
+    let mut meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
+    meta["texels"] = json!({
+        "texel_size": request.size,
+        "points_per_texel": request.points,
+        "covered": texels.texels.len(),
+        "points": texels.points,
+        "points_rejected": texels.points_rejected,
+        "rays": texels.rays,
+        "meaning": "mean of the transfer over the texel's footprint on its triangles, parts inside geometry left out; bounces gather the vertices' previous bounce",
+    });
+    let choice = config.storage.choose(&result);
+    let mut bundle = crate::bundle::make_bundle_stored(mesh, &result, &config.params, meta, choice.as_ref());
+    let mut layers = vec![crate::bundle::TransferLayer { kind: crate::bundle::LayerKind::Total, data: texels.total.clone() }];
+    layers.extend(
+        texels
+            .bounces
+            .iter()
+            .enumerate()
+            .map(|(b, l)| crate::bundle::TransferLayer { kind: crate::bundle::LayerKind::Bounce(b as u32), data: l.clone() }),
+    );
+    bundle.texels = Some(crate::bundle::TexelLayers {
+        texels: texels.texels.clone(),
+        transfer: crate::bundle::Transfer {
+            order: result.order as u32,
+            channels: result.channels as u32,
+            quantization: Quantization::F32,
+            layers,
+        },
+        atlas: texels.atlas,
+    });
+    let encoded =
+        crate::bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
+    warn_over_budget(choice.as_ref(), &config.output);
+    staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
+    if !quiet {
+        eprintln!(
+            "texels: {} covered, {} points ({} inside geometry), {} rays",
+            texels.texels.len(),
+            texels.points,
+            texels.points_rejected,
+            texels.rays
+        );
+    }
+    Ok(BakeReport {
+        output: config.output.clone(),
+        result,
+        build_seconds,
+        bundle_bytes: encoded.len() as u64,
+        window_names: surfaces.window_names,
+        open_mode: config.params.mode == bake::Mode::Open,
+        load_seconds: 0.0,
+        clean_seconds: None,
+        write_seconds: write_start.elapsed().as_secs_f64(),
+        storage: choice,
+        cull: None,
+        refine: None,
     })
 }
 

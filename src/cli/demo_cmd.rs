@@ -53,6 +53,7 @@ pub fn run(output_dir: &Path, threads: usize, as_json: bool, quiet: bool) -> any
         eprintln!("clean: {}", clean_report.summary());
     }
     let config = BakeConfig {
+        texels: None,
         refine: None,
         input: "demo-cabin (generated)".into(),
         output: bundle_path,

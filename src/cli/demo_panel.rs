@@ -51,6 +51,7 @@ pub fn run(
             layers: vec![TransferLayer { kind: LayerKind::Total, data: result.total.clone() }],
         }),
         sun: None,
+        texels: None,
     };
     let brdf = PanelBrdf::default();
     let display = Display::default();

@@ -45,6 +45,12 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         "materials": b.mesh.materials.iter().map(|m| json!({"name": m.name, "role": m.role, "albedo": m.albedo})).collect::<Vec<_>>(),
         "transfer": transfer,
         "sun": sun,
+        "texels": b.texels.as_ref().map(|t| json!({
+            "atlas": {"width": t.atlas.width, "height": t.atlas.height, "texel_size": t.atlas.texel_size, "charts": t.atlas.chart_count, "atlas_vertices": t.atlas.uv.len()},
+            "covered": t.texels.len(),
+            "order": t.transfer.order, "channels": t.transfer.channels,
+            "layers": t.transfer.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
+        })),
         "sections": sections.iter().map(|s| json!({
             "tag": s.tag_name(), "codec": s.codec_name(), "stored_bytes": s.stored_len, "raw_bytes": s.raw_len,
         })).collect::<Vec<_>>(),
@@ -63,6 +69,21 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             t.channels,
             t.quantization.name(),
             t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ")
+        );
+    }
+    if let Some(t) = &b.texels {
+        let a = &t.atlas;
+        println!(
+            "  texels: atlas {} × {} of {} (world units), {} charts; {} covered texels ({:.1}% of the texture), order {}, {} channel(s), layers {}",
+            a.width,
+            a.height,
+            a.texel_size,
+            a.chart_count,
+            t.texels.len(),
+            100.0 * t.texels.len() as f64 / (a.width as f64 * a.height as f64),
+            t.transfer.order,
+            t.transfer.channels,
+            t.transfer.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ")
         );
     }
     if let Some(s) = &b.sun {

@@ -67,7 +67,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     if run.stage() == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
         let meta = bundle_meta(loaded.meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
-        let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None };
+        let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None, texels: None };
         output.part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
     }
     run.write(&output, &config.output)?;

@@ -299,7 +299,7 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
                 "sun": sun_meta,
                 "conventions": crate::bundle::conventions(),
             });
-            bundle::encode_bundle(&Bundle { meta, mesh: input.mesh.clone(), transfer: None, sun: Some(series.clone()) })
+            bundle::encode_bundle(&Bundle { meta, mesh: input.mesh.clone(), transfer: None, sun: Some(series.clone()), texels: None })
         }
     };
     encoded.with_context(|| format!("cannot encode {}", output.display()))
@@ -361,7 +361,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             let in_input = || config.input.display().to_string();
             let mut out = match &recipe {
                 Some(recipe) => super::with_threads(config.threads, || recipe.bake(&input.mesh))?.with_context(in_input)?,
-                None => Bundle { meta: meta.clone(), mesh: input.mesh.clone(), transfer: None, sun: None },
+                None => Bundle { meta: meta.clone(), mesh: input.mesh.clone(), transfer: None, sun: None, texels: None },
             };
             out.meta["sun"] = sun_meta;
             out.sun = Some(series.clone());

@@ -33,6 +33,21 @@ pub(crate) fn bake_layers(
     receivers: Option<&[bool]>,
     kept: Option<&Kept>,
 ) -> Result<TransferResult, BakeError> {
+    bake_layers_with_texels(mesh, scene, surfaces, params, receivers, kept, None)
+}
+
+/// [`bake_layers`], and with `texels` the texel pass of each bounce
+/// ([`super::texels`]), run after the vertices' pass and gathering from the
+/// vertices' previous bounce. The vertex result is the same either way.
+pub(crate) fn bake_layers_with_texels(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    params: &BakeParams,
+    receivers: Option<&[bool]>,
+    kept: Option<&Kept>,
+    mut texels: Option<&mut super::texels::TexelState>,
+) -> Result<TransferResult, BakeError> {
     let started = Instant::now();
     let mut plan = Plan::new(mesh, scene, surfaces, params, receivers)?;
     let (coeffs, channels) = (plan.coeffs, plan.channels);
@@ -82,6 +97,11 @@ pub(crate) fn bake_layers(
             run_range(&pass, 0..plan.items.len(), None, &progress)
         };
         drop(progress);
+        if let Some(texels) = texels.as_deref_mut() {
+            // `source` still holds the vertices' bounce − 1: what this bounce gathers.
+            let pass = plan.pass(bounce, &source, &[], None, false);
+            texels.run(&pass, channels, params.store_bounces);
+        }
         let pass_channels = plan.pass_channels(bounce);
         if bounce == 0 {
             vertex_weight = sums.weights;

@@ -29,11 +29,12 @@ mod layers;
 mod normalise;
 pub(crate) mod plan;
 mod run;
+pub(crate) mod texels;
 mod update;
 
 pub use items::NothingToBake;
 pub(crate) use items::*;
-pub(crate) use layers::{bake_layers, Kept};
+pub(crate) use layers::{bake_layers, bake_layers_with_texels, Kept};
 pub(crate) use normalise::*;
 pub(crate) use plan::*;
 pub(crate) use run::*;

@@ -1,0 +1,244 @@
+//! Transfer per texel of a lightmap atlas (texel mode): each covered texel
+//! is a receiver whose value is the mean of the transfer over its footprint
+//! (the parts of its triangles inside its square), parts inside geometry
+//! left out. Its points lie in that footprint, so a 3 cm slat shadow on a
+//! 4 m triangle is resolved at the texel size, not the triangle's.
+//!
+//! The texel pass runs inside the vertex bake, bounce by bounce
+//! ([`super::layers`]): bounce b of a texel traces its points' rays and
+//! reads, at each hit, bounce b − 1 of the vertex bake (the same gather as a
+//! vertex point, [`crate::bake::gather`]). Direct light and shadows are
+//! resolved per texel; the interreflected light arriving at a texel is the
+//! vertex bake's, which varies slowly.
+//!
+//! Points: `points_per_texel` per texel, shared among its footprint's
+//! triangles by area (at least one each); within a triangle's part, a Sobol
+//! point in the clipped polygon (a fan of triangles, picked by area). A
+//! point's seed is the texel's and its index there, so the bytes do not
+//! depend on the thread count.
+
+use glam::{DVec2, Vec2};
+use rayon::prelude::*;
+
+use super::run::{Pass, Point, Scratch};
+use crate::atlas::coverage::{clip_to_texel, polygon_area, Coverage};
+use crate::atlas::Atlas;
+use crate::sampling::{hash_seed, sample_2d, square_to_triangle, DirectionPattern};
+
+const TAG_TEXEL_POSITION: u32 = 0x5054_0001;
+const TAG_TEXEL_DIRECTION: u32 = 0x5054_0002;
+/// Texels per parallel task.
+const TEXELS_PER_TASK: usize = 64;
+
+/// A texel's sample point: its triangle, barycentrics, and the footprint
+/// area it stands for (in texels²).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TexelPoint {
+    pub(crate) triangle: u32,
+    pub(crate) bary: [f32; 3],
+    pub(crate) weight: f32,
+}
+
+/// Every covered texel's points (compressed rows in coverage order).
+pub(crate) struct TexelPoints {
+    pub(crate) start: Vec<u32>,
+    pub(crate) points: Vec<TexelPoint>,
+}
+
+impl TexelPoints {
+    pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, pattern: DirectionPattern, seed: u32) -> TexelPoints {
+        let per_texel: Vec<Vec<TexelPoint>> = (0..coverage.len())
+            .into_par_iter()
+            .map(|i| {
+                let entries = coverage.start[i] as usize..coverage.start[i + 1] as usize;
+                let texel = coverage.texels[i];
+                let (x, y) = (texel % atlas.width, texel / atlas.width);
+                let total: f32 = coverage.area[entries.clone()].iter().sum();
+                let mut points = Vec::new();
+                for e in entries {
+                    let t = coverage.triangle[e];
+                    let uv = atlas.triangle_uv(t as usize);
+                    let polygon = clip_to_texel(uv, x, y);
+                    let count = ((points_per_texel as f32 * coverage.area[e] / total).round() as u32).max(1);
+                    let weight = coverage.area[e] / count as f32;
+                    let stream = hash_seed(&[seed, TAG_TEXEL_POSITION, texel, t]);
+                    for k in 0..count {
+                        let (u, v) = sample_2d(pattern, k, 0, stream);
+                        let p = point_in_polygon(&polygon, u, v);
+                        let bary = barycentric(uv, p);
+                        points.push(TexelPoint { triangle: t, bary, weight });
+                    }
+                }
+                points
+            })
+            .collect();
+        let mut start = Vec::with_capacity(per_texel.len() + 1);
+        let mut points = Vec::new();
+        start.push(0u32);
+        for p in per_texel {
+            points.extend(p);
+            start.push(points.len() as u32);
+        }
+        TexelPoints { start, points }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.points.len()
+    }
+}
+
+/// The point at `(u, v)` of the unit square mapped into a convex polygon:
+/// `u` picks a triangle of its fan by area and is rescaled within it.
+fn point_in_polygon(polygon: &[DVec2], u: f32, v: f32) -> DVec2 {
+    let fan: Vec<(f64, [DVec2; 3])> = (1..polygon.len().saturating_sub(1))
+        .map(|k| {
+            let tri = [polygon[0], polygon[k], polygon[k + 1]];
+            (polygon_area(&tri), tri)
+        })
+        .collect();
+    let total: f64 = fan.iter().map(|f| f.0).sum();
+    if fan.is_empty() || total <= 0.0 {
+        return polygon.first().copied().unwrap_or_default();
+    }
+    let mut target = u as f64 * total;
+    let last = fan.len() - 1;
+    for (k, (area, tri)) in fan.iter().enumerate() {
+        if target <= *area || k == last {
+            let u = (target / area.max(f64::MIN_POSITIVE)).clamp(0.0, 1.0) as f32;
+            let b = square_to_triangle(u, v);
+            return tri[0] * b[0] as f64 + tri[1] * b[1] as f64 + tri[2] * b[2] as f64;
+        }
+        target -= area;
+    }
+    polygon[0]
+}
+
+/// Barycentric coordinates of `p` in the atlas triangle `uv` (clamped into it).
+fn barycentric(uv: [Vec2; 3], p: DVec2) -> [f32; 3] {
+    let [a, b, c] = uv.map(|q| q.as_dvec2());
+    let det = (b - a).perp_dot(c - a);
+    if det == 0.0 {
+        return [1.0 / 3.0; 3];
+    }
+    let l1 = (p - a).perp_dot(c - a) / det;
+    let l2 = (b - a).perp_dot(p - a) / det;
+    let w = [1.0 - l1 - l2, l1, l2].map(|x| x.max(0.0));
+    let s: f64 = w.iter().sum();
+    w.map(|x| (x / s) as f32)
+}
+
+/// One bounce of the texel pass: per texel, the weighted sums of its points'
+/// results (`pass.channels × pass.coeffs` each) and their weights; bounce 0
+/// marks the points inside geometry in `rejected`, later bounces skip them.
+pub(crate) struct TexelSums {
+    pub(crate) sums: Vec<f32>,
+    pub(crate) weights: Vec<f32>,
+    pub(crate) rays: u64,
+    pub(crate) traced: u64,
+}
+
+pub(crate) fn run_texel_pass(pass: &Pass, points: &TexelPoints, texel_ids: &[u32], rejected: &mut [bool]) -> TexelSums {
+    let bounce = pass.bounce;
+    let stride = pass.channels * pass.coeffs;
+    let texels = points.start.len() - 1;
+    let tasks: Vec<(Vec<f32>, Vec<f32>, Vec<u32>, u64, u64)> = (0..texels.div_ceil(TEXELS_PER_TASK))
+        .into_par_iter()
+        .map(|task| {
+            let range = task * TEXELS_PER_TASK..((task + 1) * TEXELS_PER_TASK).min(texels);
+            let mut sums = vec![0.0f32; range.len() * stride];
+            let mut weights = vec![0.0f32; range.len()];
+            let mut inside = Vec::new();
+            let (mut rays, mut traced) = (0u64, 0u64);
+            let mut result = vec![0.0f32; stride];
+            let mut scratch = Scratch { basis: vec![0.0f32; pass.coeffs], ..Scratch::default() };
+            let mut no_hits = Vec::new();
+            for (local, texel) in range.clone().enumerate() {
+                for (k, p) in (points.start[texel]..points.start[texel + 1]).enumerate() {
+                    if bounce > 0 && rejected[p as usize] {
+                        continue;
+                    }
+                    let tp = points.points[p as usize];
+                    let [ia, ib, ic] = pass.mesh.triangle(tp.triangle as usize);
+                    let [pa, pb, pc] = pass.mesh.triangle_positions(tp.triangle as usize);
+                    let [na, nb, nc] = [ia, ib, ic].map(|i| pass.mesh.normals[i as usize]);
+                    let face_normal = pass.face_normal(tp.triangle);
+                    let b = tp.bary;
+                    let point = Point {
+                        position: pa * b[0] + pb * b[1] + pc * b[2],
+                        normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
+                        face_normal,
+                        seed: hash_seed(&[pass.params.seed, TAG_TEXEL_DIRECTION, texel_ids[texel], k as u32]),
+                    };
+                    result.fill(0.0);
+                    let (n, is_inside) = pass.trace_point(&point, bounce, bounce == 0, &mut result, &mut scratch, &mut no_hits);
+                    rays += pass.params.rays as u64;
+                    traced += n;
+                    if is_inside {
+                        inside.push(p);
+                        continue;
+                    }
+                    weights[local] += tp.weight;
+                    sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
+                }
+            }
+            (sums, weights, inside, rays, traced)
+        })
+        .collect();
+    let mut out = TexelSums { sums: Vec::with_capacity(texels * stride), weights: Vec::with_capacity(texels), rays: 0, traced: 0 };
+    for (sums, weights, inside, rays, traced) in tasks {
+        out.sums.extend(sums);
+        out.weights.extend(weights);
+        inside.into_iter().for_each(|p| rejected[p as usize] = true);
+        out.rays += rays;
+        out.traced += traced;
+    }
+    out
+}
+
+/// A texel bake in progress: its receivers and points, what bounce 0 found
+/// inside geometry, and the layers so far.
+pub(crate) struct TexelState {
+    pub(crate) texels: Vec<u32>,
+    pub(crate) points: TexelPoints,
+    pub(crate) rejected: Vec<bool>,
+    pub(crate) weights: Vec<f32>,
+    pub(crate) total: Vec<f32>,
+    pub(crate) bounces: Vec<Vec<f32>>,
+    pub(crate) rays: u64,
+    pub(crate) traced: u64,
+}
+
+impl TexelState {
+    pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, pattern: DirectionPattern, seed: u32) -> TexelState {
+        let points = TexelPoints::new(atlas, coverage, points_per_texel, pattern, seed);
+        TexelState {
+            texels: coverage.texels.clone(),
+            rejected: vec![false; points.len()],
+            points,
+            weights: Vec::new(),
+            total: Vec::new(),
+            bounces: Vec::new(),
+            rays: 0,
+            traced: 0,
+        }
+    }
+
+    /// Runs bounce `pass.bounce` over the texels and adds its layer
+    /// (widened to `channels`) to the total; keeps it when `store`.
+    pub(crate) fn run(&mut self, pass: &Pass, channels: usize, store: bool) {
+        let sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected);
+        if pass.bounce == 0 {
+            self.weights = sums.weights.clone();
+        }
+        let layer = super::normalise::normalised_layer(&sums.sums, &self.weights, pass.channels, channels, pass.coeffs);
+        if self.total.is_empty() {
+            self.total = vec![0.0; layer.len()];
+        }
+        super::normalise::add_layer(&mut self.total, &layer);
+        self.rays += sums.rays;
+        self.traced += sums.traced;
+        if store {
+            self.bounces.push(layer);
+        }
+    }
+}
