@@ -779,3 +779,67 @@ fn photographic_default_keeps_sun_patches_of_a_dim_scene() {
     assert!(clipped < 0.1, "{:.0}% of the sunlit pixels clip", 100.0 * clipped);
     assert!(f64::from(lit_median) > 1.5 * f64::from(shade_median).max(1.0), "sun {lit_median} against shade {shade_median}");
 }
+
+/// Texel mode: a plane whose texels hold a known linear function of their
+/// centre's position is drawn with that function at every pixel (a
+/// bilinear read of a linear function is exact), where the vertices hold
+/// something else entirely: the opaque draws shade from the texels.
+#[test]
+fn texel_bundles_are_shaded_per_pixel_from_their_texels() {
+    let Some(gpu) = gpu_or_skip("texel_bundles_are_shaded_per_pixel_from_their_texels") else { return };
+    let mut mesh = shapes::plane_grid(4, 2.0);
+    mesh.materials[0].albedo = [0.5, 0.5, 0.5];
+    let atlas = prtbake::atlas::Atlas::unwrap(&mesh, 0.05).unwrap();
+    assert_eq!(atlas.chart_count, 1, "a flat plane is one chart");
+    let texels = prtbake::atlas::coverage::Coverage::of(&atlas).texels;
+    // The chart's affine map from atlas to world, from its first triangle.
+    let uv = atlas.triangle_uv(0).map(|p| p.as_dvec2());
+    let world = mesh.triangle_positions(0).map(|p| p.as_dvec3());
+    let det = (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]);
+    let to_world = |p: glam::DVec2| {
+        let l1 = (p - uv[0]).perp_dot(uv[2] - uv[0]) / det;
+        let l2 = (uv[1] - uv[0]).perp_dot(p - uv[0]) / det;
+        world[0] + (world[1] - world[0]) * l1 + (world[2] - world[0]) * l2
+    };
+    let f = |p: glam::DVec3| 1.0 + 0.3 * p.x + 0.2 * p.z;
+    let values: Vec<f32> = texels
+        .iter()
+        .map(|&t| f(to_world(glam::DVec2::new((t % atlas.width) as f64 + 0.5, (t / atlas.width) as f64 + 0.5))) as f32)
+        .collect();
+    // The vertices hold a constant 3: a vertex-shaded frame would be flat.
+    let mut bundle = bundle_of(mesh.clone(), 1, vec![3.0; mesh.vertex_count()], None);
+    bundle.texels = Some(prtbake::bundle::TexelLayers {
+        atlas,
+        texels,
+        transfer: Transfer {
+            order: 1,
+            channels: 1,
+            quantization: Quantization::F32,
+            layers: vec![TransferLayer { kind: LayerKind::Total, data: values }],
+        },
+    });
+    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    let settings = FrameSettings { lighting: vec![[1.0; 3]], sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(0.0) };
+    let (width, height) = (96, 96);
+    let camera = Camera::look_at(Vec3::new(0.0, 2.5, 0.01), Vec3::ZERO, scene.bounds);
+    let image = prtbake::view::render_linear(&gpu, &scene, None, &camera, &settings, width, height).unwrap();
+    let (mut compared, mut worst) = (0, 0.0f64);
+    for y in 0..height {
+        for x in 0..width {
+            let (origin, dir) = camera.pixel_ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            let t = -origin.y / dir.y;
+            let p = (origin + dir * t).as_dvec3();
+            // Inside the plane by more than two texels: every bilinear neighbour is covered.
+            if p.x.abs() > 0.9 || p.z.abs() > 0.9 {
+                continue;
+            }
+            let expected = 0.5 * f(p);
+            let got = image.pixel(x, y)[0] as f64;
+            worst = worst.max((got / expected - 1.0).abs());
+            compared += 1;
+        }
+    }
+    assert!(compared > 2000, "{compared} pixels");
+    // Binary16 target (2⁻¹¹) and the pixel centre's position against the rasteriser's.
+    assert!(worst < 0.01, "largest relative difference {worst}");
+}

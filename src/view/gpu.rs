@@ -110,9 +110,20 @@ struct PanelGpu {
     texture: Option<(wgpu::Texture, wgpu::BindGroup)>,
 }
 
+/// Texel mode's pipeline, atlas coordinates and irradiance texture, and the
+/// texels the texture is recomputed from each frame's lighting.
+struct LightmapGpu {
+    pipeline: wgpu::RenderPipeline,
+    texcoords: wgpu::Buffer,
+    texture: wgpu::Texture,
+    bind: wgpu::BindGroup,
+    scene: super::scene::LightmapScene,
+}
+
 /// Draws a prepared scene: pipelines, buffers and targets.
 pub struct Renderer {
     panel: Option<PanelGpu>,
+    lightmap: Option<LightmapGpu>,
     scene_pipeline: wgpu::RenderPipeline,
     glass_pipeline: wgpu::RenderPipeline,
     backdrop_pipeline: wgpu::RenderPipeline,
@@ -336,6 +347,68 @@ impl Renderer {
             }
             panel
         });
+        // Texel mode: the opaque draws read a texture of the texels' irradiance (group 1) at atlas coordinates (buffer 1).
+        let lightmap = match &scene.lightmap {
+            None => None,
+            Some(lm) => {
+                if lm.width > limits.max_texture_dimension_2d || lm.height > limits.max_texture_dimension_2d {
+                    return Err(ViewError::Gpu(format!(
+                        "the atlas is {} × {} texels; this device's textures reach {} (bake with a larger --texel-size)",
+                        lm.width, lm.height, limits.max_texture_dimension_2d
+                    )));
+                }
+                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("lightmap"),
+                    entries: &[hdr_texture_entry(0, wgpu::ShaderStages::FRAGMENT)],
+                });
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("lightmap.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(concat!(include_str!("shading.wgsl"), include_str!("lightmap.wgsl")).into()),
+                });
+                let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("lightmap"),
+                    bind_group_layouts: &[Some(&scene_layout), Some(&layout)],
+                    immediate_size: 0,
+                });
+                let texcoord_attributes = wgpu::vertex_attr_array![4 => Float32x2];
+                let buffers = [
+                    vertex_layout[0].clone(),
+                    Some(wgpu::VertexBufferLayout {
+                        array_stride: 8,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &texcoord_attributes,
+                    }),
+                ];
+                let pipeline = hdr_pipeline(
+                    "lightmap",
+                    &pipeline_layout,
+                    &module,
+                    ("vs_lightmap", "fs_lightmap"),
+                    &buffers,
+                    opaque,
+                    HDR_FORMAT.into(),
+                );
+                let texcoord_words: Vec<u32> = lm.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
+                let texcoords = init("lightmap texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
+                let texture = device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("lightmap"),
+                    size: wgpu::Extent3d { width: lm.width, height: lm.height, depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                });
+                let view = texture.create_view(&Default::default());
+                let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("lightmap"),
+                    layout: &layout,
+                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }],
+                });
+                Some(LightmapGpu { pipeline, texcoords, texture, bind, scene: lm.clone() })
+            }
+        };
         // Glass: alpha ← min(alpha, τ); colour untouched.
         let min = wgpu::BlendComponent {
             src_factor: wgpu::BlendFactor::One,
@@ -483,6 +556,7 @@ impl Renderer {
             Self::create_targets(device, &luminance_layout, &tonemap_layout, &adapt_state, &adapt_params, &tone_buffer, width, height);
         Ok(Renderer {
             panel,
+            lightmap,
             scene_pipeline,
             luminance_pipeline,
             tonemap_pipeline,
@@ -618,7 +692,8 @@ impl Renderer {
         .iter()
         .map(|b| b.size())
         .sum::<u64>()
-            + self.panel.as_ref().map_or(0, |p| p.texcoords.size());
+            + self.panel.as_ref().map_or(0, |p| p.texcoords.size())
+            + self.lightmap.as_ref().map_or(0, |l| l.texcoords.size() + 16 * l.scene.width as u64 * l.scene.height as u64);
         let pixels = self.targets.width as u64 * self.targets.height as u64;
         let environment = self.env_size.0 as u64 * self.env_size.1 as u64 * 16;
         GpuMemory { buffers, environment, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
@@ -679,6 +754,17 @@ impl Renderer {
         let adapt = [dt.max(0.0).to_bits(), ADAPT_TAU_BRIGHTEN_S.to_bits(), ADAPT_TAU_DARKEN_S.to_bits(), reset_adaptation as u32];
         queue.write_buffer(&self.adapt_params, 0, &words_to_bytes(&adapt));
 
+        if let Some(lm) = &self.lightmap {
+            let image = lm.scene.irradiance(self.order, self.channels, &settings.lighting);
+            let words: Vec<u32> = image.iter().flatten().map(|x| x.to_bits()).collect();
+            let size = lm.texture.size();
+            queue.write_texture(
+                lm.texture.as_image_copy(),
+                &words_to_bytes(&words),
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size.width), rows_per_image: Some(size.height) },
+                size,
+            );
+        }
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -701,10 +787,18 @@ impl Renderer {
             pass.set_bind_group(0, &self.scene_bind, &[]);
             pass.set_vertex_buffer(0, self.vertex_buffer.slice(..));
             pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-            pass.set_pipeline(&self.scene_pipeline);
+            match &self.lightmap {
+                Some(lm) => {
+                    pass.set_pipeline(&lm.pipeline);
+                    pass.set_bind_group(1, &lm.bind, &[]);
+                    pass.set_vertex_buffer(1, lm.texcoords.slice(..));
+                }
+                None => pass.set_pipeline(&self.scene_pipeline),
+            }
             for draw in self.draws.iter().filter(|d| d.kind == DrawKind::Opaque) {
                 pass.draw_indexed(draw.indices.clone(), 0, 0..1);
             }
+            pass.set_pipeline(&self.scene_pipeline);
             let panel_draws = self.draws.iter().filter(|d| d.kind == DrawKind::Panel);
             match &self.panel {
                 Some(PanelGpu { pipeline, texcoords, texture: Some((_, bind)), .. }) => {

@@ -94,6 +94,50 @@ pub struct PreparedScene {
     pub environment: Option<crate::sh::EquirectImage>,
     /// The panel's texture coordinates and texture, when the scene has a panel.
     pub panel: Option<PanelDraws>,
+    /// Texel mode: opaque draws read their light from the bundle's texels.
+    pub lightmap: Option<LightmapScene>,
+}
+
+/// A texel-mode bundle's light for the opaque draws: per GPU vertex its
+/// atlas position (texels), and the selected transfer per covered texel.
+#[derive(Clone, Debug)]
+pub struct LightmapScene {
+    pub width: u32,
+    pub height: u32,
+    /// Per GPU vertex, its position in the atlas in texels (zero for glass copies).
+    pub texcoords: Vec<[f32; 2]>,
+    /// Covered texel ids (`y * width + x`), and whether each holds light
+    /// (a texel whose points all lay inside geometry does not).
+    pub texels: Vec<u32>,
+    pub valid: Vec<bool>,
+    /// The selected layers summed, `[texel][channel][coeff]`.
+    pub transfer: Vec<f32>,
+}
+
+impl LightmapScene {
+    /// Irradiance per texel of the whole texture for `lighting` (the SH dot
+    /// product the vertex shader does per vertex), RGBA with A = 1 where the
+    /// texel holds light; the fragment shader reads it bilinearly.
+    pub fn irradiance(&self, order: u32, channels: u32, lighting: &[[f32; 3]]) -> Vec<[f32; 4]> {
+        let n2 = (order * order) as usize;
+        let stride = n2 * channels as usize;
+        let mut image = vec![[0.0f32; 4]; self.width as usize * self.height as usize];
+        for (i, &texel) in self.texels.iter().enumerate() {
+            if !self.valid[i] {
+                continue;
+            }
+            let row = &self.transfer[i * stride..(i + 1) * stride];
+            let mut e = [0.0f32; 3];
+            for (k, l) in lighting.iter().take(n2).enumerate() {
+                for c in 0..3 {
+                    let t = if channels == 3 { row[c * n2 + k] } else { row[k] };
+                    e[c] += t * l[c];
+                }
+            }
+            image[texel as usize] = [e[0], e[1], e[2], 1.0];
+        }
+        image
+    }
 }
 
 /// Prepares `bundle` for drawing.
@@ -169,7 +213,10 @@ pub fn prepare_scene_with_panel(
     let mut order: Vec<usize> = (0..draw_keys.len()).collect();
     order.sort_by_key(|&d| matches!(draw_keys[d].1, DrawKind::Glass { .. }));
 
-    // One GPU vertex per (bundle vertex, draw) pair in first-use order.
+    // One GPU vertex per (bundle vertex, draw) pair in first-use order; in
+    // texel mode per (atlas vertex, draw), since a chart seam splits a vertex.
+    let atlas = bundle.texels.as_ref().map(|t| &t.atlas);
+    let mut atlas_uv: Vec<[f32; 2]> = Vec::new();
     let mut copies: HashMap<(u32, usize), u32> = HashMap::new();
     let mut vertices = Vec::new();
     let mut texcoords = Vec::new();
@@ -185,8 +232,14 @@ pub fn prepare_scene_with_panel(
         };
         let first = indices.len() as u32;
         for &t in &triangles_of_draw[d] {
-            for v in mesh.triangle(t as usize) {
-                let index = *copies.entry((v, d)).or_insert_with(|| {
+            for (corner, v) in mesh.triangle(t as usize).into_iter().enumerate() {
+                let atlas_vertex = atlas.map(|a| a.indices[3 * t as usize + corner]);
+                let key = (atlas_vertex.unwrap_or(v), d);
+                let index = *copies.entry(key).or_insert_with(|| {
+                    if let Some(a) = atlas {
+                        let uv = a.uv[atlas_vertex.unwrap_or(0) as usize];
+                        atlas_uv.push(if matches!(kind, DrawKind::Glass { .. }) { [0.0; 2] } else { uv.to_array() });
+                    }
                     let position = mesh.positions[v as usize];
                     lo = lo.min(position);
                     hi = hi.max(position);
@@ -214,6 +267,28 @@ pub fn prepare_scene_with_panel(
         texcoords.resize(vertices.len(), [0.0; 2]);
         PanelDraws { texcoords, texture: None }
     });
+    let lightmap = match &bundle.texels {
+        Some(t) => {
+            let stride = (t.transfer.order * t.transfer.order * t.transfer.channels) as usize;
+            if t.transfer.order != transfer.order || t.transfer.channels != transfer.channels {
+                return Err(format!(
+                    "the texels' transfer (order {}, {} channels) differs from the vertices' (order {}, {})",
+                    t.transfer.order, t.transfer.channels, transfer.order, transfer.channels
+                ));
+            }
+            let texel_transfer = layers.combine(&t.transfer);
+            let valid = texel_transfer.chunks_exact(stride.max(1)).map(|row| row.iter().any(|&x| x != 0.0)).collect();
+            Some(LightmapScene {
+                width: t.atlas.width,
+                height: t.atlas.height,
+                texcoords: atlas_uv,
+                texels: t.texels.clone(),
+                valid,
+                transfer: texel_transfer,
+            })
+        }
+        None => None,
+    };
     let (masks, words_per_vertex) = match &bundle.sun {
         Some(SunSeries { masks, words_per_vertex, .. }) => (masks.clone(), *words_per_vertex),
         None => (Vec::new(), 0),
@@ -231,5 +306,6 @@ pub fn prepare_scene_with_panel(
         bounds: (lo, hi),
         environment: None,
         panel,
+        lightmap,
     })
 }

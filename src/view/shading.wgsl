@@ -60,23 +60,30 @@ fn shade_vertex(v: VertexIn) -> VertexOut {
             light += transfer[base + i] * frame.sh[i].xyz;
         }
     }
-    if (frame.sun_rgb.w > 0.5) {
-        let step = frame.counts.w;
-        let word = masks[v.source * frame.counts.z + step / 32u];
-        let bit = (word >> (step % 32u)) & 1u;
-        var cosine = dot(v.normal, frame.sun_dir.xyz);
-        if (frame.sun_dir.w > 0.5) {
-            cosine = abs(cosine);
-        } else {
-            cosine = max(cosine, 0.0);
-        }
-        light += f32(bit) * cosine * frame.sun_rgb.xyz / PI;
-    }
+    light += sun_light(v);
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
     out.light = light;
     out.albedo = v.albedo;
     return out;
+}
+
+// The sun term of a vertex: its bit of the time-lapse step times the cosine
+// and the sun's irradiance over π (zero when the sun is off).
+fn sun_light(v: VertexIn) -> vec3<f32> {
+    if (frame.sun_rgb.w < 0.5) {
+        return vec3<f32>(0.0);
+    }
+    let step = frame.counts.w;
+    let word = masks[v.source * frame.counts.z + step / 32u];
+    let bit = (word >> (step % 32u)) & 1u;
+    var cosine = dot(v.normal, frame.sun_dir.xyz);
+    if (frame.sun_dir.w > 0.5) {
+        cosine = abs(cosine);
+    } else {
+        cosine = max(cosine, 0.0);
+    }
+    return f32(bit) * cosine * frame.sun_rgb.xyz / PI;
 }
 
 @fragment

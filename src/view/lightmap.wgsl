@@ -1,0 +1,57 @@
+// Texel mode (view::scene::LightmapScene), appended to shading.wgsl: the
+// opaque draws take their sky light from the texels instead of the vertices.
+// The texture holds each texel's irradiance E = Σ_i L_i t_i (the vertex
+// shader's dot product, done per texel on the CPU), A = 1 where the texel
+// holds light. A fragment reads the four texels around it bilinearly, over
+// those that hold light only: charts are packed 2 texels apart, so the
+// reads never mix two charts, and a chart's rim needs no dilated copy.
+// The sun term stays per vertex (sun bits per texel are not baked yet).
+
+@group(1) @binding(0) var lightmap: texture_2d<f32>;
+
+struct LightmapOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) sun: vec3<f32>,
+    @location(1) albedo: vec3<f32>,
+    // Position in the atlas, texels.
+    @location(2) texcoord: vec2<f32>,
+};
+
+@vertex
+fn vs_lightmap(v: VertexIn, @location(4) texcoord: vec2<f32>) -> LightmapOut {
+    var out: LightmapOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.sun = sun_light(v);
+    out.albedo = v.albedo;
+    out.texcoord = texcoord;
+    return out;
+}
+
+@fragment
+fn fs_lightmap(in: LightmapOut) -> @location(0) vec4<f32> {
+    let size = vec2<i32>(textureDimensions(lightmap));
+    // Texel (x, y) covers [x, x+1) × [y, y+1): its centre is at +0.5.
+    let p = in.texcoord - vec2<f32>(0.5);
+    let corner = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    var sum = vec3<f32>(0.0);
+    var weight = 0.0;
+    for (var dy = 0; dy < 2; dy++) {
+        for (var dx = 0; dx < 2; dx++) {
+            let texel = clamp(corner + vec2<i32>(dx, dy), vec2<i32>(0), size - vec2<i32>(1));
+            let w = select(1.0 - f.x, f.x, dx == 1) * select(1.0 - f.y, f.y, dy == 1);
+            let s = textureLoad(lightmap, texel, 0);
+            sum += w * s.a * s.rgb;
+            weight += w * s.a;
+        }
+    }
+    var e = vec3<f32>(0.0);
+    if (weight > 1e-6) {
+        e = sum / weight;
+    } else {
+        // No neighbour holds light: the texel under the fragment, whatever it holds.
+        let texel = clamp(vec2<i32>(floor(in.texcoord)), vec2<i32>(0), size - vec2<i32>(1));
+        e = textureLoad(lightmap, texel, 0).rgb;
+    }
+    return vec4<f32>(in.albedo * (e + in.sun), 1.0);
+}
