@@ -203,7 +203,9 @@ def main():
     info = json.loads(subprocess.run([args.prtbake, "inspect", args.bundle, "--json"], check=True, capture_output=True, text=True).stdout)
     meta = info.get("meta", info)
     order = args.order or int(find_key(meta, "order") or 3)
-    bounces = args.bounces if args.bounces is not None else int(find_key(meta, "bounces") or 1)
+    # A direct-only bake records 0 bounces: not "absent".
+    recorded = find_key(meta, "bounces")
+    bounces = args.bounces if args.bounces is not None else int(recorded if recorded is not None else 1)
 
     # prtbake's side: linear radiance at twice the size, 2x2 averaged.
     shot = os.path.join(args.out, "prtbake_2x.exr")

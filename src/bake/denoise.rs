@@ -28,15 +28,15 @@ pub const PASSES: usize = 2;
 /// Receivers per parallel task.
 const PER_TASK: usize = 4096;
 
-/// Edge neighbours per vertex, sorted and unique (compressed rows).
-struct Neighbours {
+/// Neighbours per receiver, sorted and unique (compressed rows): a vertex's
+/// edge neighbours, or a texel's 8 surrounding texels of its chart.
+pub(crate) struct Neighbours {
     offsets: Vec<u32>,
     list: Vec<u32>,
 }
 
 impl Neighbours {
     fn build(mesh: &Mesh) -> Neighbours {
-        let n = mesh.vertex_count();
         let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(mesh.indices.len() * 2);
         for tri in mesh.indices.chunks_exact(3) {
             for k in 0..3 {
@@ -47,6 +47,11 @@ impl Neighbours {
                 }
             }
         }
+        Neighbours::from_pairs(mesh.vertex_count(), pairs)
+    }
+
+    /// From directed pairs `(receiver, neighbour)` over `n` receivers.
+    pub(crate) fn from_pairs(n: usize, mut pairs: Vec<(u32, u32)>) -> Neighbours {
         pairs.sort_unstable();
         pairs.dedup();
         let mut offsets = vec![0u32; n + 1];
@@ -88,6 +93,27 @@ pub fn denoise(mesh: &Mesh, total: &mut [f32], layers: &mut [Vec<f32>], noise: &
     }
     let neighbours = Neighbours::build(mesh);
     let area = vertex_areas(mesh);
+    let mixes = |u: usize, v: usize| mesh.normals[u].dot(mesh.normals[v]) >= CREASE_COS;
+    filter_receivers(&neighbours, &area, mixes, total, layers, noise, stride, k);
+}
+
+/// The filter over any receivers: `neighbours` and `area` per receiver,
+/// `mixes(u, v)` false where two neighbours must never be averaged.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn filter_receivers(
+    neighbours: &Neighbours,
+    area: &[f32],
+    mixes: impl Fn(usize, usize) -> bool + Sync,
+    total: &mut [f32],
+    layers: &mut [Vec<f32>],
+    noise: &mut Vec<f32>,
+    stride: usize,
+    k: f32,
+) {
+    let n = area.len();
+    if noise.len() != n || total.len() != n * stride || k <= 0.0 || stride == 0 {
+        return;
+    }
     let inv_two_k2 = 1.0 / (2.0 * k * k);
     for _ in 0..PASSES {
         // Each vertex's (neighbour, weight) pairs, itself first, from this pass's inputs.
@@ -100,7 +126,7 @@ pub fn denoise(mesh: &Mesh, total: &mut [f32], layers: &mut [Vec<f32>], noise: &
                 let var_v = noise[v] * noise[v];
                 for &u in neighbours.of(v) {
                     let u_index = u as usize;
-                    if mesh.normals[u_index].dot(mesh.normals[v]) < CREASE_COS {
+                    if !mixes(u_index, v) {
                         continue;
                     }
                     let spread = var_v + noise[u_index] * noise[u_index];

@@ -26,6 +26,8 @@ pub struct TexelTransfer {
     /// The footprint each texel's kept points stood for (texels²; 0: every
     /// point inside geometry, or a texel of nothing).
     pub covered_area: Vec<f32>,
+    /// Per texel, the standard error of its DC (channel 0), after `--denoise`.
+    pub noise: Vec<f32>,
     pub points: u64,
     pub points_rejected: u64,
     /// Rays evaluated and traced for the texels (the vertices' are in the vertex result).
@@ -59,11 +61,15 @@ pub fn bake_texels(
     let coverage = Coverage::of(&atlas);
     let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params.pattern, params.seed);
     let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, None, None, Some(&mut state))?;
+    if params.denoise > 0.0 {
+        state.denoise(result.channels * crate::sh::coeff_count(params.order), params.denoise);
+    }
     let texel = TexelTransfer {
         texels: state.texels,
         total: state.total,
         bounces: state.bounces,
         covered_area: state.weights,
+        noise: state.noise,
         points: state.points.len() as u64,
         points_rejected: state.rejected.iter().filter(|&&r| r).count() as u64,
         rays: state.rays,

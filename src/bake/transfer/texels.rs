@@ -23,6 +23,7 @@ use rayon::prelude::*;
 use super::run::{Pass, Point, Scratch};
 use crate::atlas::coverage::{clip_to_texel, polygon_area, Coverage};
 use crate::atlas::Atlas;
+use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::sampling::{hash_seed, sample_2d, square_to_triangle, DirectionPattern};
 
 const TAG_TEXEL_POSITION: u32 = 0x5054_0001;
@@ -133,6 +134,8 @@ fn barycentric(uv: [Vec2; 3], p: DVec2) -> [f32; 3] {
 pub(crate) struct TexelSums {
     pub(crate) sums: Vec<f32>,
     pub(crate) weights: Vec<f32>,
+    /// Per texel, its points' DC moments (the noise estimate).
+    pub(crate) moments: Vec<Moments>,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
 }
@@ -141,12 +144,14 @@ pub(crate) fn run_texel_pass(pass: &Pass, points: &TexelPoints, texel_ids: &[u32
     let bounce = pass.bounce;
     let stride = pass.channels * pass.coeffs;
     let texels = points.start.len() - 1;
-    let tasks: Vec<(Vec<f32>, Vec<f32>, Vec<u32>, u64, u64)> = (0..texels.div_ceil(TEXELS_PER_TASK))
+    type Task = (Vec<f32>, Vec<f32>, Vec<Moments>, Vec<u32>, u64, u64);
+    let tasks: Vec<Task> = (0..texels.div_ceil(TEXELS_PER_TASK))
         .into_par_iter()
         .map(|task| {
             let range = task * TEXELS_PER_TASK..((task + 1) * TEXELS_PER_TASK).min(texels);
             let mut sums = vec![0.0f32; range.len() * stride];
             let mut weights = vec![0.0f32; range.len()];
+            let mut moments = vec![Moments::default(); range.len()];
             let mut inside = Vec::new();
             let (mut rays, mut traced) = (0u64, 0u64);
             let mut result = vec![0.0f32; stride];
@@ -178,16 +183,24 @@ pub(crate) fn run_texel_pass(pass: &Pass, points: &TexelPoints, texel_ids: &[u32
                         continue;
                     }
                     weights[local] += tp.weight;
+                    moments[local].add(tp.weight, result[0]);
                     sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
                 }
             }
-            (sums, weights, inside, rays, traced)
+            (sums, weights, moments, inside, rays, traced)
         })
         .collect();
-    let mut out = TexelSums { sums: Vec::with_capacity(texels * stride), weights: Vec::with_capacity(texels), rays: 0, traced: 0 };
-    for (sums, weights, inside, rays, traced) in tasks {
+    let mut out = TexelSums {
+        sums: Vec::with_capacity(texels * stride),
+        weights: Vec::with_capacity(texels),
+        moments: Vec::with_capacity(texels),
+        rays: 0,
+        traced: 0,
+    };
+    for (sums, weights, moments, inside, rays, traced) in tasks {
         out.sums.extend(sums);
         out.weights.extend(weights);
+        out.moments.extend(moments);
         inside.into_iter().for_each(|p| rejected[p as usize] = true);
         out.rays += rays;
         out.traced += traced;
@@ -204,6 +217,11 @@ pub(crate) struct TexelState {
     pub(crate) weights: Vec<f32>,
     pub(crate) total: Vec<f32>,
     pub(crate) bounces: Vec<Vec<f32>>,
+    /// Per texel, the standard error of its DC (channel 0), bounces added in quadrature.
+    pub(crate) noise: Vec<f32>,
+    /// Per texel, its chart (that of its first triangle).
+    pub(crate) chart: Vec<u32>,
+    pub(crate) width: u32,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
 }
@@ -218,6 +236,9 @@ impl TexelState {
             weights: Vec::new(),
             total: Vec::new(),
             bounces: Vec::new(),
+            noise: Vec::new(),
+            chart: (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect(),
+            width: atlas.width,
             rays: 0,
             traced: 0,
         }
@@ -230,6 +251,8 @@ impl TexelState {
         if pass.bounce == 0 {
             self.weights = sums.weights.clone();
         }
+        let sigma = VertexDc::new(&self.weights, &sums.sums, pass.channels * pass.coeffs, &sums.moments).standard_errors();
+        add_noise_in_quadrature(&mut self.noise, &sigma);
         let layer = super::normalise::normalised_layer(&sums.sums, &self.weights, pass.channels, channels, pass.coeffs);
         if self.total.is_empty() {
             self.total = vec![0.0; layer.len()];
@@ -240,5 +263,122 @@ impl TexelState {
         if store {
             self.bounces.push(layer);
         }
+    }
+}
+
+impl TexelState {
+    /// `--denoise K` over the texels: the vertices' filter
+    /// ([`crate::bake::denoise`]) with each texel's 8 surrounding texels of
+    /// its own chart as neighbours and its covered area as its weight.
+    pub(crate) fn denoise(&mut self, stride: usize, k: f32) {
+        let n = self.texels.len();
+        let index_of = |id: u32| self.texels.binary_search(&id).ok();
+        let mut pairs = Vec::with_capacity(n * 8);
+        for (i, &id) in self.texels.iter().enumerate() {
+            let (x, y) = ((id % self.width) as i64, (id / self.width) as i64);
+            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let (u, v) = (x + dx, y + dy);
+                if u < 0 || v < 0 || u >= self.width as i64 {
+                    continue;
+                }
+                if let Some(j) = index_of((v * self.width as i64 + u) as u32).filter(|&j| self.chart[j] == self.chart[i]) {
+                    pairs.push((i as u32, j as u32));
+                }
+            }
+        }
+        let neighbours = crate::bake::denoise::Neighbours::from_pairs(n, pairs);
+        let area = self.weights.clone();
+        crate::bake::denoise::filter_receivers(
+            &neighbours,
+            &area,
+            |_, _| true,
+            &mut self.total,
+            &mut self.bounces,
+            &mut self.noise,
+            stride,
+            k,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 24 × 24 texel grid, one channel, DC only: 0.5 plus noise of known σ
+    /// left of x = 12 (lit), 0 right of it (a sharp shadow). `charts` gives
+    /// each texel's chart.
+    fn grid(charts: impl Fn(u32) -> u32) -> (TexelState, Vec<f32>) {
+        let (w, sigma) = (24u32, 0.04f32);
+        let mut state = 777u64;
+        let mut gauss = || {
+            let mut uniform = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            let (a, b) = (uniform(), uniform());
+            ((-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()) as f32
+        };
+        let texels: Vec<u32> = (0..w * w).collect();
+        let lit = |id: u32| id % w < 12;
+        let clean: Vec<f32> = texels.iter().map(|&id| if lit(id) { 0.5 } else { 0.0 }).collect();
+        let total = texels.iter().map(|&id| clean[id as usize] + if lit(id) { sigma * gauss() } else { 0.0 }).collect();
+        let noise = texels.iter().map(|&id| if lit(id) { sigma } else { 0.0 }).collect();
+        let chart = texels.iter().map(|&id| charts(id)).collect();
+        let n = texels.len();
+        let state = TexelState {
+            texels,
+            points: TexelPoints { start: vec![0; n + 1], points: Vec::new() },
+            rejected: Vec::new(),
+            weights: vec![1.0; n],
+            total,
+            bounces: Vec::new(),
+            noise,
+            chart,
+            width: w,
+            rays: 0,
+            traced: 0,
+        };
+        (state, clean)
+    }
+
+    /// The texel denoiser lowers the noise on the lit side by more than 2×
+    /// and leaves the shadow edge where it is, within one texel: every texel
+    /// one or more texels from the edge keeps its side.
+    #[test]
+    fn the_denoiser_keeps_a_sharp_shadow_edge_within_one_texel() {
+        let (mut state, clean) = grid(|_| 0);
+        let rms = |values: &[f32]| {
+            let far: Vec<usize> = (0..values.len()).filter(|&i| (i as u32 % 24) < 10).collect();
+            (far.iter().map(|&i| (values[i] - clean[i]).powi(2)).sum::<f32>() / far.len() as f32).sqrt()
+        };
+        let before = rms(&state.total);
+        state.denoise(1, 2.0);
+        let after = rms(&state.total);
+        assert!(before > 0.03 && after < before / 2.0, "rms {before} → {after}");
+        for (i, &v) in state.total.iter().enumerate() {
+            let x = i as u32 % 24;
+            if x <= 10 {
+                assert!(v > 0.35, "lit texel {i} fell to {v}");
+            }
+            if x >= 13 {
+                assert!(v < 0.05, "shadowed texel {i} rose to {v}");
+            }
+        }
+    }
+
+    /// Texels of two charts are never averaged, however alike their values.
+    #[test]
+    fn the_denoiser_does_not_cross_charts() {
+        let (mut state, _) = grid(|id| u32::from(id / 24 >= 12));
+        // Rows 12 on are another chart at a constant 0.3, as noise-free.
+        for i in 12 * 24..24 * 24 {
+            state.total[i] = 0.3;
+            state.noise[i] = 0.0;
+        }
+        let before: Vec<f32> = state.total[12 * 24..].to_vec();
+        state.denoise(1, 100.0);
+        // Averaging equal values may round in the last bit; mixing with the first chart (0 to 0.5) would not.
+        assert!(state.total[12 * 24..].iter().zip(&before).all(|(a, b)| (a - b).abs() < 1e-6), "the second chart changed");
     }
 }
