@@ -314,18 +314,17 @@ impl Renderer {
         let opaque = (true, wgpu::CompareFunction::Less);
         let scene_pipeline =
             hdr_pipeline("scene", &scene_pipeline_layout, &shading, ("vs_main", "fs_main"), &vertex_layout, opaque, HDR_FORMAT.into());
-        // The panel: the scene's shading (same bindings) plus its texture in group 1 and texture coordinates in buffer 1.
-        let panel = scene.panel.as_ref().map(|draws| {
+        // A textured variant of the scene's shading (same bindings in group 0): a texture
+        // in group 1 and texture coordinates in vertex buffer 1 (the panel, texel mode).
+        let textured = |label: &str, source: String, entry_points: (&str, &str)| {
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("panel"),
+                label: Some(label),
                 entries: &[hdr_texture_entry(0, wgpu::ShaderStages::FRAGMENT)],
             });
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("panel.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(concat!(include_str!("shading.wgsl"), include_str!("panel.wgsl")).into()),
-            });
+            let module = device
+                .create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("panel"),
+                label: Some(label),
                 bind_group_layouts: &[Some(&scene_layout), Some(&layout)],
                 immediate_size: 0,
             });
@@ -338,7 +337,11 @@ impl Renderer {
                     attributes: &texcoord_attributes,
                 }),
             ];
-            let pipeline = hdr_pipeline("panel", &pipeline_layout, &module, ("vs_panel", "fs_panel"), &buffers, opaque, HDR_FORMAT.into());
+            (hdr_pipeline(label, &pipeline_layout, &module, entry_points, &buffers, opaque, HDR_FORMAT.into()), layout)
+        };
+        let panel = scene.panel.as_ref().map(|draws| {
+            let source = concat!(include_str!("shading.wgsl"), include_str!("panel.wgsl")).to_string();
+            let (pipeline, layout) = textured("panel", source, ("vs_panel", "fs_panel"));
             let texcoord_words: Vec<u32> = draws.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
             let texcoords = init("panel texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
             let mut panel = PanelGpu { pipeline, layout, texcoords, texture: None };
@@ -357,37 +360,8 @@ impl Renderer {
                         lm.width, lm.height, limits.max_texture_dimension_2d
                     )));
                 }
-                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("lightmap"),
-                    entries: &[hdr_texture_entry(0, wgpu::ShaderStages::FRAGMENT)],
-                });
-                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("lightmap.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(concat!(include_str!("shading.wgsl"), include_str!("lightmap.wgsl")).into()),
-                });
-                let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("lightmap"),
-                    bind_group_layouts: &[Some(&scene_layout), Some(&layout)],
-                    immediate_size: 0,
-                });
-                let texcoord_attributes = wgpu::vertex_attr_array![4 => Float32x2];
-                let buffers = [
-                    vertex_layout[0].clone(),
-                    Some(wgpu::VertexBufferLayout {
-                        array_stride: 8,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &texcoord_attributes,
-                    }),
-                ];
-                let pipeline = hdr_pipeline(
-                    "lightmap",
-                    &pipeline_layout,
-                    &module,
-                    ("vs_lightmap", "fs_lightmap"),
-                    &buffers,
-                    opaque,
-                    HDR_FORMAT.into(),
-                );
+                let source = concat!(include_str!("shading.wgsl"), include_str!("lightmap.wgsl")).to_string();
+                let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"));
                 let texcoord_words: Vec<u32> = lm.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
                 let texcoords = init("lightmap texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
                 let texture = device.create_texture(&wgpu::TextureDescriptor {
