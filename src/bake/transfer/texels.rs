@@ -140,7 +140,13 @@ pub(crate) struct TexelSums {
     pub(crate) traced: u64,
 }
 
-pub(crate) fn run_texel_pass(pass: &Pass, points: &TexelPoints, texel_ids: &[u32], rejected: &mut [bool]) -> TexelSums {
+pub(crate) fn run_texel_pass(
+    pass: &Pass,
+    points: &TexelPoints,
+    texel_ids: &[u32],
+    rejected: &mut [bool],
+    progress: &crate::bake::progress::Progress,
+) -> TexelSums {
     let bounce = pass.bounce;
     let stride = pass.channels * pass.coeffs;
     let texels = points.start.len() - 1;
@@ -187,6 +193,7 @@ pub(crate) fn run_texel_pass(pass: &Pass, points: &TexelPoints, texel_ids: &[u32
                     sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
                 }
             }
+            progress.add(rays);
             (sums, weights, moments, inside, rays, traced)
         })
         .collect();
@@ -247,7 +254,11 @@ impl TexelState {
     /// Runs bounce `pass.bounce` over the texels and adds its layer
     /// (widened to `channels`) to the total; keeps it when `store`.
     pub(crate) fn run(&mut self, pass: &Pass, channels: usize, store: bool) {
-        let sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected);
+        let rays = self.points.len() as u64 * pass.params.rays as u64;
+        let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
+        let progress = crate::bake::progress::Progress::start(label, rays, pass.params.quiet);
+        let sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected, &progress);
+        drop(progress);
         if pass.bounce == 0 {
             self.weights = sums.weights.clone();
         }
