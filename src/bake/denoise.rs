@@ -186,9 +186,22 @@ pub(crate) fn filter_receivers(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::verify::shapes;
+
+    /// Standard normal numbers, Box–Muller from a 64-bit LCG seeded with
+    /// `seed`: fixed, so the denoiser tests (vertices and texels) are exact.
+    pub(crate) fn gaussian_stream(mut state: u64) -> impl FnMut() -> f32 {
+        move || {
+            let mut uniform = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            let (a, b) = (uniform(), uniform());
+            ((-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()) as f32
+        }
+    }
 
     /// A flat plane: 0.5 plus noise of known σ on the left half, 0 (a
     /// shadow) on the right. The filter lowers the noise on the lit half
@@ -199,16 +212,7 @@ mod tests {
         let mesh = shapes::plane_grid(24, 1.0);
         let n = mesh.vertex_count();
         let sigma = 0.04f32;
-        let mut state = 12345u64;
-        let mut gauss = || {
-            // Box–Muller from a 64-bit LCG: fixed, so the test is exact.
-            let mut uniform = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (uniform(), uniform());
-            ((-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()) as f32
-        };
+        let mut gauss = gaussian_stream(12345);
         let lit = |v: usize| mesh.positions[v].x < 0.0;
         let clean: Vec<f32> = (0..n).map(|v| if lit(v) { 0.5 } else { 0.0 }).collect();
         let mut total: Vec<f32> = (0..n).map(|v| clean[v] + if lit(v) { sigma * gauss() } else { 0.0 }).collect();

@@ -364,22 +364,8 @@ impl Renderer {
                 let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"));
                 let texcoord_words: Vec<u32> = lm.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
                 let texcoords = init("lightmap texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
-                let texture = device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("lightmap"),
-                    size: wgpu::Extent3d { width: lm.width, height: lm.height, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                });
-                let view = texture.create_view(&Default::default());
-                let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("lightmap"),
-                    layout: &layout,
-                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }],
-                });
+                let size = wgpu::Extent3d { width: lm.width, height: lm.height, depth_or_array_layers: 1 };
+                let (texture, bind) = rgba32f_texture(device, &layout, "lightmap", size);
                 Some(LightmapGpu { pipeline, texcoords, texture, bind, scene: lm.clone() })
             }
         };
@@ -731,13 +717,7 @@ impl Renderer {
         if let Some(lm) = &self.lightmap {
             let image = lm.scene.irradiance(self.order, self.channels, &settings.lighting);
             let words: Vec<u32> = image.iter().flatten().map(|x| x.to_bits()).collect();
-            let size = lm.texture.size();
-            queue.write_texture(
-                lm.texture.as_image_copy(),
-                &words_to_bytes(&words),
-                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size.width), rows_per_image: Some(size.height) },
-                size,
-            );
+            write_rgba32f(queue, &lm.texture, &words);
         }
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         {
@@ -827,31 +807,48 @@ impl PanelGpu {
     fn set_texture(&mut self, gpu: &Gpu, texture: &PanelTexture) {
         let size = wgpu::Extent3d { width: texture.width.max(1), height: texture.height.max(1), depth_or_array_layers: 1 };
         if self.texture.as_ref().is_none_or(|(t, _)| t.size() != size) {
-            let gpu_texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("panel"),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba32Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            });
-            let view = gpu_texture.create_view(&Default::default());
-            let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("panel"),
-                layout: &self.layout,
-                entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }],
-            });
-            self.texture = Some((gpu_texture, bind));
+            self.texture = Some(rgba32f_texture(&gpu.device, &self.layout, "panel", size));
         }
         let Some((gpu_texture, _)) = &self.texture else { return };
         let texels: Vec<u32> = texture.rgb.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]).map(f32::to_bits).collect();
-        gpu.queue.write_texture(
-            gpu_texture.as_image_copy(),
-            &words_to_bytes(&texels),
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size.width), rows_per_image: Some(size.height) },
-            size,
-        );
+        write_rgba32f(&gpu.queue, gpu_texture, &texels);
     }
+}
+
+/// An RGBA32F texture the fragment stage reads (`textureLoad`), bound alone
+/// in a group of `layout` (the panel's and texel mode's group 1).
+fn rgba32f_texture(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    label: &str,
+    size: wgpu::Extent3d,
+) -> (wgpu::Texture, wgpu::BindGroup) {
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&Default::default());
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }],
+    });
+    (texture, bind)
+}
+
+/// Writes a whole RGBA32F texture from its texels' f32 bits (4 words a texel, rows in order).
+fn write_rgba32f(queue: &wgpu::Queue, texture: &wgpu::Texture, words: &[u32]) {
+    let size = texture.size();
+    queue.write_texture(
+        texture.as_image_copy(),
+        &words_to_bytes(words),
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * size.width), rows_per_image: Some(size.height) },
+        size,
+    );
 }

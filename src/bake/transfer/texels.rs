@@ -59,13 +59,13 @@ impl TexelPoints {
                 for e in entries {
                     let t = coverage.triangle[e];
                     let uv = atlas.triangle_uv(t as usize);
-                    let polygon = clip_to_texel(uv, x, y);
+                    let fan = Fan::of(&clip_to_texel(uv, x, y));
                     let count = ((points_per_texel as f32 * coverage.area[e] / total).round() as u32).max(1);
                     let weight = coverage.area[e] / count as f32;
                     let stream = hash_seed(&[seed, TAG_TEXEL_POSITION, texel, t]);
                     for k in 0..count {
                         let (u, v) = sample_2d(pattern, k, 0, stream);
-                        let p = point_in_polygon(&polygon, u, v);
+                        let p = fan.point(u, v);
                         let bary = barycentric(uv, p);
                         points.push(TexelPoint { triangle: t, bary, weight });
                     }
@@ -88,30 +88,44 @@ impl TexelPoints {
     }
 }
 
-/// The point at `(u, v)` of the unit square mapped into a convex polygon:
-/// `u` picks a triangle of its fan by area and is rescaled within it.
-fn point_in_polygon(polygon: &[DVec2], u: f32, v: f32) -> DVec2 {
-    let fan: Vec<(f64, [DVec2; 3])> = (1..polygon.len().saturating_sub(1))
-        .map(|k| {
-            let tri = [polygon[0], polygon[k], polygon[k + 1]];
-            (polygon_area(&tri), tri)
-        })
-        .collect();
-    let total: f64 = fan.iter().map(|f| f.0).sum();
-    if fan.is_empty() || total <= 0.0 {
-        return polygon.first().copied().unwrap_or_default();
+/// A convex polygon as the fan of triangles from its first corner, each
+/// with its area: built once per footprint part, sampled per point.
+struct Fan {
+    first: DVec2,
+    triangles: Vec<(f64, [DVec2; 3])>,
+    area: f64,
+}
+
+impl Fan {
+    fn of(polygon: &[DVec2]) -> Fan {
+        let triangles: Vec<(f64, [DVec2; 3])> = (1..polygon.len().saturating_sub(1))
+            .map(|k| {
+                let tri = [polygon[0], polygon[k], polygon[k + 1]];
+                (polygon_area(&tri), tri)
+            })
+            .collect();
+        let area = triangles.iter().map(|f| f.0).sum();
+        Fan { first: polygon.first().copied().unwrap_or_default(), triangles, area }
     }
-    let mut target = u as f64 * total;
-    let last = fan.len() - 1;
-    for (k, (area, tri)) in fan.iter().enumerate() {
-        if target <= *area || k == last {
-            let u = (target / area.max(f64::MIN_POSITIVE)).clamp(0.0, 1.0) as f32;
-            let b = square_to_triangle(u, v);
-            return tri[0] * b[0] as f64 + tri[1] * b[1] as f64 + tri[2] * b[2] as f64;
+
+    /// The point at `(u, v)` of the unit square mapped into the polygon:
+    /// `u` picks a triangle by area and is rescaled within it.
+    fn point(&self, u: f32, v: f32) -> DVec2 {
+        if self.triangles.is_empty() || self.area <= 0.0 {
+            return self.first;
         }
-        target -= area;
+        let mut target = u as f64 * self.area;
+        let last = self.triangles.len() - 1;
+        for (k, (area, tri)) in self.triangles.iter().enumerate() {
+            if target <= *area || k == last {
+                let u = (target / area.max(f64::MIN_POSITIVE)).clamp(0.0, 1.0) as f32;
+                let b = square_to_triangle(u, v);
+                return tri[0] * b[0] as f64 + tri[1] * b[1] as f64 + tri[2] * b[2] as f64;
+            }
+            target -= area;
+        }
+        self.first
     }
-    polygon[0]
 }
 
 /// Barycentric coordinates of `p` in the atlas triangle `uv` (clamped into it).
@@ -298,10 +312,9 @@ impl TexelState {
             }
         }
         let neighbours = crate::bake::denoise::Neighbours::from_pairs(n, pairs);
-        let area = self.weights.clone();
         crate::bake::denoise::filter_receivers(
             &neighbours,
-            &area,
+            &self.weights,
             |_, _| true,
             &mut self.total,
             &mut self.bounces,
@@ -321,15 +334,7 @@ mod tests {
     /// each texel's chart.
     fn grid(charts: impl Fn(u32) -> u32) -> (TexelState, Vec<f32>) {
         let (w, sigma) = (24u32, 0.04f32);
-        let mut state = 777u64;
-        let mut gauss = || {
-            let mut uniform = || {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (uniform(), uniform());
-            ((-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()) as f32
-        };
+        let mut gauss = crate::bake::denoise::tests::gaussian_stream(777);
         let texels: Vec<u32> = (0..w * w).collect();
         let lit = |id: u32| id % w < 12;
         let clean: Vec<f32> = texels.iter().map(|&id| if lit(id) { 0.5 } else { 0.0 }).collect();
