@@ -23,15 +23,22 @@ negative light), drawn for Cycles as a 512×256 equirectangular map in its axes.
 Errors are relative RMS over the vertices, sqrt(Σ (b − r)² / Σ r²).
 - prtbake's: against its own converged bake (`--rays 256 --adaptive 3`;
   two seeds of it are compared to show how converged it is; the curves use
-  a third seed, so they share no samples with it): total error.
-- Cycles': its noise, from two seeds at each sample count: the relative RMS
-  difference over √2. Cycles is unbiased, so that is its error against its
-  own converged answer; a converged Cycles bake of this room takes hours here.
-- The two answers against each other: prtbake's reference against the mean
-  of Cycles' two seeds at the most samples. This measures what the two
-  define differently (prtbake's vertex value is the hat-weighted mean over
-  its one-ring, Cycles' the value at the vertex) plus Cycles' remaining
-  noise (about half its two seeds' difference).
+  a third seed, so they share no samples with it): total error, printed
+  raw and without the reference's own noise (its two seeds' difference
+  over √2, taken out in quadrature).
+- Cycles': its noise, from two seeds at each sample count: the RMS
+  difference over √2, on the scale of the mean of the two seeds at the
+  most samples (one seed's values would put that seed's noise in the
+  denominator). Cycles is unbiased, so that is its error against its own
+  converged answer; a converged Cycles bake of this room takes hours here.
+- The two answers against each other. The two tools define a vertex's
+  value differently: prtbake's is the hat-weighted mean over its one-ring,
+  Cycles' the value at the vertex (each corner evaluated just inside its
+  triangle, the corners averaged). Where a vertex's one-ring lies within
+  3 cm of it ("free" vertices) the two agree, so the comparison is made
+  there and on all vertices apart: prtbake's reference against the mean of
+  Cycles' two seeds at the most samples, with that mean's own noise (half
+  the two seeds' difference) taken out in quadrature.
 Seconds are wall time of the bake: prtbake's whole process, Cycles'
 `bpy.ops.object.bake` (scene already built; the first call's BVH build included).
 
@@ -275,6 +282,23 @@ def svg_chart(curves, path):
     Path(path).write_text("\n".join(out))
 
 
+def free_vertices(obj_path, size):
+    """Vertices whose one-ring lies within `size` of them, where a one-ring
+    mean and the value at the vertex agree."""
+    positions, _, faces, _, _ = parse_obj(obj_path)
+    reach = [0.0] * len(positions)
+    for face in faces:
+        for v in face:
+            for w in face:
+                if w != v:
+                    reach[v] = max(reach[v], math.dist(positions[v], positions[w]))
+    return [v for v in range(len(positions)) if 0.0 < reach[v] <= size]
+
+
+def subset(values, indices):
+    return [values[i] for i in indices]
+
+
 def time_at(points, target):
     """Seconds at which a curve first reaches `target` error (log-log interpolation), or None."""
     for (s0, e0), (s1, e1) in zip(points, points[1:]):
@@ -306,12 +330,14 @@ def main():
 
     if args.quick:
         sweep = [("prtbake-r16", ["--rays", "16", "--adaptive", "0"]), ("prtbake-r64", ["--rays", "64", "--adaptive", "0"])]
-        adaptive = [("prtbake-a1-r32", ["--rays", "32", "--adaptive", "1"])]
+        adaptive = [("prtbake-a1-r32", ["--rays", "32", "--adaptive", "1"]), ("prtbake-t05-r16", ["--rays", "16", "--adaptive", "1", "--texel-size", "0.05"])]
         references = [("prtbake-ref-s1", ["--rays", "128", "--adaptive", "0", "--seed", "1"]), ("prtbake-ref-s2", ["--rays", "128", "--adaptive", "0", "--seed", "2"])]
         samples = [4, 16]
     else:
         sweep = [(f"prtbake-r{r}", ["--rays", str(r), "--adaptive", "0"]) for r in (16, 32, 64, 128, 256)]
         adaptive = [(f"prtbake-a1-r{r}", ["--rays", str(r), "--adaptive", "1"]) for r in (16, 32, 64, 128)]
+        # Texel mode: the vertices' bounces read from 2 cm texels (lower bias).
+        adaptive += [(f"prtbake-t02-r{r}", ["--rays", str(r), "--adaptive", "1", "--texel-size", "0.02"]) for r in (16, 32, 64)]
         references = [(f"prtbake-ref-s{s}", ["--rays", "256", "--adaptive", "3", "--seed", str(s)]) for s in (1, 2)]
         samples = [4, 16, 64, 128]
     seed3 = ["--seed", "3"]
@@ -332,14 +358,31 @@ def main():
 
     p_ref = shade[references[0][0]]
     c_best = [(a + b) / 2 for a, b in zip(cycles[(samples[-1], 1)], cycles[(samples[-1], 2)])]
+    # The reference's own noise, taken out of every prtbake figure in quadrature.
+    p_ref_noise = relative_rms(shade[references[1][0]], p_ref) / math.sqrt(2)
+    quiet = lambda error, noise: math.sqrt(max(error * error - noise * noise, 0.0))
     rows, curves = [], []
     for b in bakes[len(references):]:
-        rows.append({"tool": "prtbake", "setting": b["args"], "seconds": b["seconds"], "error": relative_rms(shade[b["name"]], p_ref)})
+        raw = relative_rms(shade[b["name"]], p_ref)
+        rows.append({"tool": "prtbake", "setting": b["args"], "seconds": b["seconds"], "raw": raw, "error": quiet(raw, p_ref_noise)})
+    c_scale = math.sqrt(sum(m * m for m in c_best))
     for n in samples:
-        noise = relative_rms(cycles[(n, 2)], cycles[(n, 1)]) / math.sqrt(2)
-        rows.append({"tool": "cycles", "setting": f"{n} samples", "seconds": (seconds[(n, 1)] + seconds[(n, 2)]) / 2, "error": noise})
-    for label, rows_of in (("prtbake (rays 16…256)", lambda r: r["tool"] == "prtbake" and "adaptive" not in r["setting"]),
-                           ("prtbake --adaptive 1", lambda r: r["tool"] == "prtbake" and "adaptive" in r["setting"]),
+        difference = math.sqrt(sum((a - b) ** 2 for a, b in zip(cycles[(n, 2)], cycles[(n, 1)])))
+        noise = difference / math.sqrt(2) / c_scale
+        rows.append({"tool": "cycles", "setting": f"{n} samples", "seconds": (seconds[(n, 1)] + seconds[(n, 2)]) / 2, "raw": noise, "error": noise})
+    # The two answers on the vertices where their definitions agree, and on all.
+    free = free_vertices(obj_path, 0.03)
+    agreement = {}
+    for label, chosen in (("free", free), ("all", list(range(len(p_ref))))):
+        c1, c2 = subset(cycles[(samples[-1], 1)], chosen), subset(cycles[(samples[-1], 2)], chosen)
+        mean = subset(c_best, chosen)
+        mean_noise = relative_rms(c2, c1) / 2 * math.sqrt(sum(a * a for a in c1) / sum(m * m for m in mean))
+        raw = relative_rms(subset(p_ref, chosen), mean)
+        agreement[label] = {"vertices": len(chosen), "raw": raw, "cycles_mean_noise": mean_noise, "without_cycles_noise": quiet(raw, mean_noise),
+                            "mean_ratio_prtbake_over_cycles": sum(subset(p_ref, chosen)) / sum(mean)}
+    for label, rows_of in (("prtbake (rays 16…256)", lambda r: r["tool"] == "prtbake" and "adaptive 0" in r["setting"]),
+                           ("prtbake --adaptive 1", lambda r: r["tool"] == "prtbake" and "adaptive 1" in r["setting"] and "texel" not in r["setting"]),
+                           ("prtbake --texel-size", lambda r: r["tool"] == "prtbake" and "texel" in r["setting"]),
                            ("Cycles (samples)", lambda r: r["tool"] == "cycles")):
         points = sorted((r["seconds"], r["error"]) for r in rows if rows_of(r))
         curves.append({"name": label, "points": points})
@@ -348,19 +391,19 @@ def main():
         "vertices": len(p_ref),
         "lighting": lighting,
         "sh_light_minimum": lowest,
-        "prtbake_reference": {"setting": references[0][1], "seconds": bakes[0]["seconds"], "seed_difference": relative_rms(shade[references[1][0]], p_ref)},
+        "prtbake_reference": {"setting": references[0][1], "seconds": bakes[0]["seconds"], "seed_difference": relative_rms(shade[references[1][0]], p_ref),
+                              "noise": p_ref_noise},
         "cycles_most_samples": samples[-1],
-        "prtbake_reference_against_cycles_mean": relative_rms(c_best, p_ref),
-        "mean_ratio_prtbake_over_cycles": sum(p_ref) / sum(c_best),
+        "prtbake_reference_against_cycles_mean": agreement,
         "seconds_to_reach": {},
     }
     for target in (0.1, 0.05, 0.02):
         reached = {c["name"]: time_at(c["points"], target) for c in curves}
         summary["seconds_to_reach"][f"{target:g}"] = reached
     with open(out / "cycles-compare.csv", "w") as f:
-        f.write("tool,setting,seconds,error\n")
+        f.write("tool,setting,seconds,raw_error,error\n")
         for r in rows:
-            f.write(f"{r['tool']},{r['setting']},{r['seconds']:.3f},{r['error']:.6f}\n")
+            f.write(f"{r['tool']},{r['setting']},{r['seconds']:.3f},{r['raw']:.6f},{r['error']:.6f}\n")
     svg_chart(curves, out / "cycles-compare.svg")
     (out / "cycles-compare-summary.json").write_text(json.dumps(summary, indent=1))
     print(json.dumps(summary, indent=1))

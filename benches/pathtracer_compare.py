@@ -25,11 +25,13 @@ max_depth = B + 2 (camera hit, light, B bounces), Russian roulette off:
   per-vertex storage, interpolation across triangles, ray noise, bias;
 - (b) under the full map: what a user sees, SH truncation included.
 
-prtbake's side is `view --screenshot OUT.exr` (linear radiance) at twice the
-size, averaged 2x2 (Mitsuba's box filter averages over each pixel too, so
-silhouettes match). Only pixels where the camera ray meets geometry count
-(all four of a 2x2 grid of rays through the pixel meet geometry); the
-backdrop and silhouettes are not the bake's.
+prtbake's side is `view --screenshot OUT.exr` (linear radiance) at
+--supersample times the size (default 4), box-averaged (Mitsuba's box filter
+averages over each pixel too). Only pixels wholly on geometry count: all 64
+rays of an 8x8 grid through the pixel meet geometry. A pixel a silhouette
+crosses holds backdrop in both images, but not the same backdrop (black in
+Mitsuba, the sky in the viewer): on the grey-white room's window bars a 2x2
+test let those pixels through, and they carried a quarter of the error.
 
 Printed per reference: relative L2 over pixels, sqrt(sum (x-y)^2 / sum y^2)
 over RGB ("image error"); mean relMSE, mean((x-y)^2 / (y^2 + 0.01 mean(y)^2));
@@ -189,6 +191,7 @@ def main():
     ap.add_argument("--bounces", type=int, default=None, help="default: the bundle's (prtbake inspect)")
     ap.add_argument("--order", type=int, default=None, help="SH order; default: the bundle's")
     ap.add_argument("--spp", type=int, default=512)
+    ap.add_argument("--supersample", type=int, default=4, help="prtbake renders at K times the size, box-averaged K x K")
     ap.add_argument("--env-yaw", type=float, default=180.0,
                     help="Mitsuba's envmap turned about +Y so its texels point where prtbake's do (its u = 0 looks down -Z, prtbake's u = 0.5)")
     ap.add_argument("--prtbake", default=os.path.join(ROOT, "target", "release", "prtbake"))
@@ -207,18 +210,19 @@ def main():
     recorded = find_key(meta, "bounces")
     bounces = args.bounces if args.bounces is not None else int(recorded if recorded is not None else 1)
 
-    # prtbake's side: linear radiance at twice the size, 2x2 averaged.
-    shot = os.path.join(args.out, "prtbake_2x.exr")
+    # prtbake's side: linear radiance at K times the size, K x K averaged.
+    k = args.supersample
+    shot = os.path.join(args.out, f"prtbake_{k}x.exr")
     started = time.time()
     subprocess.run([args.prtbake, "view", args.bundle, "--env", args.env, f"--camera={args.camera}", "--fov", str(args.fov),
-                    "--size", f"{2 * width}x{2 * height}", "--screenshot", shot], check=True, capture_output=True)
+                    "--size", f"{k * width}x{k * height}", "--screenshot", shot], check=True, capture_output=True)
     view_seconds = time.time() - started
 
     import mitsuba as mi
     import drjit as dr
     mi.set_variant(args.variant)
     ours = np.array(mi.Bitmap(shot).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32))[..., :3]
-    ours = ours.reshape(height, 2, width, 2, 3).mean(axis=(1, 3))
+    ours = ours.reshape(height, k, width, k, 3).mean(axis=(1, 3))
 
     env = np.array(mi.Bitmap(args.env).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32))[..., :3]
     env_sh = band_limited(env, order)
@@ -286,7 +290,7 @@ def main():
     import flip_evaluator as flip
     key = 0.18 / max(float(luminance(refs["b"])[mask].mean()), 1e-30)
     result = {"bundle": args.bundle, "size": [width, height], "spp": args.spp, "bounces": bounces, "order": order,
-              "covered_pixels": int(mask.sum()), "view_seconds": view_seconds, "mitsuba_seconds_per_image": mitsuba_seconds,
+              "covered_pixels": int(mask.sum()), "supersample": k, "mask_grid": MASK_GRID, "view_seconds": view_seconds, "mitsuba_seconds_per_image": mitsuba_seconds,
               "reference_noise_rel_l2": ref_noise}
     mi.Bitmap(ours.astype(np.float32)).write(os.path.join(args.out, "prtbake.exr"))
     save_png(mi, tonemap(ours, key), os.path.join(args.out, "prtbake.png"))
@@ -322,14 +326,19 @@ def main():
               f"relMSE {r['relmse']:.4f}, FLIP {r['flip_mean']:.4f}")
 
 
+MASK_GRID = 8
+
+
 def coverage_mask(mi, dr, scene, width, height):
-    """Pixels whose four sub-pixel rays (2x2 grid) all meet geometry: the
-    backdrop and silhouettes, which are not the bake's, are left out."""
+    """Pixels wholly on geometry: all rays of a MASK_GRID x MASK_GRID grid
+    through the pixel meet it. The backdrop and the pixels a silhouette
+    crosses, which are not the bake's, are left out."""
     sensor = scene.sensors()[0]
     hits = np.ones((height, width), dtype=bool)
     ys, xs = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
-    for dy in (0.25, 0.75):
-        for dx in (0.25, 0.75):
+    steps = (np.arange(MASK_GRID) + 0.5) / MASK_GRID
+    for dy in steps:
+        for dx in steps:
             pos = mi.Point2f(mi.Float(((xs + dx) / width).ravel()), mi.Float(((ys + dy) / height).ravel()))
             rays, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
             si = scene.ray_intersect(rays)

@@ -401,7 +401,7 @@ fn a_sheet_lit_from_behind_reflects_what_it_reflects_from_the_front() {
 /// darkening) or, with `--gather-fit`, from the triangle's own fit; the
 /// second must be the closer, and both within a few percent.
 #[test]
-fn a_bounce_reads_the_hit_point_and_gather_fit_lowers_the_bias() {
+fn a_bounce_reads_the_hit_point_and_gather_fit_and_texels_lower_the_bias() {
     use prtbake::fixtures::builder::MeshBuilder;
     use prtbake::mesh::Material;
     use rayon::prelude::*;
@@ -482,7 +482,29 @@ fn a_bounce_reads_the_hit_point_and_gather_fit_lowers_the_bias() {
     };
     let (vertex, vertex_mean) = error(false);
     let (fitted, fitted_mean) = error(true);
-    eprintln!("floor bounce 1 against the hit-point reference: vertex rows {vertex:.4} (mean ratio {vertex_mean:.4}), fit {fitted:.4} ({fitted_mean:.4})");
+    // Texel mode: the same vertices, their bounce read from the texels
+    // around each hit (4 texels a cell side, 4 points each).
+    let (texels, texels_mean) = {
+        use prtbake::atlas::Atlas;
+        use prtbake::bake::surfaces::Surfaces;
+        let params = BakeParams { order: 1, rays: 256, bounces: 1, store_bounces: true, ..BakeParams::default() };
+        let atlas = Atlas::unwrap(&mesh, 1.0 / (4 * CELLS) as f32).unwrap();
+        let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+        let (r, _) = prtbake::bake::texels::bake_texels(&mesh, &scene, &surfaces, &params, atlas, 4).unwrap();
+        let (mut d2, mut m2, mut sum_p, mut sum_m) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (&v, &m) in floor.iter().zip(&reference) {
+            let p = r.bounces[1][v] as f64;
+            (d2 += (p - m) * (p - m), m2 += m * m, sum_p += p, sum_m += m);
+        }
+        ((d2 / m2).sqrt(), sum_p / sum_m)
+    };
+    eprintln!(
+        "floor bounce 1 against the hit-point reference: vertex rows {vertex:.4} (mean ratio {vertex_mean:.4}), fit {fitted:.4} ({fitted_mean:.4}), texels {texels:.4} ({texels_mean:.4})"
+    );
+    // Texels a quarter of a cell wide read the darkening where it is: less
+    // bias than the vertex rows in the mean, and less error per vertex.
+    assert!((texels_mean - 1.0).abs() < 0.5 * (vertex_mean - 1.0), "mean ratio: texels {texels_mean}, vertex rows {vertex_mean}");
+    assert!(texels < vertex, "relative RMS: texels {texels}, vertex rows {vertex}");
     // The vertex rows read the corners bright (their one-rings reach past the
     // darkening); the fit reads less of that, in the mean and per vertex.
     assert!(vertex_mean > 1.008, "the vertex rows' bias {vertex_mean} is gone: the test no longer sees it");

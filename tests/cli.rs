@@ -770,7 +770,10 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     prtbake::mesh::write_obj(&obj, &prtbake::verify::shapes::room_with_walls_running_past()).unwrap();
     let bake = |out: &str, extra: &[&str]| {
         let out = dir.path(out);
-        let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "8", "--bounces", "1", "--quiet"];
+        let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "8", "--quiet"];
+        if !extra.contains(&"--bounces") {
+            args.extend(["--bounces", "1"]);
+        }
         args.extend(extra);
         let o = prtbake(&args);
         (o, out)
@@ -780,10 +783,24 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     let (o, two) = bake("two.prtb", &["--texel-size", "0.25", "--threads", "2"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "texel bundles differ across thread counts");
+    let stats = String::from_utf8_lossy(&o.stdout);
+    assert!(stats.contains("texels: ") && stats.contains("covered of") && stats.contains("texels, bounce 1"), "{stats}");
     let (o, plain) = bake("plain.prtb", &["--threads", "1"]);
     assert!(o.status.success());
     let (texel, vertex) = (prtbake::bundle::read_bundle(&one).unwrap(), prtbake::bundle::read_bundle(&plain).unwrap());
-    assert_eq!(texel.transfer.as_ref().unwrap().layers, vertex.transfer.as_ref().unwrap().layers, "the vertices bake as without texels");
+    // The vertices' bounce reads the texels instead of the vertices: close, not the same bits.
+    let dc_mean = |b: &prtbake::bundle::Bundle| {
+        let data = &b.transfer.as_ref().unwrap().layers[0].data;
+        data.iter().step_by(9).map(|&x| x as f64).sum::<f64>() / (data.len() / 9) as f64
+    };
+    let (with_texels, without) = (dc_mean(&texel), dc_mean(&vertex));
+    assert!((with_texels / without - 1.0).abs() < 0.05, "vertex DC mean {with_texels} with texels, {without} without");
+    assert_ne!(texel.transfer.as_ref().unwrap().layers, vertex.transfer.as_ref().unwrap().layers, "the bounce did not read the texels");
+    // Direct light does not depend on the texels.
+    let (_, direct_texels) = bake("direct-t.prtb", &["--texel-size", "0.25", "--bounces", "0"]);
+    let (_, direct_plain) = bake("direct-v.prtb", &["--bounces", "0"]);
+    let (a, b) = (prtbake::bundle::read_bundle(&direct_texels).unwrap(), prtbake::bundle::read_bundle(&direct_plain).unwrap());
+    assert_eq!(a.transfer.as_ref().unwrap().layers, b.transfer.as_ref().unwrap().layers, "direct light differs with texels");
     let t = texel.texels.as_ref().expect("texel section");
     assert_eq!(t.atlas.triangle_count(), texel.mesh.triangle_count());
     assert!(!t.texels.is_empty() && t.transfer.layers[0].data.len() == t.texels.len() * 9);

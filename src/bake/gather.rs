@@ -11,6 +11,7 @@
 //! without FMA rounds as the scalar code does, so the bytes never depend on
 //! the CPU or the order path.
 
+use crate::bake::texel_lookup::TexelLookup;
 use crate::trace::bvh8::prefetch_bytes;
 
 /// How many records ahead the gather asks for a record's triangle (corner
@@ -82,6 +83,10 @@ pub(crate) struct Gather<'a> {
     /// Whether the AVX2 kernel may run: private, and set only from the CPU's
     /// report, since running it without AVX2 is undefined behaviour.
     avx2: bool,
+    /// Texel mode: the previous bounce per texel, read bilinearly at a hit
+    /// on an atlas triangle ([`Gather::with_texels`]); `rows` then serve the
+    /// rest (back sides, triangles outside the atlas).
+    texels: Option<(&'a TexelLookup, &'a [f32])>,
 }
 
 impl<'a> Gather<'a> {
@@ -95,7 +100,13 @@ impl<'a> Gather<'a> {
         source_channels: usize,
         channels: usize,
     ) -> Gather<'a> {
-        Gather { indices, albedo, rows, coeffs, source_channels, channels, avx2: crate::trace::bvh8::avx2_available() }
+        Gather { indices, albedo, rows, coeffs, source_channels, channels, avx2: crate::trace::bvh8::avx2_available(), texels: None }
+    }
+
+    /// Reads hits on atlas triangles from `rows` per texel of `lookup`
+    /// (`source_channels` per texel, as the vertex rows).
+    pub(crate) fn with_texels(self, lookup: &'a TexelLookup, rows: &'a [f32]) -> Gather<'a> {
+        Gather { texels: Some((lookup, rows)), ..self }
     }
 }
 
@@ -104,6 +115,9 @@ impl Gather<'_> {
     /// `records` into `result` (`[channel][coeff]`), in record order. Records
     /// after `count` (the next points') are only prefetched.
     pub(crate) fn point(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32]) {
+        if self.texels.is_some() {
+            return self.general(records, count, weight, result);
+        }
         let mono = self.source_channels == 1;
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
@@ -231,6 +245,22 @@ impl Gather<'_> {
     #[inline]
     pub(crate) fn add_hit(&self, triangle: usize, u: f32, v: f32, weight: f32, result: &mut [f32]) {
         let n = self.coeffs;
+        if let Some((lookup, rows)) = self.texels {
+            if let Some((ids, texel_weights)) = lookup.bilinear(triangle, u, v) {
+                let stride = self.source_channels * n;
+                for (c, &reflect) in self.albedo[triangle].iter().enumerate().take(self.channels) {
+                    let source = if self.source_channels == 1 { 0..n } else { c * n..(c + 1) * n };
+                    for (&id, &share) in ids.iter().zip(&texel_weights) {
+                        if share > 0.0 {
+                            let w = weight * reflect * share;
+                            let row = &rows[id as usize * stride..][source.clone()];
+                            result[c * n..(c + 1) * n].iter_mut().zip(row).for_each(|(d, x)| *d += w * x);
+                        }
+                    }
+                }
+                return;
+            }
+        }
         let ([s0, s1, s2], [b0, b1, b2], albedo) = self.corners(triangle, u, v);
         for (c, &reflect) in albedo.iter().enumerate().take(self.channels) {
             let w = weight * reflect;

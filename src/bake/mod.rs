@@ -11,6 +11,7 @@ pub mod progress;
 pub(crate) mod receivers;
 pub mod sun;
 pub mod surfaces;
+pub(crate) mod texel_lookup;
 pub mod texels;
 pub mod transfer;
 pub(crate) mod twins;

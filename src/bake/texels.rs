@@ -1,7 +1,10 @@
 //! Texel mode: transfer per texel of a lightmap atlas ([`crate::atlas`])
 //! where vertices cannot hold the light. A texel's value is the mean of the
 //! transfer over its footprint (`bake::transfer::texels`); the vertex bake
-//! runs alongside, unchanged, and its bounces are what texels gather.
+//! runs alongside. From bounce 1 on, vertices and texels alike read the
+//! previous bounce at a hit from the texels around it
+//! ([`super::texel_lookup`]), so the bounce gather's bias falls with the
+//! texel size; the vertices' own rows serve only back sides.
 
 use super::transfer::texels::TexelState;
 use super::{BakeError, BakeParams, Surfaces, TransferResult};
@@ -33,6 +36,8 @@ pub struct TexelTransfer {
     /// Rays evaluated and traced for the texels (the vertices' are in the vertex result).
     pub rays: u64,
     pub rays_traced: u64,
+    /// Wall seconds of each bounce's texel pass (not in the vertex result's).
+    pub seconds_per_bounce: Vec<f64>,
 }
 
 impl TexelTransfer {
@@ -74,6 +79,7 @@ pub fn bake_texels(
         points_rejected: state.rejected.iter().filter(|&&r| r).count() as u64,
         rays: state.rays,
         rays_traced: state.traced,
+        seconds_per_bounce: state.seconds,
         atlas,
     };
     Ok((result, texel))
@@ -192,8 +198,8 @@ mod tests {
     }
 
     /// An integrating sphere (open cap): every wall texel's DC per bounce is
-    /// y00·f·(ρ(1 − f))^b, whatever its place; the texels gather the
-    /// vertices' previous bounce.
+    /// y00·f·(ρ(1 − f))^b, whatever its place; bounces read the texels'
+    /// previous bounce.
     #[test]
     fn texel_bounces_in_an_integrating_sphere_match_the_series() {
         let (albedo, cap) = (0.6f32, 0.8f32);

@@ -165,6 +165,25 @@ pub struct BakeReport {
     pub cull: Option<bake::cull::CullReport>,
     /// What adaptive refinement did.
     pub refine: Option<crate::refine::RefineReport>,
+    /// Texel mode: the atlas and the texel passes.
+    pub texels: Option<TexelReport>,
+}
+
+/// What texel mode adds to a bake's report (the vertices' own figures stay
+/// in the result's stats).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TexelReport {
+    pub texel_size: f32,
+    pub width: u32,
+    pub height: u32,
+    pub charts: u32,
+    pub covered: usize,
+    pub points: u64,
+    pub points_rejected: u64,
+    pub rays: u64,
+    pub rays_traced: u64,
+    pub atlas_seconds: f64,
+    pub seconds_per_bounce: Vec<f64>,
 }
 
 /// Extensions of a bundle output.
@@ -240,6 +259,7 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         storage: choice,
         cull: cull.map(|c| c.1),
         refine,
+        texels: None,
     })
 }
 
@@ -254,27 +274,30 @@ fn bake_texels_to_bundle(
     staged: &mut Staged,
 ) -> anyhow::Result<BakeReport> {
     let input = config.input.display().to_string();
-    let quiet = config.params.quiet;
     let baked = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = surfaces_of(mesh, config).with_context(|| input.clone())?;
         let clock = std::time::Instant::now();
         let atlas = crate::atlas::Atlas::unwrap(mesh, request.size).with_context(|| format!("{input}: --texel-size"))?;
-        if !quiet {
-            eprintln!(
-                "atlas: {} × {} texels of {} (world units), {} charts, in {:.2} s",
-                atlas.width,
-                atlas.height,
-                request.size,
-                atlas.chart_count,
-                clock.elapsed().as_secs_f64()
-            );
-        }
+        let atlas_seconds = clock.elapsed().as_secs_f64();
         let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).with_context(|| input.clone())?;
         let (result, texels) =
             bake::texels::bake_texels(mesh, &scene, &surfaces, &config.params, atlas, request.points).with_context(|| input.clone())?;
-        Ok((result, texels, surfaces, scene.build_time.as_secs_f64()))
+        Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds))
     })??;
-    let (result, texels, surfaces, build_seconds) = baked;
+    let (result, texels, surfaces, build_seconds, atlas_seconds) = baked;
+    let texel_report = TexelReport {
+        texel_size: request.size,
+        width: texels.atlas.width,
+        height: texels.atlas.height,
+        charts: texels.atlas.chart_count,
+        covered: texels.texels.len(),
+        points: texels.points,
+        points_rejected: texels.points_rejected,
+        rays: texels.rays,
+        rays_traced: texels.rays_traced,
+        atlas_seconds,
+        seconds_per_bounce: texels.seconds_per_bounce.clone(),
+    };
     check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
     let mut meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
@@ -285,7 +308,7 @@ fn bake_texels_to_bundle(
         "points": texels.points,
         "points_rejected": texels.points_rejected,
         "rays": texels.rays,
-        "meaning": "mean of the transfer over the texel's footprint on its triangles, parts inside geometry left out; bounces gather the vertices' previous bounce",
+        "meaning": "mean of the transfer over the texel's footprint on its triangles, parts inside geometry left out; bounces ≥ 1 (of vertices and texels) read the previous bounce at a hit bilinearly from the texels of the hit's chart, from the hit triangle's vertices on back sides",
     });
     let choice = config.storage.choose(&result);
     let mut bundle = crate::bundle::make_bundle_stored(mesh, &result, &config.params, meta, choice.as_ref());
@@ -311,15 +334,6 @@ fn bake_texels_to_bundle(
         crate::bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choice.as_ref(), &config.output);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
-    if !quiet {
-        eprintln!(
-            "texels: {} covered, {} points ({} inside geometry), {} rays",
-            texels.texels.len(),
-            texels.points,
-            texels.points_rejected,
-            texels.rays
-        );
-    }
     Ok(BakeReport {
         output: config.output.clone(),
         result,
@@ -333,6 +347,7 @@ fn bake_texels_to_bundle(
         storage: choice,
         cull: None,
         refine: None,
+        texels: Some(texel_report),
     })
 }
 
@@ -445,6 +460,12 @@ pub fn time_line(report: &BakeReport) -> String {
             phases.push((format!("refinement's bakes and splits ({} rounds)", r.rounds.len()), (r.seconds - r.bvh_build_seconds).max(0.0)));
         }
     }
+    if let Some(t) = &report.texels {
+        phases.push(("atlas".into(), t.atlas_seconds));
+        for (b, seconds) in t.seconds_per_bounce.iter().enumerate() {
+            phases.push((format!("texels, bounce {b}"), *seconds));
+        }
+    }
     phases.push(("write".into(), report.write_seconds));
     super::phase_line(&phases)
 }
@@ -476,6 +497,7 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             "storage_candidates": report.storage.as_ref().map(|c| &c.measured),
             "cull": report.cull,
             "refine": report.refine,
+            "texels": report.texels,
         }));
     }
     println!(
@@ -487,7 +509,8 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
         if s.points_added > 0 { format!("{} added by --adaptive, ", s.points_added) } else { String::new() },
         s.points_rejected,
         s.rays_traced,
-        s.seconds,
+        // Texel mode: the vertices' own seconds (the texels' follow on their line).
+        s.seconds - report.texels.as_ref().map_or(0.0, |t| t.seconds_per_bounce.iter().sum()),
         s.rays_per_second / 1e6,
         s.rays,
         s.rays_gathered,
@@ -497,6 +520,22 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     );
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
+    }
+    if let Some(t) = &report.texels {
+        let seconds: f64 = t.seconds_per_bounce.iter().sum();
+        println!(
+            "texels: {} covered of {} × {} ({} charts, {} per texel), {} points ({} inside geometry), {} rays traced in {:.2}s ({:.2} Mrays/s); the vertices' figures above are their own",
+            t.covered,
+            t.width,
+            t.height,
+            t.charts,
+            t.texel_size,
+            t.points,
+            t.points_rejected,
+            t.rays_traced,
+            seconds,
+            t.rays_traced as f64 / seconds.max(1e-9) / 1e6
+        );
     }
     if s.back_sides > 0 {
         println!(

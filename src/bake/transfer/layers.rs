@@ -37,8 +37,10 @@ pub(crate) fn bake_layers(
 }
 
 /// [`bake_layers`], and with `texels` the texel pass of each bounce
-/// ([`super::texels`]), run after the vertices' pass and gathering from the
-/// vertices' previous bounce. The vertex result is the same either way.
+/// ([`super::texels`]), run after the vertices' pass. Bounces ≥ 1 of both
+/// then read the previous bounce at a hit from the texels around it
+/// ([`crate::bake::texel_lookup`]), and from the hit triangle's vertices
+/// only where no texel holds it (back sides, triangles outside the atlas).
 pub(crate) fn bake_layers_with_texels(
     mesh: &Mesh,
     scene: &Scene,
@@ -81,6 +83,8 @@ pub(crate) fn bake_layers_with_texels(
     let vertex_count = mesh.vertex_count();
     let stride = channels * coeffs;
     let mut total = vec![0.0f32; vertex_count * stride];
+    // The texel passes' seconds: their own phases, not the vertices'.
+    let mut texel_seconds = 0.0f64;
     for bounce in 0..=params.bounces {
         let phase_start = Instant::now();
         let points = if bounce == 0 { planned_points } else { plan.items.point_count() };
@@ -98,9 +102,10 @@ pub(crate) fn bake_layers_with_texels(
         };
         drop(progress);
         if let Some(texels) = texels.as_deref_mut() {
-            // `source` still holds the vertices' bounce − 1: what this bounce gathers.
+            // `source` still holds bounce − 1: what this bounce gathers.
             let pass = plan.pass(bounce, &source, &[], None, false);
             texels.run(&pass, channels, params.store_bounces);
+            texel_seconds += texels.seconds.last().copied().unwrap_or(0.0);
         }
         let pass_channels = plan.pass_channels(bounce);
         if bounce == 0 {
@@ -160,10 +165,16 @@ pub(crate) fn bake_layers_with_texels(
             }
             None => {}
         }
+        if let Some(texels) = texels.as_deref_mut() {
+            // The next bounce, of vertices and texels alike, reads hits on
+            // atlas triangles from this bounce's texels.
+            source.texels = texels.take_source();
+        }
         add_layer(&mut total, &layer[..vertex_count * stride]);
         stats.rays_per_bounce.push(sums.rays);
         stats.rays_traced += sums.traced;
-        stats.seconds_per_bounce.push(phase_start.elapsed().as_secs_f64());
+        let bounce_texel_seconds = texels.as_deref().and_then(|t| t.seconds.get(bounce as usize).copied()).unwrap_or(0.0);
+        stats.seconds_per_bounce.push(phase_start.elapsed().as_secs_f64() - bounce_texel_seconds);
         if params.store_bounces {
             if !plan.twins.is_empty() {
                 back_layers.push(back_rows(&layer, &plan.twins, stride));
@@ -184,8 +195,10 @@ pub(crate) fn bake_layers_with_texels(
     stats.rays = stats.rays_per_bounce.iter().sum();
     stats.seconds = started.elapsed().as_secs_f64();
     stats.rays_gathered = if use_cache { stats.rays_per_bounce.iter().skip(1).sum() } else { 0 };
-    stats.rays_per_second = stats.rays_traced as f64 / stats.seconds.max(1e-9);
-    stats.evaluations_per_second = stats.rays as f64 / stats.seconds.max(1e-9);
+    // The vertices' rates, over the vertices' own time.
+    let vertex_seconds = (stats.seconds - texel_seconds).max(1e-9);
+    stats.rays_per_second = stats.rays_traced as f64 / vertex_seconds;
+    stats.evaluations_per_second = stats.rays as f64 / vertex_seconds;
     Ok(TransferResult { order: params.order, channels, total, bounces: layers, noise, back: back_layers, stats })
 }
 

@@ -3,7 +3,10 @@
 
 use rayon::prelude::*;
 
+use std::sync::Arc;
+
 use crate::bake::gather::RowBuffer;
+use crate::bake::texel_lookup::TexelLookup;
 
 /// The previous bounce per vertex in line-aligned rows, what the next
 /// bounce gathers from. After bounce 0 it is colourless (one row serves
@@ -15,11 +18,20 @@ pub(crate) struct SourceRows {
     /// The row of each triangle corner, when the rows are per triangle
     /// corner (`--gather-fit`, [`super::fit`]); empty: the mesh's vertex indices.
     pub(crate) corner_indices: Vec<u32>,
+    /// Texel mode: the previous bounce per texel, which hits on atlas
+    /// triangles read instead of `rows`.
+    pub(crate) texels: Option<TexelRows>,
+}
+
+/// The previous bounce per covered texel, `channels` rows each as [`SourceRows`].
+pub(crate) struct TexelRows {
+    pub(crate) lookup: Arc<TexelLookup>,
+    pub(crate) rows: RowBuffer,
 }
 
 impl SourceRows {
     pub(crate) fn empty() -> SourceRows {
-        SourceRows { rows: RowBuffer::zeroed(0), channels: 1, corner_indices: Vec::new() }
+        SourceRows { rows: RowBuffer::zeroed(0), channels: 1, corner_indices: Vec::new(), texels: None }
     }
 }
 

@@ -98,7 +98,11 @@ impl<'a> Plan<'a> {
     ) -> Pass<'p> {
         let gather = (bounce > 0).then(|| {
             let corners = if source.corner_indices.is_empty() { self.receivers().hit_table() } else { &source.corner_indices };
-            Gather::new(corners, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels)
+            let gather = Gather::new(corners, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels);
+            match &source.texels {
+                Some(texels) => gather.with_texels(&texels.lookup, texels.rows.as_slice()),
+                None => gather,
+            }
         });
         Pass {
             bounce,

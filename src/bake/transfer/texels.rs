@@ -17,13 +17,18 @@
 //! point's seed is the texel's and its index there, so the bytes do not
 //! depend on the thread count.
 
+use std::sync::Arc;
+
 use glam::{DVec2, Vec2};
 use rayon::prelude::*;
 
+use super::normalise::TexelRows;
 use super::run::{Pass, Point, Scratch};
 use crate::atlas::coverage::{clip_to_texel, polygon_area, Coverage};
 use crate::atlas::Atlas;
+use crate::bake::gather::RowBuffer;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
+use crate::bake::texel_lookup::TexelLookup;
 use crate::sampling::{hash_seed, sample_2d, square_to_triangle, DirectionPattern};
 
 const TAG_TEXEL_POSITION: u32 = 0x5054_0001;
@@ -245,12 +250,24 @@ pub(crate) struct TexelState {
     pub(crate) width: u32,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
+    /// Wall seconds of each bounce's texel pass.
+    pub(crate) seconds: Vec<f64>,
+    /// Where hits read the texels; texels without light are dropped from it after bounce 0.
+    lookup: Arc<TexelLookup>,
+    /// The last bounce per texel, unwidened: what the next bounce gathers.
+    next: Option<RowBuffer>,
 }
 
 impl TexelState {
     pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, pattern: DirectionPattern, seed: u32) -> TexelState {
         let points = TexelPoints::new(atlas, coverage, points_per_texel, pattern, seed);
+        let chart: Vec<u32> =
+            (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect();
+        let everywhere = vec![1.0; coverage.len()];
         TexelState {
+            lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &everywhere, &chart)),
+            next: None,
+            seconds: Vec::new(),
             texels: coverage.texels.clone(),
             rejected: vec![false; points.len()],
             points,
@@ -258,7 +275,7 @@ impl TexelState {
             total: Vec::new(),
             bounces: Vec::new(),
             noise: Vec::new(),
-            chart: (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect(),
+            chart,
             width: atlas.width,
             rays: 0,
             traced: 0,
@@ -270,11 +287,21 @@ impl TexelState {
     pub(crate) fn run(&mut self, pass: &Pass, channels: usize, store: bool) {
         let rays = self.points.len() as u64 * pass.params.rays as u64;
         let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
+        let clock = std::time::Instant::now();
         let progress = crate::bake::progress::Progress::start(label, rays, pass.params.quiet);
         let sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected, &progress);
         drop(progress);
         if pass.bounce == 0 {
             self.weights = sums.weights.clone();
+            if let Some(lookup) = Arc::get_mut(&mut self.lookup) {
+                lookup.drop_empty(&self.texels, &self.weights);
+            }
+        }
+        if pass.bounce < pass.params.bounces {
+            let stride = pass.channels * pass.coeffs;
+            let mut rows = RowBuffer::zeroed(self.texels.len() * stride);
+            super::normalise::normalise_rows(rows.as_mut_slice(), &sums.sums, &self.weights, stride);
+            self.next = Some(rows);
         }
         let sigma = VertexDc::new(&self.weights, &sums.sums, pass.channels * pass.coeffs, &sums.moments).standard_errors();
         add_noise_in_quadrature(&mut self.noise, &sigma);
@@ -288,10 +315,17 @@ impl TexelState {
         if store {
             self.bounces.push(layer);
         }
+        self.seconds.push(clock.elapsed().as_secs_f64());
     }
 }
 
 impl TexelState {
+    /// What the next bounce gathers at hits on atlas triangles: this
+    /// bounce's texels (once; `None` after the last bounce).
+    pub(crate) fn take_source(&mut self) -> Option<TexelRows> {
+        self.next.take().map(|rows| TexelRows { lookup: Arc::clone(&self.lookup), rows })
+    }
+
     /// `--denoise K` over the texels: the vertices' filter
     /// ([`crate::bake::denoise`]) with each texel's 8 surrounding texels of
     /// its own chart as neighbours and its covered area as its weight.
@@ -354,6 +388,9 @@ mod tests {
             width: w,
             rays: 0,
             traced: 0,
+            lookup: Arc::new(TexelLookup::empty()),
+            next: None,
+            seconds: Vec::new(),
         };
         (state, clean)
     }
