@@ -821,4 +821,16 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
         assert!(err.contains(what), "{extra:?}: {err}");
         assert!(!out.exists(), "{extra:?} wrote its output");
     }
+    // Sun masks add to a texel bundle and keep its texels; refining its mesh would lose them, so it is refused.
+    let sunned = dir.path("sunned.prtb");
+    let o = prtbake(&["sun", one.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--steps", "6", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sunned = prtbake::bundle::read_bundle(&sunned).unwrap();
+    assert!(sunned.sun.is_some() && sunned.texels.as_ref().map(|t| &t.texels) == Some(&t.texels), "the texels were not kept");
+    let refused = dir.path("sun-refined.prtb");
+    let o = prtbake(&["sun", one.to_str().unwrap(), "-o", refused.to_str().unwrap(), "--steps", "6", "--refine", "0.2", "--quiet"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("holds texels") && err.contains("one.prtb"), "{err}");
+    assert!(!refused.exists(), "the refused sun run wrote its output");
 }

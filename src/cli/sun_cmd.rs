@@ -313,6 +313,16 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     let config = &with_bundle_windows(config, &input)?;
     // Refining a bundle's mesh re-bakes its transfer on the new vertices:
     // read how before any work, so a bundle that cannot be re-baked stops here.
+    if let (Some(_), Some((_, meta))) = (&config.refine, &input.original) {
+        // Its texels belong to the mesh refinement replaces, and only the vertices could be re-baked.
+        if meta.get("texels").is_some_and(|t| !t.is_null()) {
+            anyhow::bail!(
+                "{}: the bundle holds texels (texel mode): --refine replaces its mesh, whose atlas and texels would be lost; \
+                 run sun on it without --refine, or refine the mesh and bake texels again",
+                config.input.display()
+            );
+        }
+    }
     let recipe = match (&config.refine, &input.original) {
         (Some(_), Some((_, meta))) if input.had_transfer => {
             Some(crate::bundle::recipe::TransferRecipe::from_meta(&config.input, meta, config.params.quiet)?)

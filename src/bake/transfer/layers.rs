@@ -102,9 +102,24 @@ pub(crate) fn bake_layers_with_texels(
         };
         drop(progress);
         if let Some(texels) = texels.as_deref_mut() {
-            // `source` still holds bounce − 1: what this bounce gathers.
-            let pass = plan.pass(bounce, &source, &[], None, false);
+            // `source` still holds bounce − 1: what this bounce gathers,
+            // from bounce 0's hit records when they fit beside the vertices'.
+            let texel_cache_bytes = texels.points.len() as u64 * params.rays as u64 * 8;
+            let record =
+                bounce == 0 && params.bounces > 0 && texel_cache_bytes + if use_cache { cache_bytes } else { 0 } <= params.hit_cache_bytes;
+            if bounce == 0 && params.bounces > 0 && !record && !params.quiet {
+                eprintln!(
+                    "hit cache: the texels' {:.1} GiB do not fit beside the vertices' (--hit-cache-mib): their later bounces re-trace (same bytes, slower)",
+                    texel_cache_bytes as f64 / (1u64 << 30) as f64
+                );
+            }
+            let records = std::mem::take(&mut texels.hits);
+            let cached = (!records.is_empty()).then_some(HitRecords { records: &records, first_point: 0 });
+            let pass = plan.pass(bounce, &source, &[], cached, record);
             texels.run(&pass, channels, params.store_bounces);
+            if texels.hits.is_empty() {
+                texels.hits = records;
+            }
             texel_seconds += texels.seconds.last().copied().unwrap_or(0.0);
         }
         let pass_channels = plan.pass_channels(bounce);

@@ -150,6 +150,8 @@ fn barycentric(uv: [Vec2; 3], p: DVec2) -> [f32; 3] {
 /// One bounce of the texel pass: per texel, the weighted sums of its points'
 /// results (`pass.channels × pass.coeffs` each) and their weights; bounce 0
 /// marks the points inside geometry in `rejected`, later bounces skip them.
+/// With a hit cache, bounce 0 returns one hit record per ray of every point
+/// in point order, and later bounces gather from them instead of tracing.
 pub(crate) struct TexelSums {
     pub(crate) sums: Vec<f32>,
     pub(crate) weights: Vec<f32>,
@@ -157,6 +159,7 @@ pub(crate) struct TexelSums {
     pub(crate) moments: Vec<Moments>,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
+    pub(crate) hits: Vec<u64>,
 }
 
 pub(crate) fn run_texel_pass(
@@ -169,7 +172,7 @@ pub(crate) fn run_texel_pass(
     let bounce = pass.bounce;
     let stride = pass.channels * pass.coeffs;
     let texels = points.start.len() - 1;
-    type Task = (Vec<f32>, Vec<f32>, Vec<Moments>, Vec<u32>, u64, u64);
+    type Task = (Vec<f32>, Vec<f32>, Vec<Moments>, Vec<u32>, u64, u64, Vec<u64>);
     let tasks: Vec<Task> = (0..texels.div_ceil(TEXELS_PER_TASK))
         .into_par_iter()
         .map(|task| {
@@ -181,13 +184,21 @@ pub(crate) fn run_texel_pass(
             let (mut rays, mut traced) = (0u64, 0u64);
             let mut result = vec![0.0f32; stride];
             let mut scratch = Scratch { basis: vec![0.0f32; pass.coeffs], ..Scratch::default() };
-            let mut no_hits = Vec::new();
+            let mut hits = Vec::with_capacity(pass.record_count((points.start[range.end] - points.start[range.start]) as usize));
             for (local, texel) in range.clone().enumerate() {
                 for (k, p) in (points.start[texel]..points.start[texel + 1]).enumerate() {
                     if bounce > 0 && rejected[p as usize] {
                         continue;
                     }
+                    result.fill(0.0);
                     let tp = points.points[p as usize];
+                    if pass.gather_cached(p as u64, &mut result) {
+                        rays += pass.params.rays as u64;
+                        weights[local] += tp.weight;
+                        moments[local].add(tp.weight, result[0]);
+                        sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
+                        continue;
+                    }
                     let [ia, ib, ic] = pass.mesh.triangle(tp.triangle as usize);
                     let [pa, pb, pc] = pass.mesh.triangle_positions(tp.triangle as usize);
                     let [na, nb, nc] = [ia, ib, ic].map(|i| pass.mesh.normals[i as usize]);
@@ -200,7 +211,7 @@ pub(crate) fn run_texel_pass(
                         seed: hash_seed(&[pass.params.seed, TAG_TEXEL_DIRECTION, texel_ids[texel], k as u32]),
                     };
                     result.fill(0.0);
-                    let (n, is_inside) = pass.trace_point(&point, bounce, bounce == 0, &mut result, &mut scratch, &mut no_hits);
+                    let (n, is_inside) = pass.trace_point(&point, bounce, bounce == 0, &mut result, &mut scratch, &mut hits);
                     rays += pass.params.rays as u64;
                     traced += n;
                     if is_inside {
@@ -213,7 +224,7 @@ pub(crate) fn run_texel_pass(
                 }
             }
             progress.add(rays);
-            (sums, weights, moments, inside, rays, traced)
+            (sums, weights, moments, inside, rays, traced, hits)
         })
         .collect();
     let mut out = TexelSums {
@@ -222,14 +233,16 @@ pub(crate) fn run_texel_pass(
         moments: Vec::with_capacity(texels),
         rays: 0,
         traced: 0,
+        hits: Vec::new(),
     };
-    for (sums, weights, moments, inside, rays, traced) in tasks {
+    for (sums, weights, moments, inside, rays, traced, hits) in tasks {
         out.sums.extend(sums);
         out.weights.extend(weights);
         out.moments.extend(moments);
         inside.into_iter().for_each(|p| rejected[p as usize] = true);
         out.rays += rays;
         out.traced += traced;
+        out.hits.extend(hits);
     }
     out
 }
@@ -252,6 +265,9 @@ pub(crate) struct TexelState {
     pub(crate) traced: u64,
     /// Wall seconds of each bounce's texel pass.
     pub(crate) seconds: Vec<f64>,
+    /// Bounce 0's hit records, one per ray of every point (empty: later
+    /// bounces re-trace), as the vertices' hit cache.
+    pub(crate) hits: Vec<u64>,
     /// Where hits read the texels; texels without light are dropped from it after bounce 0.
     lookup: Arc<TexelLookup>,
     /// The last bounce per texel, unwidened: what the next bounce gathers.
@@ -268,6 +284,7 @@ impl TexelState {
             lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &everywhere, &chart)),
             next: None,
             seconds: Vec::new(),
+            hits: Vec::new(),
             texels: coverage.texels.clone(),
             rejected: vec![false; points.len()],
             points,
@@ -289,8 +306,11 @@ impl TexelState {
         let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
         let clock = std::time::Instant::now();
         let progress = crate::bake::progress::Progress::start(label, rays, pass.params.quiet);
-        let sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected, &progress);
+        let mut sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected, &progress);
         drop(progress);
+        if !sums.hits.is_empty() {
+            self.hits = std::mem::take(&mut sums.hits);
+        }
         if pass.bounce == 0 {
             self.weights = sums.weights.clone();
             if let Some(lookup) = Arc::get_mut(&mut self.lookup) {
@@ -391,6 +411,7 @@ mod tests {
             lookup: Arc::new(TexelLookup::empty()),
             next: None,
             seconds: Vec::new(),
+            hits: Vec::new(),
         };
         (state, clean)
     }
