@@ -821,6 +821,15 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
         assert!(err.contains(what), "{extra:?}: {err}");
         assert!(!out.exists(), "{extra:?} wrote its output");
     }
+    // `--quantize f16` stores the texels as f16 too, within f16's rounding of the f32 bake.
+    let (o, half) = bake("half.prtb", &["--texel-size", "0.25", "--threads", "1", "--quantize", "f16"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let half = prtbake::bundle::read_bundle(&half).unwrap();
+    let h = half.texels.as_ref().unwrap();
+    assert_eq!(h.transfer.quantization, prtbake::bundle::Quantization::F16);
+    for (a, b) in h.transfer.layers[0].data.iter().zip(&t.transfer.layers[0].data) {
+        assert!((a - b).abs() <= b.abs() / 2048.0 + 1e-7, "f16 texel {a} against f32 {b}");
+    }
     // Sun masks add to a texel bundle and keep its texels; refining its mesh would lose them, so it is refused.
     let sunned = dir.path("sunned.prtb");
     let o = prtbake(&["sun", one.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--steps", "6", "--quiet"]);

@@ -264,8 +264,8 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
 }
 
 /// Texel mode: unwraps the atlas, bakes vertices and texels together, and
-/// stages the bundle with its ATLS and TXFR sections (texels stored as f32;
-/// `--quantize`/`--max-error` apply to the vertices).
+/// stages the bundle with its ATLS and TXFR sections (texels at the
+/// vertices' quantization, at the baked order and channels).
 fn bake_texels_to_bundle(
     mesh: &Mesh,
     config: &BakeConfig,
@@ -325,7 +325,8 @@ fn bake_texels_to_bundle(
         transfer: crate::bundle::Transfer {
             order: result.order as u32,
             channels: result.channels as u32,
-            quantization: Quantization::F32,
+            // The vertices' quantization (`--quantize`, or what `--max-error` chose), at the baked order and channels.
+            quantization: choice.as_ref().map_or(Quantization::F32, |c| c.chosen.storage.quantization),
             layers,
         },
         atlas: texels.atlas,
