@@ -101,27 +101,13 @@ pub(crate) fn bake_layers_with_texels(
             run_range(&pass, 0..plan.items.len(), None, &progress)
         };
         drop(progress);
-        if let Some(texels) = texels.as_deref_mut() {
-            // `source` still holds bounce − 1: what this bounce gathers,
-            // from bounce 0's hit records when they fit beside the vertices'.
-            let texel_cache_bytes = texels.points.len() as u64 * params.rays as u64 * 8;
-            let record =
-                bounce == 0 && params.bounces > 0 && texel_cache_bytes + if use_cache { cache_bytes } else { 0 } <= params.hit_cache_bytes;
-            if bounce == 0 && params.bounces > 0 && !record && !params.quiet {
-                eprintln!(
-                    "hit cache: the texels' {:.1} GiB do not fit beside the vertices' (--hit-cache-mib): their later bounces re-trace (same bytes, slower)",
-                    texel_cache_bytes as f64 / (1u64 << 30) as f64
-                );
-            }
-            let records = std::mem::take(&mut texels.hits);
-            let cached = (!records.is_empty()).then_some(HitRecords { records: &records, first_point: 0 });
-            let pass = plan.pass(bounce, &source, &[], cached, record);
-            texels.run(&pass, channels, params.store_bounces);
-            if texels.hits.is_empty() {
-                texels.hits = records;
-            }
-            texel_seconds += texels.seconds.last().copied().unwrap_or(0.0);
-        }
+        // The texels' pass of this bounce: it gathers what `source` still
+        // holds, bounce − 1, as the vertices' pass did.
+        let bounce_texel_seconds = match texels.as_deref_mut() {
+            Some(texels) => texels.run_bounce(&plan, &source, bounce, if use_cache { cache_bytes } else { 0 }),
+            None => 0.0,
+        };
+        texel_seconds += bounce_texel_seconds;
         let pass_channels = plan.pass_channels(bounce);
         if bounce == 0 {
             vertex_weight = sums.weights;
@@ -188,7 +174,6 @@ pub(crate) fn bake_layers_with_texels(
         add_layer(&mut total, &layer[..vertex_count * stride]);
         stats.rays_per_bounce.push(sums.rays);
         stats.rays_traced += sums.traced;
-        let bounce_texel_seconds = texels.as_deref().and_then(|t| t.seconds.get(bounce as usize).copied()).unwrap_or(0.0);
         stats.seconds_per_bounce.push(phase_start.elapsed().as_secs_f64() - bounce_texel_seconds);
         if params.store_bounces {
             if !plan.twins.is_empty() {

@@ -22,8 +22,9 @@ use std::sync::Arc;
 use glam::{DVec2, Vec2};
 use rayon::prelude::*;
 
-use super::normalise::TexelRows;
-use super::run::{Pass, Point, Scratch};
+use super::normalise::{SourceRows, TexelRows};
+use super::plan::Plan;
+use super::run::{HitRecords, Pass, Point, Scratch};
 use crate::atlas::coverage::{clip_to_texel, polygon_area, Coverage};
 use crate::atlas::Atlas;
 use crate::bake::gather::RowBuffer;
@@ -267,7 +268,7 @@ pub(crate) struct TexelState {
     pub(crate) seconds: Vec<f64>,
     /// Bounce 0's hit records, one per ray of every point (empty: later
     /// bounces re-trace), as the vertices' hit cache.
-    pub(crate) hits: Vec<u64>,
+    hits: Vec<u64>,
     /// Where hits read the texels; texels without light are dropped from it after bounce 0.
     lookup: Arc<TexelLookup>,
     /// The last bounce per texel, unwidened: what the next bounce gathers.
@@ -299,9 +300,33 @@ impl TexelState {
         }
     }
 
+    /// Bounce `bounce` of the texels, gathering from `source` (bounce − 1)
+    /// like the plan's vertex pass. Bounce 0 records its hits when they fit
+    /// the hit cache beside the vertices' `vertex_cache_bytes`; later bounces
+    /// gather from them (same bytes as re-tracing). Returns its seconds.
+    pub(crate) fn run_bounce(&mut self, plan: &Plan, source: &SourceRows, bounce: u32, vertex_cache_bytes: u64) -> f64 {
+        let params = plan.params;
+        let cache_bytes = self.points.len() as u64 * params.rays as u64 * 8;
+        let record = bounce == 0 && params.bounces > 0 && cache_bytes + vertex_cache_bytes <= params.hit_cache_bytes;
+        if bounce == 0 && params.bounces > 0 && !record && !params.quiet {
+            eprintln!(
+                "hit cache: the texels' {:.1} GiB do not fit beside the vertices' (--hit-cache-mib): their later bounces re-trace (same bytes, slower)",
+                cache_bytes as f64 / (1u64 << 30) as f64
+            );
+        }
+        let records = std::mem::take(&mut self.hits);
+        let cached = (!records.is_empty()).then_some(HitRecords { records: &records, first_point: 0 });
+        let pass = plan.pass(bounce, source, &[], cached, record);
+        self.run(&pass, plan.channels, params.store_bounces);
+        if self.hits.is_empty() {
+            self.hits = records;
+        }
+        self.seconds.last().copied().unwrap_or(0.0)
+    }
+
     /// Runs bounce `pass.bounce` over the texels and adds its layer
     /// (widened to `channels`) to the total; keeps it when `store`.
-    pub(crate) fn run(&mut self, pass: &Pass, channels: usize, store: bool) {
+    fn run(&mut self, pass: &Pass, channels: usize, store: bool) {
         let rays = self.points.len() as u64 * pass.params.rays as u64;
         let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
         let clock = std::time::Instant::now();
