@@ -8,6 +8,12 @@
 //! 20k (`bake/cone_valence`): the time must grow about as the triangles do
 //! (fans, `prtbake::trace::fans`), not as their square.
 //!
+//! And texel mode on the generated room whose walls run past each other
+//! (`bake/texels`): a whole 3-bounce bake, vertices and texels, at 5 cm
+//! texels with 4 points each (bounces read from the texels, gathered from
+//! bounce 0's hit records); elements/s are the texels' evaluated rays over
+//! the whole bake's time.
+//!
 //! Run: `cargo bench --bench bake` (add `-- trace` etc. to filter; only the
 //! cones: `cargo bench --bench bake -- cone_valence`).
 
@@ -185,5 +191,26 @@ fn cone_valence(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(bake_benches, benches, cone_valence);
+/// A texel bake (atlas made once, outside the timing), 2 threads.
+fn texels(c: &mut Criterion) {
+    use prtbake::atlas::Atlas;
+    use prtbake::bake::surfaces::Surfaces;
+    let mesh = prtbake::verify::shapes::room_with_walls_running_past();
+    let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+    let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+    let atlas = Atlas::unwrap(&mesh, 0.05).unwrap();
+    let params = BakeParams { order: 3, rays: 32, bounces: 3, quiet: true, ..BakeParams::default() };
+    let pool = pool(2);
+    let bake = || pool.install(|| prtbake::bake::texels::bake_texels(&mesh, &scene, &surfaces, &params, atlas.clone(), 4).unwrap());
+    let (_, probe) = bake();
+    let mut group = c.benchmark_group("bake/texels");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(probe.rays));
+    group.bench_function(format!("room_5cm_4points_3bounces_{}texels_2t", probe.texels.len()), |b| {
+        b.iter_batched(|| (), |_| bake(), BatchSize::PerIteration)
+    });
+    group.finish();
+}
+
+criterion_group!(bake_benches, benches, cone_valence, texels);
 criterion_main!(bake_benches);
