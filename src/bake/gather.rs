@@ -158,13 +158,21 @@ impl Gather<'_> {
 
     /// Asks for the corner indices and albedo of a record's triangle, and
     /// for the corner rows of a record further on, whose triangle was asked
-    /// for `AHEAD_TRIANGLE - AHEAD_ROWS` records ago.
+    /// for `AHEAD_TRIANGLE - AHEAD_ROWS` records ago. Reading texels, it asks
+    /// for the triangle's atlas corners instead (the texels themselves
+    /// depend on the hit point), and no corner rows.
     #[inline(always)]
     fn prefetch(&self, records: &[u64], i: usize) {
         if let Some(&ahead) = records.get(i + AHEAD_TRIANGLE).filter(|&&r| r != NO_HIT) {
             let triangle = decode_hit(ahead).0;
-            prefetch_bytes(self.indices.as_ptr().wrapping_add(3 * triangle), 12);
             prefetch_bytes(self.albedo.as_ptr().wrapping_add(triangle), 12);
+            match self.texels {
+                Some((lookup, _)) => lookup.prefetch(triangle),
+                None => prefetch_bytes(self.indices.as_ptr().wrapping_add(3 * triangle), 12),
+            }
+        }
+        if self.texels.is_some() {
+            return;
         }
         if let Some(&ahead) = records.get(i + AHEAD_ROWS).filter(|&&r| r != NO_HIT) {
             let stride = self.source_channels * self.coeffs;

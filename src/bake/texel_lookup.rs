@@ -28,14 +28,12 @@ pub(crate) struct TexelLookup {
 }
 
 impl TexelLookup {
-    /// `texels`: the covered texels (`y · width + x`), with each one's kept
-    /// footprint weight and chart.
-    pub(crate) fn new(atlas: &Atlas, texels: &[u32], weights: &[f32], chart: &[u32]) -> TexelLookup {
+    /// `texels`: the covered texels (`y · width + x`), each with its chart;
+    /// every one readable until [`TexelLookup::drop_empty`].
+    pub(crate) fn new(atlas: &Atlas, texels: &[u32], chart: &[u32]) -> TexelLookup {
         let mut receiver = vec![NONE; atlas.width as usize * atlas.height as usize];
-        for (i, (&texel, &weight)) in texels.iter().zip(weights).enumerate() {
-            if weight > 0.0 {
-                receiver[texel as usize] = i as u32;
-            }
+        for (i, &texel) in texels.iter().enumerate() {
+            receiver[texel as usize] = i as u32;
         }
         TexelLookup {
             corner_uv: (0..atlas.triangle_count()).map(|t| atlas.triangle_uv(t)).collect(),
@@ -66,6 +64,15 @@ impl TexelLookup {
             if weight <= 0.0 {
                 self.receiver[texel as usize] = NONE;
             }
+        }
+    }
+
+    /// Asks for what [`TexelLookup::bilinear`] reads first of `triangle`.
+    #[inline(always)]
+    pub(crate) fn prefetch(&self, triangle: usize) {
+        if triangle < self.corner_uv.len() {
+            crate::trace::bvh8::prefetch_bytes(self.corner_uv.as_ptr().wrapping_add(triangle), 24);
+            crate::trace::bvh8::prefetch_bytes(self.triangle_chart.as_ptr().wrapping_add(triangle), 4);
         }
     }
 
@@ -128,7 +135,9 @@ mod tests {
         };
         let texels: Vec<u32> = (0..16).collect();
         let weights: Vec<f32> = texels.iter().map(|&t| if t == 6 { 0.0 } else { 1.0 }).collect();
-        TexelLookup::new(&atlas, &texels, &weights, &[0; 16])
+        let mut lookup = TexelLookup::new(&atlas, &texels, &[0; 16]);
+        lookup.drop_empty(&texels, &weights);
+        lookup
     }
 
     /// Barycentrics of the atlas point (x, y) on the test triangle.

@@ -280,9 +280,8 @@ impl TexelState {
         let points = TexelPoints::new(atlas, coverage, points_per_texel, pattern, seed);
         let chart: Vec<u32> =
             (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect();
-        let everywhere = vec![1.0; coverage.len()];
         TexelState {
-            lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &everywhere, &chart)),
+            lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &chart)),
             next: None,
             seconds: Vec::new(),
             hits: Vec::new(),
