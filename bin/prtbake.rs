@@ -434,6 +434,14 @@ struct SunArgs {
     no_shadow_cache: bool,
     #[command(flatten)]
     refine: RefineArgs,
+    /// Texel mode: also a sun bit per texel of a lightmap atlas (xatlas) at this size in world
+    /// units (e.g. 0.02), for a mesh or a per-vertex bundle (whose sky light stays per vertex);
+    /// a texel bundle's own atlas is always used.
+    #[arg(long, value_name = "L", conflicts_with_all = ["refine", "shard"])]
+    texel_size: Option<f32>,
+    /// Sample points per texel for its sun bits (default: a texel bundle's bake's, else 4).
+    #[arg(long, value_name = "N")]
+    texel_points: Option<u32>,
     /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
@@ -955,7 +963,15 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         quiet: a.quiet || a.json,
     };
     params.check()?;
+    if let Some(size) = a.texel_size.filter(|s| !(s.is_finite() && *s > 0.0)) {
+        bail!("--texel-size {size}: expected a positive length in world units (e.g. 0.02 for 2 cm)");
+    }
+    if let Some(n) = a.texel_points.filter(|n| !(1..=256).contains(n)) {
+        bail!("--texel-points {n}: expected 1..=256");
+    }
     Ok(cli::sun_cmd::SunConfig {
+        texel_size: a.texel_size,
+        texel_points: a.texel_points,
         refine: a.refine.request()?,
         shard: a.shard.as_deref().map(prtbake::shards::Shard::parse).transpose()?,
         input: a.input,

@@ -19,6 +19,9 @@
 //!   outside the enclosure, the bake's rule), the mean absolute difference over points and
 //!   day steps: the fraction of the surface drawn wrong, on average over the day.
 //!
+//! A bundle with sun bits per texel (TSUN) is drawn from them, bilinearly
+//! over its atlas as the viewer reads them.
+//!
 //! With `BY_MATERIAL=1`, stderr also splits the sun-mask disagreement (and
 //! the drawn and reference lit fractions) by the reference mesh's material.
 
@@ -49,6 +52,47 @@ fn shaded(bundle: &Bundle, located: &[Option<Located>]) -> Vec<Vec<[f64; 3]>> {
         .iter()
         .map(|sky| prtbake::bundle::budget::shade(&rows, order, channels, &sky.sh))
         .collect()
+}
+
+/// The texels' sun bits as the viewer draws them (`lightmap.wgsl`): at each
+/// point's atlas position, bilinear between texel centres over the texels
+/// that hold light (with texel transfer, a non-zero row; without, every
+/// covered texel), else the texel under it. `[point][step]`.
+fn texel_masks_at(texels: &prtbake::bundle::TexelLayers, series: &prtbake::bundle::SunSeries, located: &[Option<Located>]) -> Vec<f32> {
+    let steps = series.step_count();
+    let atlas = &texels.atlas;
+    let stride = texels.transfer.as_ref().map_or(0, |t| t.values_per_vertex() as usize);
+    let total = texels.transfer.as_ref().map(|t| t.total());
+    let holds = |i: usize| total.as_ref().is_none_or(|t| t[i * stride..(i + 1) * stride].iter().any(|&x| x != 0.0));
+    let index = |x: i64, y: i64| -> Option<usize> {
+        (x >= 0 && y >= 0 && x < atlas.width as i64 && y < atlas.height as i64)
+            .then(|| texels.texels.binary_search(&((y * atlas.width as i64 + x) as u32)).ok())
+            .flatten()
+    };
+    let mut out = vec![0.0f32; located.len() * steps];
+    for (p, l) in located.iter().enumerate() {
+        let Some(l) = l else { continue };
+        let uv = atlas.triangle_uv(l.triangle as usize);
+        let q = uv[0] * l.barycentrics[0] + uv[1] * l.barycentrics[1] + uv[2] * l.barycentrics[2] - glam::Vec2::splat(0.5);
+        let (x0, y0) = (q.x.floor() as i64, q.y.floor() as i64);
+        let (fx, fy) = (q.x - q.x.floor(), q.y - q.y.floor());
+        let mut taps = Vec::with_capacity(4);
+        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            let w = if dx == 1 { fx } else { 1.0 - fx } * if dy == 1 { fy } else { 1.0 - fy };
+            if let Some(i) = index(x0 + dx, y0 + dy).filter(|&i| holds(i)) {
+                taps.push((i, w));
+            }
+        }
+        let total: f32 = taps.iter().map(|t| t.1).sum();
+        if total <= 1e-6 {
+            taps = index((q.x + 0.5).floor() as i64, (q.y + 0.5).floor() as i64).map(|i| vec![(i, 1.0)]).unwrap_or_default();
+        }
+        let total: f32 = taps.iter().map(|t| t.1).sum::<f32>().max(1e-12);
+        for k in 0..steps {
+            out[p * steps + k] = taps.iter().filter(|(i, _)| series.texel_bit(*i, k)).map(|t| t.1).sum::<f32>() / total;
+        }
+    }
+    out
 }
 
 fn window_mode(bundle: &Bundle) -> bool {
@@ -132,8 +176,14 @@ fn main() {
         };
         let sun = match (&sun_reference, &bundle.sun) {
             (Some((suns, lit)), Some(series)) => {
-                let masks = SunMasks { words_per_vertex: series.words_per_vertex, masks: series.masks.clone(), stats: Default::default() };
-                let drawn = interpolate_masks(&bundle.mesh, &masks, suns.len(), &located);
+                let drawn = match &bundle.texels {
+                    Some(texels) if !series.texel_masks.is_empty() => texel_masks_at(texels, series, &located),
+                    _ => {
+                        let masks =
+                            SunMasks { words_per_vertex: series.words_per_vertex, masks: series.masks.clone(), stats: Default::default() };
+                        interpolate_masks(&bundle.mesh, &masks, suns.len(), &located)
+                    }
+                };
                 let (mut sum, mut drawn_sum, mut lit_sum) = (0.0f64, 0.0f64, 0.0f64);
                 for &p in &both {
                     for k in 0..suns.len() {

@@ -759,6 +759,88 @@ fn an_open_mode_bake_of_a_closed_scene_says_so() {
     assert!(!open.contains("see the sky"), "{open}");
 }
 
+/// `sun` on a texel bundle bakes a sun bit per texel too (TSUN), the same
+/// bytes on 1 and 2 threads, shown by `inspect` and `--json`; `sun MESH
+/// --texel-size` makes a sun-only texel bundle with the same bits on the
+/// same atlas, and on a per-vertex bundle keeps its transfer beside them; a
+/// size for a bundle that has its atlas, a bad size and `--refine` with
+/// texels are refused (exit 2, nothing written).
+#[test]
+fn texel_sun_bits_are_baked_deterministic_and_refused_where_they_cannot_apply() {
+    let dir = Scratch::new("texel-sun");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &prtbake::verify::shapes::room_with_walls_running_past()).unwrap();
+    let texel = dir.path("texel.prtb");
+    let o = prtbake(&[
+        "bake",
+        obj.to_str().unwrap(),
+        "-o",
+        texel.to_str().unwrap(),
+        "--rays",
+        "8",
+        "--bounces",
+        "0",
+        "--texel-size",
+        "0.1",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sun = |input: &std::path::Path, out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec!["sun", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--steps", "8", "--quiet"];
+        args.extend(extra);
+        (prtbake(&args), out)
+    };
+    let (o, one) = sun(&texel, "one.prtb", &["--threads", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, two) = sun(&texel, "two.prtb", &["--threads", "2", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "texel sun bits differ across thread counts");
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let b = prtbake::bundle::read_bundle(&one).unwrap();
+    let (t, series) = (b.texels.as_ref().unwrap(), b.sun.as_ref().unwrap());
+    assert_eq!(report["texels"]["stats"]["texels"].as_u64(), Some(t.texels.len() as u64), "{report}");
+    assert_eq!(series.texel_masks.len(), t.texels.len() * series.words_per_vertex as usize);
+    let lit = |k: usize| (0..t.texels.len()).filter(|&i| series.texel_bit(i, k)).count();
+    let day: Vec<usize> = (0..series.step_count()).filter(|&k| !series.steps[k].night).collect();
+    assert!(day.iter().any(|&k| lit(k) > 0 && lit(k) < t.texels.len()), "no step with both lit and shadowed texels");
+    assert!((0..series.step_count()).filter(|k| !day.contains(k)).all(|k| lit(k) == 0), "a texel lit at night");
+    let shown = String::from_utf8_lossy(&prtbake(&["inspect", one.to_str().unwrap()]).stdout).to_string();
+    assert!(shown.contains("sun bits per texel") && shown.contains("TSUN") && shown.contains("(vertices, texels)"), "{shown}");
+    // From the mesh: a sun-only texel bundle on the atlas the bake made of the same mesh.
+    let (o, sun_only) = sun(&obj, "sun-only.prtb", &["--texel-size", "0.1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = prtbake::bundle::read_bundle(&sun_only).unwrap();
+    let st = s.texels.as_ref().unwrap();
+    assert!(s.transfer.is_none() && st.transfer.is_none());
+    assert_eq!((&st.atlas, &st.texels), (&t.atlas, &t.texels), "the same mesh unwraps the same");
+    assert_eq!(s.sun.as_ref().unwrap().texel_masks, series.texel_masks, "the same points vote the same");
+    // On a per-vertex bundle: its transfer kept, the atlas added with the sun bits.
+    let vertex = dir.path("vertex.prtb");
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", vertex.to_str().unwrap(), "--rays", "8", "--bounces", "0", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, hybrid) = sun(&vertex, "hybrid.prtb", &["--texel-size", "0.1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let h = prtbake::bundle::read_bundle(&hybrid).unwrap();
+    assert_eq!(h.transfer, prtbake::bundle::read_bundle(&vertex).unwrap().transfer);
+    let ht = h.texels.as_ref().unwrap();
+    assert!(ht.transfer.is_none() && ht.atlas == t.atlas);
+    assert_eq!(h.sun.as_ref().unwrap().texel_masks, series.texel_masks);
+    for (input, extra, what) in [
+        (&texel, vec!["--texel-size", "0.1"], "has its atlas"),
+        (&obj, vec!["--texel-size", "0"], "positive length"),
+        (&obj, vec!["--texel-size", "0.1", "--refine", "0.2"], "--refine"),
+        (&obj, vec!["--texel-size", "0.1", "--texel-points", "0"], "--texel-points"),
+        (&hybrid, vec!["--refine", "0.2"], "holds texels"),
+    ] {
+        let (o, out) = sun(input, "refused.prtb", &extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(what), "{extra:?}: {err}");
+        assert!(!out.exists(), "{extra:?} wrote its output");
+    }
+}
+
 /// `bake --texel-size` writes the atlas and texel transfer (ATLS, TXFR) next
 /// to unchanged vertices, the same bytes on 1 and 2 threads; `inspect`
 /// shows them; bad sizes and combinations it cannot do are refused (exit 2,
@@ -803,8 +885,9 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     assert_eq!(a.transfer.as_ref().unwrap().layers, b.transfer.as_ref().unwrap().layers, "direct light differs with texels");
     let t = texel.texels.as_ref().expect("texel section");
     assert_eq!(t.atlas.triangle_count(), texel.mesh.triangle_count());
-    assert!(!t.texels.is_empty() && t.transfer.layers[0].data.len() == t.texels.len() * 9);
-    assert!(t.transfer.layers[0].data.iter().any(|&x| x > 0.0));
+    let texel_transfer = t.transfer.as_ref().expect("texel transfer");
+    assert!(!t.texels.is_empty() && texel_transfer.layers[0].data.len() == t.texels.len() * 9);
+    assert!(texel_transfer.layers[0].data.iter().any(|&x| x > 0.0));
     let shown = prtbake(&["inspect", one.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&shown.stdout);
     assert!(text.contains("texels: atlas") && text.contains("ATLS") && text.contains("TXFR"), "{text}");
@@ -825,9 +908,9 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     let (o, half) = bake("half.prtb", &["--texel-size", "0.25", "--threads", "1", "--quantize", "f16"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let half = prtbake::bundle::read_bundle(&half).unwrap();
-    let h = half.texels.as_ref().unwrap();
-    assert_eq!(h.transfer.quantization, prtbake::bundle::Quantization::F16);
-    for (a, b) in h.transfer.layers[0].data.iter().zip(&t.transfer.layers[0].data) {
+    let h = half.texels.as_ref().unwrap().transfer.as_ref().unwrap();
+    assert_eq!(h.quantization, prtbake::bundle::Quantization::F16);
+    for (a, b) in h.layers[0].data.iter().zip(&texel_transfer.layers[0].data) {
         assert!((a - b).abs() <= b.abs() / 2048.0 + 1e-7, "f16 texel {a} against f32 {b}");
     }
     // Sun masks add to a texel bundle and keep its texels; refining its mesh would lose them, so it is refused.

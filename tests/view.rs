@@ -212,7 +212,7 @@ pub fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
             sky_sh: Vec::new(),
         })
         .collect();
-    let sun = SunSeries { sky_order: 0, steps, words_per_vertex, masks };
+    let sun = SunSeries { sky_order: 0, steps, words_per_vertex, masks, texel_masks: Vec::new() };
     let transfer = unoccluded_transfer(&mesh, order);
     (bundle_of(mesh, order, transfer, Some(sun)), suns.to_vec(), plane_vertices)
 }
@@ -780,6 +780,18 @@ fn photographic_default_keeps_sun_patches_of_a_dim_scene() {
     assert!(f64::from(lit_median) > 1.5 * f64::from(shade_median).max(1.0), "sun {lit_median} against shade {shade_median}");
 }
 
+/// The affine map from atlas to world of a one-chart flat mesh, from its first triangle.
+fn atlas_to_world(atlas: &prtbake::atlas::Atlas, mesh: &Mesh) -> impl Fn(glam::DVec2) -> glam::DVec3 {
+    let uv = atlas.triangle_uv(0).map(|p| p.as_dvec2());
+    let world = mesh.triangle_positions(0).map(|p| p.as_dvec3());
+    let det = (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]);
+    move |p: glam::DVec2| {
+        let l1 = (p - uv[0]).perp_dot(uv[2] - uv[0]) / det;
+        let l2 = (uv[1] - uv[0]).perp_dot(p - uv[0]) / det;
+        world[0] + (world[1] - world[0]) * l1 + (world[2] - world[0]) * l2
+    }
+}
+
 /// Texel mode: a plane whose texels hold a known linear function of their
 /// centre's position is drawn with that function at every pixel (a
 /// bilinear read of a linear function is exact), where the vertices hold
@@ -792,15 +804,7 @@ fn texel_bundles_are_shaded_per_pixel_from_their_texels() {
     let atlas = prtbake::atlas::Atlas::unwrap(&mesh, 0.05).unwrap();
     assert_eq!(atlas.chart_count, 1, "a flat plane is one chart");
     let texels = prtbake::atlas::coverage::Coverage::of(&atlas).texels;
-    // The chart's affine map from atlas to world, from its first triangle.
-    let uv = atlas.triangle_uv(0).map(|p| p.as_dvec2());
-    let world = mesh.triangle_positions(0).map(|p| p.as_dvec3());
-    let det = (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]);
-    let to_world = |p: glam::DVec2| {
-        let l1 = (p - uv[0]).perp_dot(uv[2] - uv[0]) / det;
-        let l2 = (uv[1] - uv[0]).perp_dot(p - uv[0]) / det;
-        world[0] + (world[1] - world[0]) * l1 + (world[2] - world[0]) * l2
-    };
+    let to_world = atlas_to_world(&atlas, &mesh);
     let f = |p: glam::DVec3| 1.0 + 0.3 * p.x + 0.2 * p.z;
     let values: Vec<f32> = texels
         .iter()
@@ -811,12 +815,12 @@ fn texel_bundles_are_shaded_per_pixel_from_their_texels() {
     bundle.texels = Some(prtbake::bundle::TexelLayers {
         atlas,
         texels,
-        transfer: Transfer {
+        transfer: Some(Transfer {
             order: 1,
             channels: 1,
             quantization: Quantization::F32,
             layers: vec![TransferLayer { kind: LayerKind::Total, data: values }],
-        },
+        }),
     });
     let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
     let settings = FrameSettings { lighting: vec![[1.0; 3]], sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(0.0) };
@@ -842,4 +846,81 @@ fn texel_bundles_are_shaded_per_pixel_from_their_texels() {
     assert!(compared > 2000, "{compared} pixels");
     // Binary16 target (2⁻¹¹) and the pixel centre's position against the rasteriser's.
     assert!(worst < 0.01, "largest relative difference {worst}");
+}
+
+/// Sun bits per texel are drawn per pixel: a sun-only texel bundle (no
+/// transfer) whose texels are lit left of x = 0.13, a line no vertex or
+/// triangle edge follows, while every vertex's bit says lit. Under an
+/// overhead sun of irradiance π, a pixel two texels left of the line shows
+/// the albedo (cos = 1), two texels right of it black, and the line itself
+/// lies within one texel of where the bits put it.
+#[test]
+fn texel_sun_bits_draw_their_shadow_edge_per_pixel() {
+    let Some(gpu) = gpu_or_skip("texel_sun_bits_draw_their_shadow_edge_per_pixel") else { return };
+    let mut mesh = shapes::plane_grid(4, 2.0);
+    mesh.materials[0].albedo = [0.5, 0.5, 0.5];
+    let texel = 0.05f32;
+    let atlas = prtbake::atlas::Atlas::unwrap(&mesh, texel).unwrap();
+    let texels = prtbake::atlas::coverage::Coverage::of(&atlas).texels;
+    let to_world = atlas_to_world(&atlas, &mesh);
+    let edge = 0.13f64;
+    let centre = |t: u32| to_world(glam::DVec2::new((t % atlas.width) as f64 + 0.5, (t / atlas.width) as f64 + 0.5));
+    let (words, texel_masks) = SunSeries::pack(1, texels.len(), |i, _| centre(texels[i]).x < edge);
+    let (_, masks) = SunSeries::pack(1, mesh.vertex_count(), |_, _| true);
+    let step = SunStep {
+        unix_time_utc: 1_773_993_600.0,
+        direction: [0.0, 1.0, 0.0],
+        elevation_deg: 90.0,
+        azimuth_deg: 0.0,
+        sun_rgb: [std::f32::consts::PI; 3],
+        night: false,
+        sky_sh: Vec::new(),
+    };
+    let sun = SunSeries { sky_order: 0, steps: vec![step], words_per_vertex: words, masks, texel_masks };
+    let mut bundle = bundle_of(mesh.clone(), 1, vec![0.0; mesh.vertex_count()], Some(sun));
+    bundle.transfer = None;
+    bundle.texels = Some(prtbake::bundle::TexelLayers { atlas, texels, transfer: None });
+    let bundle = prtbake::bundle::decode_bundle(&prtbake::bundle::encode_bundle(&bundle).unwrap()).unwrap();
+    let mut shown = bundle.clone();
+    shown.transfer = Some(Transfer::zero(mesh.vertex_count()));
+    let scene = prepare_scene(&shown, &LayerSelection::Total, &[]).unwrap();
+    let settings = FrameSettings { lighting: vec![[0.0; 3]], sun_step: Some(0), backdrop: Backdrop::Black, tonemap: linear_tonemap(0.0) };
+    let (width, height) = (160, 160);
+    let camera = Camera::look_at(Vec3::new(0.0, 2.5, 0.01), Vec3::ZERO, scene.bounds);
+    let image = prtbake::view::render_linear(&gpu, &scene, bundle.sun.as_ref(), &camera, &settings, width, height).unwrap();
+    let (mut lit, mut dark, mut worst) = (0, 0, 0.0f64);
+    // Per image row, where the value crosses half the albedo.
+    let mut crossings = Vec::new();
+    for y in 0..height {
+        let mut previous: Option<(f64, f64)> = None;
+        for x in 0..width {
+            let (origin, dir) = camera.pixel_ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            let p = (origin + dir * (-origin.y / dir.y)).as_dvec3();
+            if p.x.abs() > 0.9 || p.z.abs() > 0.9 {
+                previous = None;
+                continue;
+            }
+            let got = image.pixel(x, y)[0] as f64;
+            if p.x < edge - 2.0 * texel as f64 {
+                worst = worst.max((got - 0.5).abs());
+                lit += 1;
+            } else if p.x > edge + 2.0 * texel as f64 {
+                worst = worst.max(got.abs());
+                dark += 1;
+            }
+            if let Some((px, pv)) = previous {
+                if (pv - 0.25) * (got - 0.25) < 0.0 {
+                    crossings.push(px + (p.x - px) * (0.25 - pv) / (got - pv));
+                }
+            }
+            previous = Some((p.x, got));
+        }
+    }
+    assert!(lit > 1000 && dark > 1000, "{lit} lit and {dark} dark pixels");
+    assert!(worst < 0.01, "largest difference from the sun term {worst}");
+    // The bits switch between the centres of the texels on either side of the line.
+    assert!(!crossings.is_empty());
+    for x in &crossings {
+        assert!((x - edge).abs() < texel as f64, "the shadow edge drawn at x = {x}, the bits put it at {edge}");
+    }
 }

@@ -12,6 +12,7 @@ pub(crate) mod receivers;
 pub mod sun;
 pub mod surfaces;
 pub(crate) mod texel_lookup;
+pub mod texel_sun;
 pub mod texels;
 pub mod transfer;
 pub(crate) mod twins;
@@ -20,6 +21,7 @@ mod window_light;
 pub use crate::sampling::DirectionPattern;
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
+pub use texel_sun::{bake_texel_sun_masks, TexelSunMasks, TexelSunStats};
 pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 
 use crate::sh;

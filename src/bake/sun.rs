@@ -154,12 +154,26 @@ impl SunMasks {
 
 /// A sample point of the bake.
 #[derive(Clone, Copy)]
-struct Point {
-    position: Vec3,
+pub(crate) struct Point {
+    pub(crate) position: Vec3,
     /// Interpolated shading normal (the facing test, open mode).
-    normal: Vec3,
+    pub(crate) normal: Vec3,
     /// Geometric normal (the origin offset).
-    face_normal: Vec3,
+    pub(crate) face_normal: Vec3,
+}
+
+impl Point {
+    /// The point at barycentrics `b` of triangle `t`.
+    pub(crate) fn on_triangle(mesh: &Mesh, scene: &Scene, t: usize, b: [f32; 3]) -> Point {
+        let [pa, pb, pc] = mesh.triangle_positions(t);
+        let [na, nb, nc] = mesh.triangle(t).map(|i| mesh.normals[i as usize]);
+        let face_normal = scene.face_normal(t as u32);
+        Point {
+            position: pa * b[0] + pb * b[1] + pc * b[2],
+            normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
+            face_normal,
+        }
+    }
 }
 
 /// Bakes a sun bit per vertex and step.
@@ -267,6 +281,24 @@ pub fn sun_masks_from_bits(
     SunPlan::new(mesh, surfaces, suns, params)?.masks_from_bits(sample_bits, rays, Instant::now())
 }
 
+/// The day's directions made unit, after checking the step count (1 to
+/// [`MAX_SUN_STEPS`]) and that each day direction is finite and non-zero.
+pub(crate) fn checked_suns(suns: &[Option<Vec3>]) -> Result<Vec<Option<Vec3>>, BakeError> {
+    if suns.is_empty() || suns.len() > MAX_SUN_STEPS {
+        return Err(BakeError::Params(format!("{} sun steps, allowed 1..={MAX_SUN_STEPS}", suns.len())));
+    }
+    suns.iter()
+        .enumerate()
+        .map(|(k, s)| match s {
+            None => Ok(None),
+            Some(d) => d
+                .try_normalize()
+                .map(Some)
+                .ok_or_else(|| BakeError::Params(format!("sun direction of step {k} is {d:?}, not a usable direction"))),
+        })
+        .collect()
+}
+
 /// What a sun bake's tracing and voting share: the checked day and where
 /// the samples go. A whole bake and each of its shards (`shards`)
 /// build it the same way.
@@ -284,20 +316,7 @@ impl<'a> SunPlan<'a> {
     /// Checks the parameters and the day (see [`bake_sun_masks`]) and places the samples.
     pub(crate) fn new(mesh: &'a Mesh, surfaces: &Surfaces, suns: &[Option<Vec3>], params: &'a SunParams) -> Result<SunPlan<'a>, BakeError> {
         params.check()?;
-        if suns.is_empty() || suns.len() > MAX_SUN_STEPS {
-            return Err(BakeError::Params(format!("{} sun steps, allowed 1..={MAX_SUN_STEPS}", suns.len())));
-        }
-        let suns: Vec<Option<Vec3>> = suns
-            .iter()
-            .enumerate()
-            .map(|(k, s)| match s {
-                None => Ok(None),
-                Some(d) => d
-                    .try_normalize()
-                    .map(Some)
-                    .ok_or_else(|| BakeError::Params(format!("sun direction of step {k} is {d:?}, not a usable direction"))),
-            })
-            .collect::<Result<_, _>>()?;
+        let suns = checked_suns(suns)?;
         let layout = interior_layout(mesh, sampled_triangles(mesh, surfaces)?, params.samples_per_vertex, params.max_per_triangle);
         super::transfer::check_point_count(layout.sample_count())?;
         Ok(SunPlan { mesh, params, words: suns.len().div_ceil(32), suns, layout })
@@ -332,7 +351,8 @@ impl<'a> SunPlan<'a> {
             _ => (0, 0),
         };
         let mut sample_bits = vec![0u32; (end - base) * words];
-        let tracer = Tracer { mesh: self.mesh, scene, surfaces, params: self.params, layout, suns: &self.suns, words };
+        let test = SunTest { scene, surfaces, params: self.params };
+        let tracer = Tracer { mesh: self.mesh, test, layout, suns: &self.suns, words };
         let points: u64 = runs.iter().flat_map(|r| &layout.counts[r.clone()]).map(|&c| c as u64).sum();
         let progress = Progress::start("sun".into(), points * day_steps, self.params.quiet);
         let mut tasks = Vec::new();
@@ -480,9 +500,7 @@ fn sample_barycentrics(mesh: &Mesh, params: &SunParams, layout: &InteriorLayout,
 /// Shared read-only state of the tracing pass.
 struct Tracer<'a> {
     mesh: &'a Mesh,
-    scene: &'a Scene,
-    surfaces: &'a Surfaces,
-    params: &'a SunParams,
+    test: SunTest<'a>,
     layout: &'a InteriorLayout,
     suns: &'a [Option<Vec3>],
     words: usize,
@@ -492,7 +510,7 @@ impl Tracer<'_> {
     /// Barycentrics of sample `s` of layout item `item`.
     #[inline]
     fn barycentrics(&self, item: usize, s: u32) -> [f32; 3] {
-        sample_barycentrics(self.mesh, self.params, self.layout, item, s)
+        sample_barycentrics(self.mesh, self.test.params, self.layout, item, s)
     }
 
     /// Traces the samples of layout items `start..end` at every day step into
@@ -502,16 +520,8 @@ impl Tracer<'_> {
         let mut points = Vec::with_capacity(out.len() / self.words.max(1));
         for item in start..end {
             let t = self.layout.triangles[item] as usize;
-            let [pa, pb, pc] = self.mesh.triangle_positions(t);
-            let [na, nb, nc] = self.mesh.triangle(t).map(|i| self.mesh.normals[i as usize]);
-            let face_normal = self.scene.face_normal(t as u32);
             for s in 0..self.layout.counts[item] {
-                let b = self.barycentrics(item, s);
-                points.push(Point {
-                    position: pa * b[0] + pb * b[1] + pc * b[2],
-                    normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
-                    face_normal,
-                });
+                points.push(Point::on_triangle(self.mesh, self.test.scene, t, self.barycentrics(item, s)));
             }
         }
         let words = self.words;
@@ -520,12 +530,12 @@ impl Tracer<'_> {
         let mut sides = vec![[None; 2]; points.len()];
         // One shadow-cache entry per task: the leaf that blocked the previous ray.
         let mut hint = u32::MAX;
-        match self.params.loop_order {
+        match self.test.params.loop_order {
             LoopOrder::StepOuter => {
                 for (k, sun) in self.suns.iter().enumerate() {
                     let Some(s) = *sun else { continue };
                     for (p, point) in points.iter().enumerate() {
-                        let (lit, traced) = self.sees_sun(point, s, &mut hint, &mut sides[p]);
+                        let (lit, traced) = self.test.sees_sun(point, s, &mut hint, &mut sides[p]);
                         rays += traced as u64;
                         if lit {
                             out[p * words + k / 32] |= 1 << (k % 32);
@@ -537,7 +547,7 @@ impl Tracer<'_> {
                 for (p, point) in points.iter().enumerate() {
                     for (k, sun) in self.suns.iter().enumerate() {
                         let Some(s) = *sun else { continue };
-                        let (lit, traced) = self.sees_sun(point, s, &mut hint, &mut sides[p]);
+                        let (lit, traced) = self.test.sees_sun(point, s, &mut hint, &mut sides[p]);
                         rays += traced as u64;
                         if lit {
                             out[p * words + k / 32] |= 1 << (k % 32);
@@ -548,11 +558,22 @@ impl Tracer<'_> {
         }
         rays
     }
+}
 
+/// The test of one point against one sun direction, shared by the
+/// vertices' samples and the texels' (`bake::texel_sun`).
+#[derive(Clone, Copy)]
+pub(crate) struct SunTest<'a> {
+    pub(crate) scene: &'a Scene,
+    pub(crate) surfaces: &'a Surfaces,
+    pub(crate) params: &'a SunParams,
+}
+
+impl SunTest<'_> {
     /// Whether `point` sees the sun toward unit `s`, and the rays traced.
     /// `sides` holds the point's verdicts on its sides (window mode).
     #[inline]
-    fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32, sides: &mut [Option<bool>; 2]) -> (bool, u32) {
+    pub(crate) fn sees_sun(&self, point: &Point, s: Vec3, hint: &mut u32, sides: &mut [Option<bool>; 2]) -> (bool, u32) {
         match self.params.mode {
             Mode::Open => {
                 if point.normal.dot(s) <= 0.0 {

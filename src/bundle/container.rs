@@ -46,6 +46,7 @@ pub(crate) const SUNM: [u8; 4] = *b"SUNM";
 pub(crate) const SUND: [u8; 4] = *b"SUND";
 pub(crate) const ATLS: [u8; 4] = *b"ATLS";
 pub(crate) const TXFR: [u8; 4] = *b"TXFR";
+pub(crate) const TSUN: [u8; 4] = *b"TSUN";
 /// Offset of the header CRC field; the CRC covers bytes `0..HEADER_CRC_AT` and the table.
 const HEADER_CRC_AT: usize = 28;
 

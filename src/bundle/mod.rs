@@ -7,7 +7,7 @@
 //! Little-endian everywhere. The byte layout is specified in docs/bundle-format.md.
 //!
 //! - `container`: header, section table, codecs, checksums (knows no content).
-//! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND, ATLS, TXFR.
+//! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND, ATLS, TXFR, TSUN.
 //! - `quantize`: f32 / f16 / i16-with-per-vertex-scale transfer storage.
 //! - `export_gltf`: the mesh as GLB with transfer and sun masks as `_PRT_…` vertex attributes.
 //!
@@ -49,7 +49,7 @@ pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, 
 pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};
-use sections::{ReadRules, ATLS, MATL, MESH, META, SUND, SUNM, TXFR, XFER};
+use sections::{ReadRules, ATLS, MATL, MESH, META, SUND, SUNM, TSUN, TXFR, XFER};
 
 /// Encodes a bundle with the default options (zstd level 9 per section).
 ///
@@ -85,7 +85,16 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
     }
     if let Some(t) = &b.texels {
         parts.push((ATLS, sections::encode_atlas(t, &b.mesh)?));
-        parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), &t.transfer, TXFR)?));
+        if let Some(transfer) = &t.transfer {
+            parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), transfer, TXFR)?));
+        }
+    }
+    if let Some(sun) = b.sun.as_ref().filter(|s| !s.texel_masks.is_empty()) {
+        let t = b.texels.as_ref().ok_or_else(|| BundleError::Invalid("texel sun masks without an atlas".into()))?;
+        parts.push((TSUN, sections::encode_texel_sun_masks(sun, t.texels.len())?));
+    }
+    if b.texels.as_ref().is_some_and(|t| t.transfer.is_none()) && b.sun.as_ref().is_none_or(|s| s.texel_masks.is_empty()) {
+        return Err(BundleError::Invalid("an atlas with neither texel transfer nor texel sun masks".into()));
     }
     write_container(&parts, options)
 }
@@ -129,19 +138,28 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
             if steps.len() != step_count as usize {
                 return Err(BundleError::malformed(SUND, format!("{} steps, but SUNM has {step_count}", steps.len())));
             }
-            Some(SunSeries { sky_order, steps, words_per_vertex, masks })
+            Some(SunSeries { sky_order, steps, words_per_vertex, masks, texel_masks: Vec::new() })
         }
     };
-    let texels = match (section(ATLS)?, section(TXFR)?) {
-        (None, None) => None,
-        (Some(_), None) => return Err(BundleError::MissingSection(Tag(TXFR))),
-        (None, Some(_)) => return Err(BundleError::MissingSection(Tag(ATLS))),
-        (Some(atlas_raw), Some(transfer_raw)) => {
+    let (atlas_raw, texel_transfer_raw, texel_sun_raw) = (section(ATLS)?, section(TXFR)?, section(TSUN)?);
+    let texels = match atlas_raw {
+        None if texel_transfer_raw.is_some() || texel_sun_raw.is_some() => return Err(BundleError::MissingSection(Tag(ATLS))),
+        None => None,
+        Some(atlas_raw) => {
             let (atlas, texels) = sections::decode_atlas(&atlas_raw, &mesh, rules)?;
-            let transfer = sections::decode_transfer_of(&transfer_raw, texels.len(), rules, TXFR)?;
+            let transfer = match texel_transfer_raw {
+                Some(raw) => Some(sections::decode_transfer_of(&raw, texels.len(), rules, TXFR)?),
+                None if texel_sun_raw.is_none() => return Err(BundleError::MissingSection(Tag(TXFR))),
+                None => None,
+            };
             Some(TexelLayers { atlas, texels, transfer })
         }
     };
+    let mut sun = sun;
+    if let (Some(raw), Some(t)) = (texel_sun_raw, &texels) {
+        let series = sun.as_mut().ok_or(BundleError::MissingSection(Tag(SUNM)))?;
+        series.texel_masks = sections::decode_texel_sun_masks(&raw, t.texels.len(), series.steps.len() as u32, rules)?;
+    }
     Ok(Bundle { meta, mesh, transfer, sun, texels })
 }
 
@@ -150,16 +168,45 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
 /// sections this reader does not know), so the transfer stays bit-identical
 /// whatever its quantization. (From a 1.0 original, MESH and MATL are written
 /// as decoded, in range; the result is a file of the current minor.) Sections keep their order; META is replaced in
-/// place, SUNM and SUND are replaced or appended.
+/// place, SUNM and SUND (and TSUN, the texels' masks, when the series has
+/// them; an earlier TSUN is dropped otherwise) are replaced or appended.
 ///
 /// `original` is fully decoded first (every check of [`decode_bundle`]); the
 /// sun series must match its mesh's vertex count.
 pub fn encode_with_sun(original: &[u8], meta: &serde_json::Value, sun: &SunSeries) -> Result<Vec<u8>, BundleError> {
+    encode_with_sun_on(original, meta, sun, None)
+}
+
+/// [`encode_with_sun`] with the atlas its texel sun masks are laid over:
+/// added as ATLS to an `original` without one (texel sun bits beside
+/// per-vertex transfer), or the same as `original`'s (else refused).
+pub fn encode_with_sun_on(
+    original: &[u8],
+    meta: &serde_json::Value,
+    sun: &SunSeries,
+    atlas: Option<(&crate::atlas::Atlas, &[u32])>,
+) -> Result<Vec<u8>, BundleError> {
     let decoded = decode_bundle(original)?;
+    let added_atlas = match (atlas, &decoded.texels) {
+        (Some((a, texels)), None) => {
+            let layers = TexelLayers { atlas: a.clone(), texels: texels.to_vec(), transfer: None };
+            Some((sections::encode_atlas(&layers, &decoded.mesh)?, layers))
+        }
+        (Some((a, texels)), Some(t)) if (a, texels) != (&t.atlas, &t.texels[..]) => {
+            return Err(BundleError::Invalid("the texel sun masks' atlas is not the bundle's".into()));
+        }
+        _ => None,
+    };
+    let texels = added_atlas.as_ref().map(|(_, layers)| layers).or(decoded.texels.as_ref());
     let container = Container::parse(original)?;
     let vertex_count = decoded.mesh.vertex_count();
     let sun_masks = sections::encode_sun_masks(sun, vertex_count)?;
     let sun_data = sections::encode_sun_data(sun)?;
+    let texel_sun = match (texels, sun.texel_masks.is_empty()) {
+        (_, true) => None,
+        (Some(t), false) => Some(sections::encode_texel_sun_masks(sun, t.texels.len())?),
+        (None, false) => return Err(BundleError::Invalid("texel sun masks, but the bundle has no atlas".into())),
+    };
     // A 1.0 file's mesh and materials may hold values its writer did not bring
     // into range (the decoder did): those two are stored as decoded.
     let legacy_values = container.minor < values::RANGES_CHECKED_SINCE_MINOR;
@@ -167,7 +214,7 @@ pub fn encode_with_sun(original: &[u8], meta: &serde_json::Value, sun: &SunSerie
     for info in &container.sections {
         match info.tag {
             META => parts.push((META, sections::encode_meta(meta)?)),
-            SUNM | SUND => {}
+            SUNM | SUND | TSUN => {}
             MESH if legacy_values => parts.push((MESH, sections::encode_mesh(&decoded.mesh)?)),
             MATL if legacy_values => parts.push((MATL, sections::encode_materials(&decoded.mesh.materials, &decoded.mesh.groups)?)),
             tag => parts.push((tag, container.payload(info)?.into_owned())),
@@ -175,6 +222,12 @@ pub fn encode_with_sun(original: &[u8], meta: &serde_json::Value, sun: &SunSerie
     }
     parts.push((SUNM, sun_masks));
     parts.push((SUND, sun_data));
+    if let Some((raw, _)) = added_atlas {
+        parts.push((ATLS, raw));
+    }
+    if let Some(masks) = texel_sun {
+        parts.push((TSUN, masks));
+    }
     write_container(&parts, EncodeOptions::default())
 }
 

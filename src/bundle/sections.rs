@@ -14,7 +14,7 @@ use super::types::{LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Tra
 use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
-pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TXFR, XFER};
+pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TSUN, TXFR, XFER};
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;
@@ -379,6 +379,61 @@ pub(crate) fn decode_sun_masks(raw: &[u8], vertex_count: usize, rules: ReadRules
     }
     cur.finish()?;
     Ok((steps, words_per_vertex, masks))
+}
+
+// ---------------------------------------------------------------- TSUN
+
+/// TSUN: u32 step_count, u32 words_per_texel, u32 covered_count, u32
+/// reserved, then the words: SUNM's layout over the atlas's covered texels.
+pub(crate) fn encode_texel_sun_masks(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
+    let steps = count_u32(sun.steps.len(), "step count")?;
+    if Some(sun.texel_masks.len()) != covered.checked_mul(sun.words_per_vertex as usize) {
+        return Err(invalid(format!(
+            "{} texel mask words for {covered} covered texels × {} words",
+            sun.texel_masks.len(),
+            sun.words_per_vertex
+        )));
+    }
+    if let Some(i) = first_vertex_with_padding_bits(&sun.texel_masks, steps) {
+        return Err(invalid(format!("sun mask of covered texel {i} has bits set past step {steps}")));
+    }
+    let mut out = Vec::with_capacity(16 + 4 * sun.texel_masks.len());
+    put_u32(&mut out, steps);
+    put_u32(&mut out, sun.words_per_vertex);
+    put_u32(&mut out, count_u32(covered, "covered texel count")?);
+    put_u32(&mut out, 0);
+    sun.texel_masks.iter().for_each(|&w| put_u32(&mut out, w));
+    Ok(out)
+}
+
+/// Decodes TSUN for an atlas of `covered` texels and a series of
+/// `step_count` steps (SUNM's); returns the masks.
+pub(crate) fn decode_texel_sun_masks(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
+    let mut cur = Cursor::new(raw, TSUN);
+    let steps = cur.u32("step count")?;
+    let words = cur.u32("words per texel")?;
+    let declared = cur.u32("covered texel count")?;
+    let reserved = cur.u32("reserved")?;
+    if rules.reject_reserved && reserved != 0 {
+        return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
+    }
+    if steps != step_count {
+        return Err(cur.error(format!("{steps} steps, but SUNM has {step_count}")));
+    }
+    if words != steps.div_ceil(32) {
+        return Err(cur.error(format!("{words} words per texel for {steps} steps, expected {}", steps.div_ceil(32))));
+    }
+    if declared as usize != covered {
+        return Err(cur.error(format!("masks for {declared} texels, the atlas covers {covered}")));
+    }
+    let expected = checked_len(&[(declared as u64, 4 * words as u64)]);
+    check_exact_len(&cur, expected, || format!("{declared} texels × {words} words"))?;
+    let masks = cur.u32s(declared as u64 * words as u64, "mask words")?;
+    if let Some(i) = first_vertex_with_padding_bits(&masks, steps) {
+        return Err(cur.error(format!("mask of covered texel {i} has bits set past step {steps} (must be zero)")));
+    }
+    cur.finish()?;
+    Ok(masks)
 }
 
 // ---------------------------------------------------------------- SUND

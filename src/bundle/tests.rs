@@ -69,7 +69,7 @@ pub(super) fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> S
         .collect();
     let bits: Vec<bool> = (0..vertices * step_count).map(|_| rng.next() & 1 == 1).collect();
     let (words_per_vertex, masks) = SunSeries::pack(step_count, vertices, |v, k| bits[v * step_count + k]);
-    SunSeries { sky_order: sky_order as u32, steps, words_per_vertex, masks }
+    SunSeries { sky_order: sky_order as u32, steps, words_per_vertex, masks, texel_masks: Vec::new() }
 }
 
 fn random_bundle(seed: u64, vertices: usize, triangles: usize, quantization: Quantization) -> Bundle {
@@ -143,7 +143,7 @@ pub(super) fn small_regular_bundle() -> Bundle {
         meta: serde_json::json!({"tool": "prtbake golden", "note": "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa"}),
         mesh,
         transfer: Some(transfer),
-        sun: Some(SunSeries { sky_order: 1, steps: vec![step(0), step(1)], words_per_vertex, masks }),
+        sun: Some(SunSeries { sky_order: 1, steps: vec![step(0), step(1)], words_per_vertex, masks, texel_masks: Vec::new() }),
         texels: None,
     }
 }
@@ -1031,7 +1031,7 @@ fn texel_bundle() -> Bundle {
     let data = (0..texels.len() * coeffs).map(|i| (i as f32 * 0.37).cos()).collect();
     let transfer =
         Transfer { order: 2, channels: 1, quantization: Quantization::F32, layers: vec![TransferLayer { kind: LayerKind::Total, data }] };
-    bundle.texels = Some(TexelLayers { atlas, texels, transfer });
+    bundle.texels = Some(TexelLayers { atlas, texels, transfer: Some(transfer) });
     bundle
 }
 
@@ -1065,11 +1065,54 @@ fn texel_bundles_round_trip_and_refuse_a_broken_atlas() {
     forged[first_index..first_index + 4].copy_from_slice(&u32::MAX.to_le_bytes());
     let mut parts = base();
     parts.push((ATLS, forged));
-    parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), &t.transfer, TXFR).unwrap()));
+    parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), t.transfer.as_ref().unwrap(), TXFR).unwrap()));
     let error = decode_bundle(&write_container(&parts, EncodeOptions::default()).unwrap()).unwrap_err().to_string();
     assert!(error.contains("ATLS") && error.contains("atlas index"), "{error}");
     // A transfer for the wrong number of texels is refused by the encoder.
     let mut short = bundle.clone();
     short.texels.as_mut().unwrap().texels.pop();
     assert!(encode_bundle(&short).is_err());
+}
+
+/// Sun bits per texel (section TSUN) round trip beside the vertices' masks,
+/// with or without the texels' transfer (a sun-only texel bundle); `sun`
+/// on a bundle replaces them; masks for another texel count, masks without
+/// an atlas and an atlas with neither transfer nor masks are refused.
+#[test]
+fn texel_sun_masks_round_trip_with_and_without_texel_transfer() {
+    let mut bundle = texel_bundle();
+    let covered = bundle.texels.as_ref().unwrap().texels.len();
+    let mut rng = Rng(41);
+    let mut sun = random_sun(&mut rng, bundle.mesh.vertex_count(), 40);
+    let (words, texel_masks) = SunSeries::pack(40, covered, |i, k| (i * 7 + k * 3) % 5 < 2);
+    assert_eq!(words, sun.words_per_vertex);
+    sun.texel_masks = texel_masks;
+    bundle.sun = Some(sun.clone());
+    let bytes = encode_bundle(&bundle).unwrap();
+    let decoded = decode_bundle(&bytes).unwrap();
+    assert_eq!(decoded, bundle);
+    let series = decoded.sun.as_ref().unwrap();
+    assert!(series.texel_bit(1, 0) == ((7 % 5) < 2) && !series.texel_bit(1, 40) && !series.texel_bit(covered, 0));
+    assert!(list_sections(&bytes).unwrap().iter().any(|s| s.tag_name() == "TSUN"));
+    // Sun-only: ATLS and TSUN without TXFR.
+    let mut sun_only = bundle.clone();
+    sun_only.transfer = None;
+    sun_only.texels.as_mut().unwrap().transfer = None;
+    assert_eq!(decode_bundle(&encode_bundle(&sun_only).unwrap()).unwrap(), sun_only);
+    // `sun` again on the texel bundle: its masks replaced, the rest kept.
+    let mut again = sun.clone();
+    again.texel_masks = SunSeries::pack(40, covered, |i, k| (i + k) % 3 == 0).1;
+    let replaced = decode_bundle(&encode_with_sun(&bytes, &bundle.meta, &again).unwrap()).unwrap();
+    assert_eq!(replaced.sun.as_ref().unwrap().texel_masks, again.texel_masks);
+    assert_eq!(replaced.texels, bundle.texels);
+    // The wrong texel count, masks without an atlas, an atlas holding nothing.
+    let mut short = bundle.clone();
+    short.sun.as_mut().unwrap().texel_masks.truncate(words as usize * (covered - 1));
+    assert!(encode_bundle(&short).is_err());
+    let mut no_atlas = bundle.clone();
+    no_atlas.texels = None;
+    assert!(encode_bundle(&no_atlas).is_err());
+    let mut empty = sun_only.clone();
+    empty.sun.as_mut().unwrap().texel_masks.clear();
+    assert!(encode_bundle(&empty).is_err());
 }

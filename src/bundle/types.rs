@@ -21,15 +21,17 @@ pub struct Bundle {
     pub texels: Option<TexelLayers>,
 }
 
-/// Texel mode's part of a bundle (sections ATLS and TXFR).
+/// Texel mode's part of a bundle (sections ATLS and TXFR; its sun bits are
+/// [`SunSeries::texel_masks`], section TSUN).
 #[derive(Clone, Debug, PartialEq)]
 pub struct TexelLayers {
     /// The mesh's atlas, triangle for triangle.
     pub atlas: crate::atlas::Atlas,
     /// The covered texels (`y * width + x`, ascending), one transfer row each.
     pub texels: Vec<u32>,
-    /// Transfer per covered texel, laid out as a vertex transfer is per vertex.
-    pub transfer: Transfer,
+    /// Transfer per covered texel, laid out as a vertex transfer is per
+    /// vertex; `None` in a sun-only texel bundle (`sun MESH --texel-size`).
+    pub transfer: Option<Transfer>,
 }
 
 impl Bundle {
@@ -221,6 +223,10 @@ pub struct SunSeries {
     /// Vertex-major bits: vertex v, step k is bit `k % 32` of word
     /// `v · words_per_vertex + k / 32`; 1 = sunlit. Bits at steps ≥ `steps.len()` are 0.
     pub masks: Vec<u32>,
+    /// Texel mode (section TSUN): the same bits per covered texel of the
+    /// bundle's atlas, texel-major with `words_per_vertex` words each; empty
+    /// when the sun was baked per vertex only.
+    pub texel_masks: Vec<u32>,
 }
 
 impl SunSeries {
@@ -244,6 +250,14 @@ impl SunSeries {
             }
         }
         (words_per_vertex as u32, masks)
+    }
+
+    /// Whether covered texel `i` (an index into [`TexelLayers::texels`]) is
+    /// sunlit at `step`; `false` without texel masks or out of range.
+    pub fn texel_bit(&self, i: usize, step: usize) -> bool {
+        let word =
+            i.checked_mul(self.words_per_vertex as usize).and_then(|w| w.checked_add(step / 32)).and_then(|w| self.texel_masks.get(w));
+        step < self.steps.len() && word.is_some_and(|w| (w >> (step % 32)) & 1 == 1)
     }
 
     /// Number of time steps.

@@ -322,13 +322,13 @@ fn bake_texels_to_bundle(
     );
     bundle.texels = Some(crate::bundle::TexelLayers {
         texels: texels.texels.clone(),
-        transfer: crate::bundle::Transfer {
+        transfer: Some(crate::bundle::Transfer {
             order: result.order as u32,
             channels: result.channels as u32,
             // The vertices' quantization (`--quantize`, or what `--max-error` chose), at the baked order and channels.
             quantization: choice.as_ref().map_or(Quantization::F32, |c| c.chosen.storage.quantization),
             layers,
-        },
+        }),
         atlas: texels.atlas,
     });
     let encoded =

@@ -26,14 +26,15 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             "layers": t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
         })
     });
-    let lapse = b.sun.as_ref().map(|s| time_lapse(s, b.mesh.vertex_count(), &b.meta));
+    let covered = b.texels.as_ref().map_or(0, |t| t.texels.len());
+    let lapse = b.sun.as_ref().map(|s| time_lapse(s, b.mesh.vertex_count(), covered, &b.meta));
     let sun = b.sun.as_ref().map(|s| {
         json!({
             "steps": s.step_count(), "sky_order": s.sky_order, "words_per_vertex": s.words_per_vertex,
             "time_lapse": lapse.as_ref().map(|l| l.iter().map(|r| json!({
                 "step": r.step, "unix_time_utc": r.unix_time_utc, "local_time": r.local_time,
                 "elevation_deg": r.elevation_deg, "azimuth_deg": r.azimuth_deg, "night": r.night,
-                "lit_fraction": r.lit_fraction, "sun_rgb": r.sun_rgb,
+                "lit_fraction": r.lit_fraction, "texels_lit_fraction": r.texels_lit_fraction, "sun_rgb": r.sun_rgb,
             })).collect::<Vec<_>>()),
         })
     });
@@ -48,8 +49,11 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         "texels": b.texels.as_ref().map(|t| json!({
             "atlas": {"width": t.atlas.width, "height": t.atlas.height, "texel_size": t.atlas.texel_size, "charts": t.atlas.chart_count, "atlas_vertices": t.atlas.uv.len()},
             "covered": t.texels.len(),
-            "order": t.transfer.order, "channels": t.transfer.channels,
-            "layers": t.transfer.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
+            "transfer": t.transfer.as_ref().map(|x| json!({
+                "order": x.order, "channels": x.channels, "quantization": x.quantization.name(),
+                "layers": x.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
+            })),
+            "sun_bits": b.sun.as_ref().is_some_and(|s| !s.texel_masks.is_empty()),
         })),
         "sections": sections.iter().map(|s| json!({
             "tag": s.tag_name(), "codec": s.codec_name(), "stored_bytes": s.stored_len, "raw_bytes": s.raw_len,
@@ -73,30 +77,34 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
     }
     if let Some(t) = &b.texels {
         let a = &t.atlas;
+        let transfer = t.transfer.as_ref().map_or("no transfer".to_string(), |x| {
+            let layers = x.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ");
+            format!("order {}, {} channel(s), {}, layers {layers}", x.order, x.channels, x.quantization.name())
+        });
+        let sun_bits = if b.sun.as_ref().is_some_and(|s| !s.texel_masks.is_empty()) { "; sun bits per texel" } else { "" };
         println!(
-            "  texels: atlas {} × {} of {} (world units), {} charts; {} covered texels ({:.1}% of the texture), order {}, {} channel(s), layers {}",
+            "  texels: atlas {} × {} of {} (world units), {} charts; {} covered texels ({:.1}% of the texture), {transfer}{sun_bits}",
             a.width,
             a.height,
             a.texel_size,
             a.chart_count,
             t.texels.len(),
             100.0 * t.texels.len() as f64 / (a.width as f64 * a.height as f64),
-            t.transfer.order,
-            t.transfer.channels,
-            t.transfer.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ")
         );
     }
     if let Some(s) = &b.sun {
         println!("  sun: {} steps, sky order {}", s.step_count(), s.sky_order);
-        println!("    step  time   elevation  azimuth  lit");
+        let texel_column = lapse.iter().flatten().any(|r| r.texels_lit_fraction.is_some());
+        println!("    step  time   elevation  azimuth  lit{}", if texel_column { " (vertices, texels)" } else { "" });
         for r in lapse.iter().flatten() {
             println!(
-                "    {:>4}  {:>5}  {:>8.2}°  {:>6.2}°  {:>5.1}%{}",
+                "    {:>4}  {:>5}  {:>8.2}°  {:>6.2}°  {:>5.1}%{}{}",
                 r.step,
                 r.local_time.as_deref().unwrap_or("-"),
                 r.elevation_deg,
                 r.azimuth_deg,
                 100.0 * r.lit_fraction,
+                r.texels_lit_fraction.map_or(String::new(), |f| format!("  {:>5.1}%", 100.0 * f)),
                 if r.night { "  night" } else { "" }
             );
         }
@@ -122,6 +130,8 @@ struct LapseRow {
     night: bool,
     /// Fraction of vertices whose bit is set.
     lit_fraction: f64,
+    /// Fraction of covered texels whose bit is set, when the sun was baked per texel.
+    texels_lit_fraction: Option<f64>,
     sun_rgb: [f32; 3],
 }
 
@@ -162,20 +172,25 @@ fn inspect_mesh(path: &Path, as_json: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn time_lapse(sun: &bundle::SunSeries, vertex_count: usize, meta: &serde_json::Value) -> Vec<LapseRow> {
+fn time_lapse(sun: &bundle::SunSeries, vertex_count: usize, covered: usize, meta: &serde_json::Value) -> Vec<LapseRow> {
     let source = &meta["sun"]["source"];
     let tz_minutes = (source["kind"] == "spa").then(|| source["tz_minutes"].as_i64()).flatten();
     let words = sun.words_per_vertex as usize;
-    let mut lit = vec![0u64; sun.step_count()];
-    for vertex_words in sun.masks.chunks_exact(words.max(1)) {
-        for (w, &word) in vertex_words.iter().enumerate() {
-            let mut word = word;
-            while word != 0 {
-                lit[w * 32 + word.trailing_zeros() as usize] += 1;
-                word &= word - 1;
+    let lit_per_step = |masks: &[u32]| {
+        let mut lit = vec![0u64; sun.step_count()];
+        for receiver_words in masks.chunks_exact(words.max(1)) {
+            for (w, &word) in receiver_words.iter().enumerate() {
+                let mut word = word;
+                while word != 0 {
+                    lit[w * 32 + word.trailing_zeros() as usize] += 1;
+                    word &= word - 1;
+                }
             }
         }
-    }
+        lit
+    };
+    let lit = lit_per_step(&sun.masks);
+    let texels_lit = (!sun.texel_masks.is_empty() && covered > 0).then(|| lit_per_step(&sun.texel_masks));
     sun.steps
         .iter()
         .enumerate()
@@ -190,6 +205,7 @@ fn time_lapse(sun: &bundle::SunSeries, vertex_count: usize, meta: &serde_json::V
             azimuth_deg: s.azimuth_deg,
             night: s.night,
             lit_fraction: if vertex_count == 0 { 0.0 } else { lit[k] as f64 / vertex_count as f64 },
+            texels_lit_fraction: texels_lit.as_ref().map(|t| t[k] as f64 / covered as f64),
             sun_rgb: s.sun_rgb,
         })
         .collect()

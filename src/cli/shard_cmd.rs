@@ -141,6 +141,12 @@ fn placeholder_stats(steps: &[SunStep]) -> SunStats {
 /// Traces one shard's sun samples into a part and prints what it wrote.
 pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
     let input = load_sun_input(config, PART_FORMAT, false)?;
+    if input.atlas.is_some() {
+        anyhow::bail!(
+            "{}: the bundle holds texels (texel mode): shards trace the vertices' sun samples only; run sun on it in one process",
+            config.input.display()
+        );
+    }
     let config = &super::sun_cmd::with_bundle_windows(config, &input)?;
     let started = std::time::Instant::now();
     let (part, steps) = super::with_threads(config.threads, || -> anyhow::Result<_> {
@@ -164,6 +170,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             steps,
             words_per_vertex: words,
             masks: vec![0; input.mesh.vertex_count() * words as usize],
+            texel_masks: Vec::new(),
         };
         let meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());
         part.frame = encode_sun_output(&input, meta, &series, &config.output)?;

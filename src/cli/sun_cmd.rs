@@ -67,12 +67,20 @@ pub struct SunConfig {
     /// Refine the mesh where the sun's light changes (`--refine`, `--max-vertices`); a bundle's
     /// transfer is then baked again on the refined mesh (`bundle::recipe`).
     pub refine: Option<super::bake_cmd::RefineRequest>,
+    /// Sun bits per texel too: of a new atlas at this size (`--texel-size`)
+    /// for a mesh or a vertex bundle; a texel bundle's own atlas is always used.
+    pub texel_size: Option<f32>,
+    /// Points per texel (`--texel-points`); default: the texel bundle's
+    /// transfer bake's, else [`bake::texels::POINTS_PER_TEXEL`].
+    pub texel_points: Option<u32>,
 }
 
 /// What `sun` reports.
 pub struct SunReport {
     pub output: PathBuf,
     pub masks: SunMasks,
+    /// Texel mode: the texels' bits and the atlas's seconds (0 when the bundle had it).
+    pub texel_masks: Option<(bake::TexelSunMasks, f64)>,
     pub steps: Vec<SunStep>,
     pub input_was_bundle: bool,
     pub sky_seconds: f64,
@@ -121,6 +129,8 @@ pub struct SunInput {
     /// The light the input bundle was baked for (its transfer's, else its
     /// earlier sun masks'): window mode and patterns.
     pub recorded_windows: Option<(Mode, Vec<String>)>,
+    /// A texel bundle's atlas and covered texels.
+    pub atlas: Option<(crate::atlas::Atlas, Vec<u32>)>,
 }
 
 impl SunInput {
@@ -154,18 +164,19 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     } else {
         UpAxis::Y
     };
-    let (mesh, original, had_transfer) = if input_was_bundle {
+    let (mesh, original, had_transfer, atlas) = if input_was_bundle {
         let bytes = bundle::read_bundle_bytes(input).map_err(|e| match e {
             bundle::BundleError::Io { source, .. } => anyhow::Error::new(source).context(format!("cannot read {}", input.display())),
             bundle::BundleError::InFile { source, .. } => anyhow::anyhow!("{}: not a valid bundle: {source}", input.display()),
             other => other.into(),
         })?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
-        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some())
+        let atlas = b.texels.map(|t| (t.atlas, t.texels));
+        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some(), atlas)
     } else {
         // The new bundle says which glass was a window, as a transfer bake's does.
         let mesh = super::load_mesh(input, config.up, quiet, &outputs, config.force)?;
-        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false)
+        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false, None)
     };
     let recorded_windows = original.as_ref().and_then(|(_, meta)| recorded_windows(meta, had_transfer));
     let up = Vec3::Y;
@@ -182,7 +193,15 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
     let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
-    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows })
+    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows, atlas })
+}
+
+/// The points per texel of a texel sun bake: `--texel-points`, else the
+/// texel bundle's transfer bake's (its points, so the same seed votes on
+/// the same points), else the default.
+fn texel_points(config: &SunConfig, input: &SunInput) -> u32 {
+    let recorded = input.original.as_ref().and_then(|(_, meta)| meta.pointer("/texels/points_per_texel")?.as_u64());
+    config.texel_points.or(recorded.and_then(|p| u32::try_from(p).ok())).unwrap_or(bake::texels::POINTS_PER_TEXEL)
 }
 
 /// The mode and `--window` patterns a bundle's META records: its transfer
@@ -280,6 +299,8 @@ pub fn sun_surfaces(config: &SunConfig, mesh: &crate::mesh::Mesh) -> anyhow::Res
 /// The output bundle's bytes: the input bundle with the sun sections added
 /// (every other section copied byte for byte) or a new bundle of the mesh.
 pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: &SunSeries, output: &Path) -> anyhow::Result<Vec<u8>> {
+    let texels =
+        input.atlas.as_ref().map(|(atlas, texels)| bundle::TexelLayers { atlas: atlas.clone(), texels: texels.clone(), transfer: None });
     let encoded = match &input.original {
         Some((bytes, meta)) => {
             let mut meta = meta.clone();
@@ -288,7 +309,8 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
             } else {
                 meta = json!({ "previous_meta": meta, "sun": sun_meta });
             }
-            bundle::encode_with_sun(bytes, &meta, series)
+            let atlas = input.atlas.as_ref().map(|(atlas, texels)| (atlas, &texels[..]));
+            bundle::encode_with_sun_on(bytes, &meta, series, atlas)
         }
         None => {
             let meta = json!({
@@ -299,7 +321,7 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
                 "sun": sun_meta,
                 "conventions": crate::bundle::conventions(),
             });
-            bundle::encode_bundle(&Bundle { meta, mesh: input.mesh.clone(), transfer: None, sun: Some(series.clone()), texels: None })
+            bundle::encode_bundle(&Bundle { meta, mesh: input.mesh.clone(), transfer: None, sun: Some(series.clone()), texels })
         }
     };
     encoded.with_context(|| format!("cannot encode {}", output.display()))
@@ -313,9 +335,9 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     let config = &with_bundle_windows(config, &input)?;
     // Refining a bundle's mesh re-bakes its transfer on the new vertices:
     // read how before any work, so a bundle that cannot be re-baked stops here.
-    if let (Some(_), Some((_, meta))) = (&config.refine, &input.original) {
-        // Its texels belong to the mesh refinement replaces, and only the vertices could be re-baked.
-        if meta.get("texels").is_some_and(|t| !t.is_null()) {
+    if config.refine.is_some() {
+        // Its texels (transfer or sun bits) belong to the mesh refinement replaces, and only the vertices could be re-baked.
+        if input.atlas.is_some() {
             anyhow::bail!(
                 "{}: the bundle holds texels (texel mode): --refine replaces its mesh, whose atlas and texels would be lost; \
                  run sun on it without --refine, or refine the mesh and bake texels again",
@@ -323,30 +345,82 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             );
         }
     }
+    if config.refine.is_some() && config.texel_size.is_some() {
+        anyhow::bail!("--texel-size with --refine: texels already resolve the sun where vertices cannot; refine or bake texels");
+    }
+    if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
+        anyhow::bail!(
+            "{}: --texel-size {size}, but the bundle has its atlas ({} m texels), whose texels the sun bits must match; leave --texel-size out",
+            config.input.display(),
+            atlas.texel_size
+        );
+    }
     let recipe = match (&config.refine, &input.original) {
         (Some(_), Some((_, meta))) if input.had_transfer => {
             Some(crate::bundle::recipe::TransferRecipe::from_meta(&config.input, meta, config.params.quiet)?)
         }
         _ => None,
     };
-    let (steps, build_seconds, sky_seconds, masks, refined) = super::with_threads(config.threads, || -> anyhow::Result<_> {
-        let sky_start = Instant::now();
-        let steps = day_steps(config, &input)?;
-        let sky_seconds = sky_start.elapsed().as_secs_f64();
-        let surfaces = sun_surfaces(config, &input.mesh)?;
-        let in_input = || config.input.display().to_string();
-        let suns = sky::day_directions(&steps);
-        if let Some(request) = &config.refine {
-            let params = request.params(&input.mesh);
-            let (mesh, masks, report) =
-                crate::refine::refine_sun(input.mesh.clone(), &config.window_patterns, &suns, &config.params, &params)
+    let points_per_texel = texel_points(config, &input);
+    let (steps, build_seconds, sky_seconds, masks, refined, texel_masks) =
+        super::with_threads(config.threads, || -> anyhow::Result<_> {
+            let sky_start = Instant::now();
+            let steps = day_steps(config, &input)?;
+            let sky_seconds = sky_start.elapsed().as_secs_f64();
+            let surfaces = sun_surfaces(config, &input.mesh)?;
+            let in_input = || config.input.display().to_string();
+            let suns = sky::day_directions(&steps);
+            if let Some(request) = &config.refine {
+                let params = request.params(&input.mesh);
+                let (mesh, masks, report) =
+                    crate::refine::refine_sun(input.mesh.clone(), &config.window_patterns, &suns, &config.params, &params)
+                        .with_context(in_input)?;
+                return Ok((steps, 0.0, sky_seconds, masks, Some((mesh, report)), None));
+            }
+            let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
+            let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
+            let atlas_start = Instant::now();
+            let atlas = match (&input.atlas, config.texel_size) {
+                (Some((atlas, _)), _) => Some(atlas.clone()),
+                (None, Some(size)) => Some(crate::atlas::Atlas::unwrap(&input.mesh, size).with_context(in_input)?),
+                (None, None) => None,
+            };
+            let atlas_seconds = if input.atlas.is_some() { 0.0 } else { atlas_start.elapsed().as_secs_f64() };
+            let texel_masks = match atlas {
+                None => None,
+                Some(atlas) => {
+                    let pattern = bake::DirectionPattern::Sobol;
+                    let texel_masks = bake::bake_texel_sun_masks(
+                        &input.mesh,
+                        &scene,
+                        &surfaces,
+                        &atlas,
+                        points_per_texel,
+                        pattern,
+                        &suns,
+                        &config.params,
+                    )
                     .with_context(in_input)?;
-            return Ok((steps, 0.0, sky_seconds, masks, Some((mesh, report))));
+                    if let Some((_, covered)) = &input.atlas {
+                        anyhow::ensure!(
+                            *covered == texel_masks.texels,
+                            "{}: the atlas lists {} covered texels, but its triangles overlap {}: a damaged atlas",
+                            config.input.display(),
+                            covered.len(),
+                            texel_masks.texels.len()
+                        );
+                    }
+                    Some((texel_masks, atlas, atlas_seconds))
+                }
+            };
+            Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None, texel_masks))
+        })??;
+    if let Some((masks, atlas, _)) = &texel_masks {
+        if input.atlas.is_none() {
+            input.atlas = Some((atlas.clone(), masks.texels.clone()));
         }
-        let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
-        let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
-        Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None))
-    })??;
+    }
+    let texel_masks = texel_masks.map(|(masks, _, seconds)| (masks, seconds));
     warn_if_never_lit(&config.output, config.params.mode, &config.window_patterns, &masks.stats);
     let refine = refined.map(|(mesh, report)| {
         input.mesh = mesh;
@@ -358,8 +432,20 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         steps: steps.clone(),
         words_per_vertex: masks.words_per_vertex,
         masks: masks.masks.clone(),
+        texel_masks: texel_masks.as_ref().map(|(t, _)| t.masks.clone()).unwrap_or_default(),
     };
     let mut sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
+    if let (Some((t, _)), Some((atlas, _))) = (&texel_masks, &input.atlas) {
+        sun_meta["texels"] = json!({
+            "texel_size": atlas.texel_size,
+            "points_per_texel": t.stats.points_per_texel,
+            "covered": t.stats.texels,
+            "points": t.stats.points,
+            "rays": t.stats.rays,
+            "lit_texels": t.stats.lit_texels,
+            "bit_rule": "lit iff a strict majority of the texel's points (its footprint on its triangles, each weighted by the area it stands for; window triangles' left out) see the sun, each tested as a vertex's sample",
+        });
+    }
     if let Some(r) = &refine {
         sun_meta["refine"] = r.meta();
     }
@@ -384,6 +470,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     Ok(SunReport {
         output: output.clone(),
         masks,
+        texel_masks,
         steps,
         input_was_bundle: input.was_bundle(),
         sky_seconds,
@@ -446,6 +533,7 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
             "output": super::json_path(&report.output),
             "added_to_bundle": report.input_was_bundle,
             "stats": s,
+            "texels": report.texel_masks.as_ref().map(|(t, atlas_seconds)| json!({ "stats": t.stats, "atlas_seconds": atlas_seconds })),
             "sky_seconds": report.sky_seconds,
             "bvh_build_seconds": report.build_seconds,
             "bundle_bytes": report.bundle_bytes,
@@ -465,6 +553,12 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
         ]),
     }
     let write = if report.transfer_rebaked { "transfer re-baked on the refined mesh, and write" } else { "write" };
+    if let Some((t, atlas_seconds)) = &report.texel_masks {
+        if *atlas_seconds > 0.0 {
+            phases.push(("atlas".to_string(), *atlas_seconds));
+        }
+        phases.push(("texel sun rays".to_string(), t.stats.seconds));
+    }
     phases.push((write.to_string(), report.write_seconds));
     println!(
         "sun {}: {} steps ({} day), {} vertices, {} points, {} rays in {:.2}s ({:.2} Mrays/s), sky {:.2}s, {} bytes",
@@ -479,6 +573,19 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
         report.sky_seconds,
         report.bundle_bytes
     );
+    if let Some((t, _)) = &report.texel_masks {
+        let lit: u64 = t.stats.lit_texels.iter().sum();
+        println!(
+            "texels: {} covered, {} points ({} per texel), {} rays in {:.2}s ({:.2} Mrays/s), {:.1}% of texel-steps lit",
+            t.stats.texels,
+            t.stats.points,
+            t.stats.points_per_texel,
+            t.stats.rays,
+            t.stats.seconds,
+            t.stats.rays as f64 / t.stats.seconds.max(1e-9) / 1e6,
+            100.0 * lit as f64 / (t.stats.texels * s.steps).max(1) as f64
+        );
+    }
     // Last, as `bake` and `clean` end: where the time went.
     println!("{}", super::phase_line(&phases));
     Ok(())

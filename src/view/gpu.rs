@@ -360,7 +360,14 @@ impl Renderer {
                         lm.width, lm.height, limits.max_texture_dimension_2d
                     )));
                 }
-                let source = concat!(include_str!("shading.wgsl"), include_str!("lightmap.wgsl")).to_string();
+                // Whether the texels carry their own sun bits and sky light, as constants of the shader.
+                let source = format!(
+                    "{}{}const TEXEL_SUN: bool = {};\nconst TEXEL_SKY: bool = {};\n",
+                    include_str!("shading.wgsl"),
+                    include_str!("lightmap.wgsl"),
+                    lm.has_sun_bits(),
+                    lm.has_sky()
+                );
                 let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"));
                 let texcoord_words: Vec<u32> = lm.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
                 let texcoords = init("lightmap texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
@@ -715,7 +722,8 @@ impl Renderer {
         queue.write_buffer(&self.adapt_params, 0, &words_to_bytes(&adapt));
 
         if let Some(lm) = &self.lightmap {
-            let image = lm.scene.irradiance(self.order, self.channels, &settings.lighting);
+            let step = settings.sun_step.filter(|&k| sun.is_some_and(|s| k < s.steps.len()) && self.words_per_vertex > 0);
+            let image = lm.scene.irradiance(self.order, self.channels, &settings.lighting, step);
             let words: Vec<u32> = image.iter().flatten().map(|x| x.to_bits()).collect();
             write_rgba32f(queue, &lm.texture, &words);
         }

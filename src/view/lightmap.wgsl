@@ -5,25 +5,41 @@
 // holds light. A fragment reads the four texels around it bilinearly, over
 // those that hold light only: charts are packed 2 texels apart, so the
 // reads never mix two charts, and a chart's rim needs no dilated copy.
-// The sun term stays per vertex (sun bits per texel are not baked yet).
+// With sun bits per texel (TEXEL_SUN, a constant the renderer appends), A
+// is 2 for a texel lit at the frame's step: A − 1 read bilinearly over the
+// same texels is the fragment's sun visibility, times its own cosine, so a
+// slat's shadow edge is drawn at the texel size, not the triangle's.
+// Without them the sun term is per vertex, as in shading.wgsl. A bundle with
+// texel sun bits but no texel transfer (TEXEL_SKY false, also a constant the
+// renderer appends) keeps the sky term per vertex.
 
 @group(1) @binding(0) var lightmap: texture_2d<f32>;
 
 struct LightmapOut {
     @builtin(position) clip: vec4<f32>,
-    @location(0) sun: vec3<f32>,
+    // The per-vertex sun term (without texel sun bits) plus the per-vertex
+    // sky term (without texel transfer).
+    @location(0) vertex_light: vec3<f32>,
     @location(1) albedo: vec3<f32>,
     // Position in the atlas, texels.
     @location(2) texcoord: vec2<f32>,
+    @location(3) normal: vec3<f32>,
 };
 
 @vertex
 fn vs_lightmap(v: VertexIn, @location(4) texcoord: vec2<f32>) -> LightmapOut {
     var out: LightmapOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
-    out.sun = sun_light(v);
+    out.vertex_light = vec3<f32>(0.0);
+    if (!TEXEL_SUN) {
+        out.vertex_light += sun_light(v);
+    }
+    if (!TEXEL_SKY) {
+        out.vertex_light += sky_light(v);
+    }
     out.albedo = v.albedo;
     out.texcoord = texcoord;
+    out.normal = v.normal;
     return out;
 }
 
@@ -35,23 +51,37 @@ fn fs_lightmap(in: LightmapOut) -> @location(0) vec4<f32> {
     let corner = vec2<i32>(floor(p));
     let f = p - floor(p);
     var sum = vec3<f32>(0.0);
+    var sun_sum = 0.0;
     var weight = 0.0;
     for (var dy = 0; dy < 2; dy++) {
         for (var dx = 0; dx < 2; dx++) {
             let texel = clamp(corner + vec2<i32>(dx, dy), vec2<i32>(0), size - vec2<i32>(1));
             let w = select(1.0 - f.x, f.x, dx == 1) * select(1.0 - f.y, f.y, dy == 1);
             let s = textureLoad(lightmap, texel, 0);
-            sum += w * s.a * s.rgb;
-            weight += w * s.a;
+            let holds = min(s.a, 1.0);
+            sum += w * holds * s.rgb;
+            sun_sum += w * max(s.a - 1.0, 0.0);
+            weight += w * holds;
         }
     }
     var e = vec3<f32>(0.0);
+    var visibility = 0.0;
     if (weight > 1e-6) {
         e = sum / weight;
+        visibility = sun_sum / weight;
     } else {
         // No neighbour holds light: the texel under the fragment, whatever it holds.
         let texel = clamp(vec2<i32>(floor(in.texcoord)), vec2<i32>(0), size - vec2<i32>(1));
-        e = textureLoad(lightmap, texel, 0).rgb;
+        let s = textureLoad(lightmap, texel, 0);
+        e = s.rgb;
+        visibility = max(s.a - 1.0, 0.0);
     }
-    return vec4<f32>(in.albedo * (e + in.sun), 1.0);
+    var light = in.vertex_light;
+    if (TEXEL_SKY) {
+        light += e;
+    }
+    if (TEXEL_SUN) {
+        light += visibility * sun_cosine(normalize(in.normal)) * frame.sun_rgb.xyz / PI;
+    }
+    return vec4<f32>(in.albedo * light, 1.0);
 }

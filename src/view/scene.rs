@@ -110,15 +110,31 @@ pub struct LightmapScene {
     /// (a texel whose points all lay inside geometry does not).
     pub texels: Vec<u32>,
     pub valid: Vec<bool>,
-    /// The selected layers summed, `[texel][channel][coeff]`.
+    /// The selected layers summed, `[texel][channel][coeff]`; empty when
+    /// the bundle has texel sun bits only (the sky light is then per vertex).
     pub transfer: Vec<f32>,
+    /// Sun bits per covered texel (`bundle::SunSeries::texel_masks`; empty:
+    /// the sun stays per vertex) and their words per texel.
+    pub sun_masks: Vec<u32>,
+    pub words_per_texel: u32,
 }
 
 impl LightmapScene {
+    /// Whether the texels carry their own sun bits (else the sun is per vertex).
+    pub fn has_sun_bits(&self) -> bool {
+        self.words_per_texel > 0
+    }
+
+    /// Whether the texels carry the sky light (else it is per vertex).
+    pub fn has_sky(&self) -> bool {
+        !self.transfer.is_empty()
+    }
+
     /// Irradiance per texel of the whole texture for `lighting` (the SH dot
-    /// product the vertex shader does per vertex), RGBA with A = 1 where the
-    /// texel holds light; the fragment shader reads it bilinearly.
-    pub fn irradiance(&self, order: u32, channels: u32, lighting: &[[f32; 3]]) -> Vec<[f32; 4]> {
+    /// product the vertex shader does per vertex), RGBA; the fragment shader
+    /// reads it bilinearly. A is 0 where the texel holds no light, else 1,
+    /// plus 1 when it has sun bits and is lit at `sun_step`.
+    pub fn irradiance(&self, order: u32, channels: u32, lighting: &[[f32; 3]], sun_step: Option<usize>) -> Vec<[f32; 4]> {
         let n2 = (order * order) as usize;
         let stride = n2 * channels as usize;
         let mut image = vec![[0.0f32; 4]; self.width as usize * self.height as usize];
@@ -126,15 +142,21 @@ impl LightmapScene {
             if !self.valid[i] {
                 continue;
             }
-            let row = &self.transfer[i * stride..(i + 1) * stride];
             let mut e = [0.0f32; 3];
-            for (k, l) in lighting.iter().take(n2).enumerate() {
-                for c in 0..3 {
-                    let t = if channels == 3 { row[c * n2 + k] } else { row[k] };
-                    e[c] += t * l[c];
+            if let Some(row) = self.transfer.get(i * stride..(i + 1) * stride) {
+                for (k, l) in lighting.iter().take(n2).enumerate() {
+                    for c in 0..3 {
+                        let t = if channels == 3 { row[c * n2 + k] } else { row[k] };
+                        e[c] += t * l[c];
+                    }
                 }
             }
-            image[texel as usize] = [e[0], e[1], e[2], 1.0];
+            let words = self.words_per_texel as usize;
+            let lit = sun_step
+                .filter(|_| words > 0)
+                .and_then(|k| self.sun_masks.get(i * words + k / 32).map(|w| (w >> (k % 32)) & 1 == 1))
+                .unwrap_or(false);
+            image[texel as usize] = [e[0], e[1], e[2], if lit { 2.0 } else { 1.0 }];
         }
         image
     }
@@ -269,15 +291,23 @@ pub fn prepare_scene_with_panel(
     });
     let lightmap = match &bundle.texels {
         Some(t) => {
-            let stride = (t.transfer.order * t.transfer.order * t.transfer.channels) as usize;
-            if t.transfer.order != transfer.order || t.transfer.channels != transfer.channels {
-                return Err(format!(
-                    "the texels' transfer (order {}, {} channels) differs from the vertices' (order {}, {})",
-                    t.transfer.order, t.transfer.channels, transfer.order, transfer.channels
-                ));
-            }
-            let texel_transfer = layers.combine(&t.transfer);
-            let valid = texel_transfer.chunks_exact(stride.max(1)).map(|row| row.iter().any(|&x| x != 0.0)).collect();
+            let stride = (transfer.order * transfer.order * transfer.channels) as usize;
+            let (texel_transfer, valid) = match &t.transfer {
+                Some(tt) => {
+                    if tt.order != transfer.order || tt.channels != transfer.channels {
+                        return Err(format!(
+                            "the texels' transfer (order {}, {} channels) differs from the vertices' (order {}, {})",
+                            tt.order, tt.channels, transfer.order, transfer.channels
+                        ));
+                    }
+                    let texel_transfer = layers.combine(tt);
+                    let valid = texel_transfer.chunks_exact(stride.max(1)).map(|row| row.iter().any(|&x| x != 0.0)).collect();
+                    (texel_transfer, valid)
+                }
+                // Sun bits alone (`sun --texel-size` on a mesh or a vertex bundle): the sky light stays per vertex.
+                None => (Vec::new(), vec![true; t.texels.len()]),
+            };
+            let sun_masks = bundle.sun.as_ref().map_or_else(Vec::new, |s| s.texel_masks.clone());
             Some(LightmapScene {
                 width: t.atlas.width,
                 height: t.atlas.height,
@@ -285,6 +315,8 @@ pub fn prepare_scene_with_panel(
                 texels: t.texels.clone(),
                 valid,
                 transfer: texel_transfer,
+                words_per_texel: bundle.sun.as_ref().filter(|_| !sun_masks.is_empty()).map_or(0, |s| s.words_per_vertex),
+                sun_masks,
             })
         }
         None => None,

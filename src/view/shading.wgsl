@@ -46,6 +46,15 @@ fn vs_main(v: VertexIn) -> VertexOut {
 
 // The PRT shading of a vertex (also the panel's, panel.wgsl).
 fn shade_vertex(v: VertexIn) -> VertexOut {
+    var out: VertexOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.light = sky_light(v) + sun_light(v);
+    out.albedo = v.albedo;
+    return out;
+}
+
+// The sky term of a vertex: its transfer dotted with the lighting SH.
+fn sky_light(v: VertexIn) -> vec3<f32> {
     let n2 = frame.counts.x;
     let channels = frame.counts.y;
     let base = v.source * channels * n2;
@@ -60,12 +69,7 @@ fn shade_vertex(v: VertexIn) -> VertexOut {
             light += transfer[base + i] * frame.sh[i].xyz;
         }
     }
-    light += sun_light(v);
-    var out: VertexOut;
-    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
-    out.light = light;
-    out.albedo = v.albedo;
-    return out;
+    return light;
 }
 
 // The sun term of a vertex: its bit of the time-lapse step times the cosine
@@ -77,13 +81,20 @@ fn sun_light(v: VertexIn) -> vec3<f32> {
     let step = frame.counts.w;
     let word = masks[v.source * frame.counts.z + step / 32u];
     let bit = (word >> (step % 32u)) & 1u;
-    var cosine = dot(v.normal, frame.sun_dir.xyz);
-    if (frame.sun_dir.w > 0.5) {
-        cosine = abs(cosine);
-    } else {
-        cosine = max(cosine, 0.0);
+    return f32(bit) * sun_cosine(v.normal) * frame.sun_rgb.xyz / PI;
+}
+
+// The sun's cosine on a surface of normal n: |n·s| for window-mode bundles
+// (two-sided, as their bake), else max(n·s, 0); 0 when no step is shown.
+fn sun_cosine(n: vec3<f32>) -> f32 {
+    if (frame.sun_rgb.w < 0.5) {
+        return 0.0;
     }
-    return f32(bit) * cosine * frame.sun_rgb.xyz / PI;
+    let cosine = dot(n, frame.sun_dir.xyz);
+    if (frame.sun_dir.w > 0.5) {
+        return abs(cosine);
+    }
+    return max(cosine, 0.0);
 }
 
 @fragment
