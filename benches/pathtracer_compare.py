@@ -4,7 +4,7 @@ bundle beside Mitsuba 3's rendering of the same mesh, camera and light.
 
 usage:
     target/mitsuba-venv/bin/python benches/pathtracer_compare.py BUNDLE MESH.obj \\
-        --env MAP.exr --camera EX,EY,EZ,TX,TY,TZ [--fov 50] [--size 320x240] \\
+        (--env MAP.exr | --step K) --camera EX,EY,EZ,TX,TY,TZ [--fov 50] [--size 320x240] \\
         [--bounces B] [--spp 512] [--prtbake target/release/prtbake] -o OUTDIR [--json]
 
 Needs numpy, mitsuba and flip-evaluator (PyPI) in a virtualenv:
@@ -12,9 +12,20 @@ Needs numpy, mitsuba and flip-evaluator (PyPI) in a virtualenv:
     target/mitsuba-venv/bin/pip install mitsuba numpy flip-evaluator
 (the LLVM variant needs a shared libLLVM, see benches/mitsuba_probe.py).
 
-Open mode only (no glass, no sun masks): the mesh is the OBJ the bundle was
-baked from (loaded as prtbake loads it: Y up, no clean), every surface
-Lambertian and two-sided with its MTL Kd (0.8 where there is none), RGB.
+The mesh is the OBJ the bundle was baked from (loaded as prtbake loads it:
+Y up, no clean), every surface Lambertian and two-sided with its MTL Kd (0.8
+where there is none), RGB. Windows (MTL `prtbake_role window`, or the
+bundle's `--window` patterns) of transmittance 1 are left out of Mitsuba's
+scene: light passes them unchanged, as the bake counts it (a window of
+transmittance below 1 is refused: Mitsuba would refract or reflect at it).
+
+`--step K` compares a time-lapse step instead of an environment map: the
+viewer's `view --step K`, and in Mitsuba the step's sky and sun
+(examples/sky_env.rs writes them). The bundle models the sun as direct light
+only (sun bits; its sky SH holds no sun), so (a) is the sky SH with B
+bounces plus the sun's direct light alone; (b) is the full Preetham sky and
+the sun, both with B bounces: what a user sees, the sun's bounced light
+included.
 
 Two references, each rendered by Mitsuba's `path` integrator with
 max_depth = B + 2 (camera hit, light, B bounces), Russian roulette off:
@@ -93,6 +104,34 @@ def load_obj_rgb(path):
                 for m in materials:
                     m[1] = kd.get(m[0], m[1])
     return np.array(positions, dtype=np.float32), np.array(tris, dtype=np.uint32), np.array(tri_mat), materials
+
+
+def window_materials(obj_path, materials, meta):
+    """Names of the OBJ's window materials: MTL `prtbake_role window`, or a
+    match of the bundle's recorded `--window` patterns. Exits on one whose
+    transmittance is below 1."""
+    import fnmatch
+    roles, tau = {}, {}
+    base = os.path.dirname(obj_path)
+    with open(obj_path) as f:
+        libs = [" ".join(l.split()[1:]) for l in f if l.startswith("mtllib")]
+    for lib in libs:
+        name = None
+        with open(os.path.join(base, lib)) as f:
+            for line in f:
+                parts = line.split()
+                if parts and parts[0] == "newmtl":
+                    name = " ".join(parts[1:])
+                elif parts and parts[0] == "prtbake_role" and name is not None:
+                    roles[name] = parts[1]
+                elif parts and parts[0] == "prtbake_transmittance" and name is not None:
+                    tau[name] = float(parts[1])
+    patterns = [p.split("=")[0] for p in (meta.get("window_patterns") or [])]
+    names = {m[0] for m in materials if roles.get(m[0]) == "window" or any(fnmatch.fnmatchcase(m[0], p) for p in patterns)}
+    for n in names:
+        if tau.get(n, 1.0) < 1.0:
+            sys.exit(f"{obj_path}: window material {n!r} has transmittance {tau[n]}: only panes of transmittance 1 are modelled")
+    return names
 
 
 def load_mtl(path):
@@ -184,7 +223,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("bundle")
     ap.add_argument("mesh")
-    ap.add_argument("--env", required=True)
+    light = ap.add_mutually_exclusive_group(required=True)
+    light.add_argument("--env")
+    light.add_argument("--step", type=int, help="a time-lapse step: its sky and sun (needs examples/sky_env)")
     ap.add_argument("--camera", required=True)
     ap.add_argument("--fov", type=float, default=50.0)
     ap.add_argument("--size", default="320x240")
@@ -214,7 +255,8 @@ def main():
     k = args.supersample
     shot = os.path.join(args.out, f"prtbake_{k}x.exr")
     started = time.time()
-    subprocess.run([args.prtbake, "view", args.bundle, "--env", args.env, f"--camera={args.camera}", "--fov", str(args.fov),
+    light_args = ["--env", args.env] if args.env else ["--step", str(args.step)]
+    subprocess.run([args.prtbake, "view", args.bundle, *light_args, f"--camera={args.camera}", "--fov", str(args.fov),
                     "--size", f"{k * width}x{k * height}", "--screenshot", shot], check=True, capture_output=True)
     view_seconds = time.time() - started
 
@@ -224,14 +266,31 @@ def main():
     ours = np.array(mi.Bitmap(shot).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32))[..., :3]
     ours = ours.reshape(height, k, width, k, 3).mean(axis=(1, 3))
 
-    env = np.array(mi.Bitmap(args.env).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32))[..., :3]
-    env_sh = band_limited(env, order)
+    def read_map(path):
+        return np.array(mi.Bitmap(path).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32))[..., :3]
+
+    sun = None
+    if args.env:
+        env = read_map(args.env)
+        env_sh = band_limited(env, order)
+        light_key = [os.path.abspath(args.env)]
+    else:
+        # The step's sky as the viewer applies it, the full sky, and the sun.
+        tool = os.path.join(os.path.dirname(args.prtbake), "examples", "sky_env")
+        sh_path, full_path = os.path.join(args.out, "sky_sh.exr"), os.path.join(args.out, "sky_full.exr")
+        step = json.loads(subprocess.run([tool, args.bundle, str(args.step), str(order), sh_path, full_path],
+                                         check=True, capture_output=True, text=True).stdout)
+        env_sh, env = read_map(sh_path), read_map(full_path)
+        sun = None if step["night"] else step
+        # Bundles of one scene and day share their references.
+        light_key = [args.step, step, hashlib.sha256(env_sh.tobytes() + env.tobytes()).hexdigest()]
 
     positions, tris, tri_mat, materials = load_obj_rgb(args.mesh)
+    windows = window_materials(args.mesh, materials, meta)
     shapes = {}
     for m, (name, rgb) in enumerate(materials):
         sel = tris[tri_mat == m]
-        if len(sel) == 0:
+        if len(sel) == 0 or name in windows:
             continue
         used, remap = np.unique(sel, return_inverse=True)
         mesh = mi.Mesh(f"m{m}", len(used), len(sel), has_vertex_normals=False)
@@ -249,14 +308,30 @@ def main():
         "sampler": {"type": "independent", "sample_count": args.spp},
     }
 
-    def render(env_image, seed, spp=None):
+    def sun_emitter():
+        # Mitsuba's direction is the light's travel, away from the sun; irradiance on a facing surface.
+        return {"type": "directional", "direction": [-x for x in sun["direction"]],
+                "irradiance": {"type": "rgb", "value": list(sun["sun_rgb"])}}
+
+    def render(env_image, seed, spp=None, with_sun=False, depth=None):
+        emitters = {}
+        if env_image is not None:
+            emitters["emitter"] = {"type": "envmap", "bitmap": mi.Bitmap(env_image.astype(np.float32)),
+                                   "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], args.env_yaw)}
+        if with_sun and sun is not None:
+            emitters["sun"] = sun_emitter()
         scene = mi.load_dict({
-            "type": "scene", **shapes, "sensor": sensor,
-            "integrator": {"type": "path", "max_depth": bounces + 2, "rr_depth": 1000, "hide_emitters": True},
-            "emitter": {"type": "envmap", "bitmap": mi.Bitmap(env_image.astype(np.float32)),
-                        "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], args.env_yaw)},
+            "type": "scene", **shapes, "sensor": sensor, **emitters,
+            "integrator": {"type": "path", "max_depth": depth or bounces + 2, "rr_depth": 1000, "hide_emitters": True},
         })
         return np.array(mi.render(scene, seed=seed, spp=spp or args.spp))[..., :3]
+
+    def render_a(seed):
+        # The lighting the bundle sees: the SH sky with its bounces, the sun direct only.
+        image = render_signed(env_sh, seed)
+        if sun is not None:
+            image = image + render(None, seed + 2000, with_sun=True, depth=2)
+        return image
 
     def render_signed(env_image, seed):
         # A band-limited map dips below zero; light is linear, so its
@@ -271,17 +346,17 @@ def main():
     # The references depend on the scene, light, camera and samples only: kept
     # in --cache (default: OUTDIR) under a key of those, so bundles of one
     # scene are compared against the same images.
-    key = hashlib.sha256(json.dumps([os.path.abspath(args.mesh), os.path.getsize(args.mesh), os.path.abspath(args.env),
-                                     args.camera, args.fov, width, height, args.spp, bounces, order, args.env_yaw]).encode()).hexdigest()[:16]
+    scene_key = [os.path.abspath(args.mesh), os.path.getsize(args.mesh), *light_key] + ([sorted(windows)] if windows else [])
+    key = hashlib.sha256(json.dumps(scene_key + [args.camera, args.fov, width, height, args.spp, bounces, order, args.env_yaw]).encode()).hexdigest()[:16]
     cache = os.path.join(args.cache or args.out, f"mitsuba-{key}.npz")
     if os.path.exists(cache):
         stored = np.load(cache)
         refs, second, mitsuba_seconds = {"a": stored["a"], "b": stored["b"]}, stored["second"], float(stored["seconds"])
     else:
         started = time.time()
-        refs = {"a": render_signed(env_sh, 1), "b": render(env, 1)}
+        refs = {"a": render_a(1), "b": render(env, 1, with_sun=True)}
         mitsuba_seconds = (time.time() - started) / 2
-        second = render_signed(env_sh, 2)
+        second = render_a(2)
         os.makedirs(os.path.dirname(cache), exist_ok=True)
         np.savez(cache + ".tmp.npz", a=refs["a"], b=refs["b"], second=second, seconds=mitsuba_seconds)
         os.replace(cache + ".tmp.npz", cache)
@@ -319,7 +394,9 @@ def main():
         return
     print(f"{args.bundle}: {width}x{height}, {int(mask.sum())} covered pixels, Mitsuba {args.spp} spp "
           f"(max_depth {bounces + 2}, {mitsuba_seconds:.1f} s/image; its noise {100 * ref_noise:.2f}% rel L2)")
-    for name, what in [("a", "lighting the bundle sees (SH order %d)" % order), ("b", "full map")]:
+    full = "full map" if args.env else f"full sky and sun, both with {bounces} bounce(s)"
+    seen = ("lighting the bundle sees (SH order %d" % order) + (")" if args.env else ", the sun direct)")
+    for name, what in [("a", seen), ("b", full)]:
         r = result[name]
         print(f"  ({name}) {what}: image error {100 * r['rel_l2']:.2f}% rel L2 "
               f"({100 * r['rel_l2_without_reference_noise']:.2f}% without the reference's noise), "

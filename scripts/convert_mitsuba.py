@@ -63,10 +63,14 @@ With panes, a BSDF called `pane` would clash with their material: refused.
 Examples, on the scenes' own coordinates (metres, +Y up):
 - Dining room: the window is a hole in the `Walls` mesh (models/Mesh048.obj)
   at x = 5.133022, y 1.872104..6.862088, z -4.055528..2.823203; the blinds
-  (material `None`, models/Mesh024.obj) hang across it. The pane fills the
-  hole in the wall's plane, on the hole's own corners (normal -X, into the
-  room):
-      --pane 5.133022,1.872104,-4.055528:5.133022,1.872104,2.823203:5.133022,6.862088,-4.055528
+  (material `None`, models/Mesh024.obj) hang across it, their slats reaching
+  from x = 5.03 out to 5.263. Window mode lights a point when the first
+  thing toward the sun is glass, so the pane goes outside the slats, at
+  x = 5.27 (a pane in the hole's plane cuts them: their outer halves cast
+  no shadow, and the slat shadows come out half as wide as they are), and
+  0.5 m wider than the hole on every side, so oblique rays leaving the
+  hole still meet it (normal -X, into the room):
+      --pane 5.27,1.372104,-4.555528:5.27,1.372104,3.323203:5.27,7.362088,-4.555528
 - Kitchen: `rectangle295` (x -0.7515..0.8721, y 0.8731..3.0744,
   z = -3.1173) sits inside the window's reveal (x -0.7661..0.8841,
   y 0.8631..3.0790, z -3.1613..-2.4732), 0.5 to 1.5 cm short of it on each
