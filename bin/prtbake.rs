@@ -442,6 +442,10 @@ struct SunArgs {
     /// Sample points per texel for its sun bits (default: a texel bundle's bake's, else 4).
     #[arg(long, value_name = "N")]
     texel_points: Option<u32>,
+    /// With texels: also store each texel's sunlit share per step (4 bits, section TSUF), which
+    /// the viewer reads instead of the bit, so a shadow edge falls inside a texel, not on its border.
+    #[arg(long)]
+    texel_fractions: bool,
     /// Trace only shard K of N (K in 0..N) into a part (-o PART.prtp); `prtbake merge` joins the parts.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
@@ -972,6 +976,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     Ok(cli::sun_cmd::SunConfig {
         texel_size: a.texel_size,
         texel_points: a.texel_points,
+        texel_fractions: a.texel_fractions,
         refine: a.refine.request()?,
         shard: a.shard.as_deref().map(prtbake::shards::Shard::parse).transpose()?,
         input: a.input,

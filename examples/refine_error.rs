@@ -89,7 +89,7 @@ fn texel_masks_at(texels: &prtbake::bundle::TexelLayers, series: &prtbake::bundl
         }
         let total: f32 = taps.iter().map(|t| t.1).sum::<f32>().max(1e-12);
         for k in 0..steps {
-            out[p * steps + k] = taps.iter().filter(|(i, _)| series.texel_bit(*i, k)).map(|t| t.1).sum::<f32>() / total;
+            out[p * steps + k] = taps.iter().map(|&(i, w)| w * series.texel_sun(i, k)).sum::<f32>() / total;
         }
     }
     out

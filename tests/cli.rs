@@ -805,6 +805,23 @@ fn texel_sun_bits_are_baked_deterministic_and_refused_where_they_cannot_apply() 
     let day: Vec<usize> = (0..series.step_count()).filter(|&k| !series.steps[k].night).collect();
     assert!(day.iter().any(|&k| lit(k) > 0 && lit(k) < t.texels.len()), "no step with both lit and shadowed texels");
     assert!((0..series.step_count()).filter(|k| !day.contains(k)).all(|k| lit(k) == 0), "a texel lit at night");
+    // With --texel-fractions: the same bits, and each texel's lit share beside them, agreeing with its bit.
+    let (o, frac) = sun(&texel, "frac.prtb", &["--texel-fractions"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let f = prtbake::bundle::read_bundle(&frac).unwrap();
+    let fs = f.sun.as_ref().unwrap();
+    assert_eq!(fs.texel_masks, series.texel_masks);
+    assert_eq!(fs.texel_fractions.len(), t.texels.len() * fs.step_count().div_ceil(8));
+    for k in 0..fs.step_count() {
+        for i in 0..t.texels.len() {
+            let share = fs.texel_sun(i, k);
+            assert!(
+                fs.texel_bit(i, k) == (share > 0.5) || (share - 0.5).abs() < 0.04,
+                "texel {i} step {k}: bit and share {share} disagree"
+            );
+        }
+    }
+    assert!((0..t.texels.len()).any(|i| day.iter().any(|&k| (0.05..0.95).contains(&fs.texel_sun(i, k)))), "no texel in partial sun");
     let shown = String::from_utf8_lossy(&prtbake(&["inspect", one.to_str().unwrap()]).stdout).to_string();
     assert!(shown.contains("sun bits per texel") && shown.contains("TSUN") && shown.contains("(vertices, texels)"), "{shown}");
     // From the mesh: a sun-only texel bundle on the atlas the bake made of the same mesh.
@@ -832,6 +849,7 @@ fn texel_sun_bits_are_baked_deterministic_and_refused_where_they_cannot_apply() 
         (&obj, vec!["--texel-size", "0.1", "--refine", "0.2"], "--refine"),
         (&obj, vec!["--texel-size", "0.1", "--texel-points", "0"], "--texel-points"),
         (&hybrid, vec!["--refine", "0.2"], "holds texels"),
+        (&vertex, vec!["--texel-fractions"], "--texel-fractions"),
     ] {
         let (o, out) = sun(input, "refused.prtb", &extra);
         let err = String::from_utf8_lossy(&o.stderr);

@@ -40,7 +40,7 @@ fn sample_bundle() -> Bundle {
                 TransferLayer { kind: LayerKind::Bounce(0), data: values(1.0) },
             ],
         }),
-        sun: Some(SunSeries { sky_order: 2, steps, words_per_vertex, masks, texel_masks: Vec::new() }),
+        sun: Some(SunSeries { sky_order: 2, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() }),
         mesh,
         texels: None,
     }

@@ -55,7 +55,19 @@ pub struct TexelSunMasks {
     pub words_per_texel: u32,
     /// Texel-major words: texel i, step k is bit `k % 32` of word `i · words_per_texel + k / 32`.
     pub masks: Vec<u32>,
+    /// The share of each texel's footprint whose points see the sun, in
+    /// sixteenths of 15 (0 = none, 15 = all): texel-major, `ceil(steps / 8)`
+    /// words a texel, step k in bits `4 (k % 8)` of word `k / 8`.
+    pub fractions: Vec<u32>,
     pub stats: TexelSunStats,
+}
+
+/// Largest value of a texel's sun fraction (4 bits: 0..=15).
+pub const FRACTION_MAX: u32 = 15;
+
+/// Words of 4-bit fractions per texel for `steps` steps.
+pub fn fraction_words(steps: usize) -> usize {
+    steps.div_ceil(8)
 }
 
 impl TexelSunMasks {
@@ -63,6 +75,12 @@ impl TexelSunMasks {
     pub fn bit(&self, i: usize, step: usize) -> bool {
         let w = self.words_per_texel as usize;
         (self.masks[i * w + step / 32] >> (step % 32)) & 1 == 1
+    }
+
+    /// The lit share of covered texel `i` at `step`, 0..=1 in steps of 1/15.
+    pub fn fraction(&self, i: usize, step: usize) -> f32 {
+        let w = self.fractions.len() / self.texels.len().max(1);
+        ((self.fractions[i * w + step / 8] >> (4 * (step % 8))) & 0xF) as f32 / FRACTION_MAX as f32
     }
 }
 
@@ -97,10 +115,13 @@ pub fn bake_texel_sun_masks(
     let test = SunTest { scene, surfaces, params };
     let progress = Progress::start("sun, texels".into(), points.len() as u64 * day_steps, params.quiet);
     let mut masks = vec![0u32; texel_count * words];
+    let fwords = fraction_words(suns.len());
+    let mut fractions = vec![0u32; texel_count * fwords];
     let (rays, traced_points): (u64, u64) = masks
         .par_chunks_mut(TEXELS_PER_TASK * words)
+        .zip(fractions.par_chunks_mut(TEXELS_PER_TASK * fwords))
         .enumerate()
-        .map(|(task, out)| {
+        .map(|(task, (out, fraction_out))| {
             let first = task * TEXELS_PER_TASK;
             let texels = first..(first + TEXELS_PER_TASK).min(texel_count);
             let range = points.start[texels.start] as usize..points.start[texels.end] as usize;
@@ -138,6 +159,10 @@ pub fn bake_texel_sun_masks(
                     if t > 0.0 && 2.0 * l > t {
                         out[local * words + k / 32] |= 1 << (k % 32);
                     }
+                    if t > 0.0 {
+                        let v = ((l / t).clamp(0.0, 1.0) * FRACTION_MAX as f32).round() as u32;
+                        fraction_out[local * fwords + k / 8] |= v << (4 * (k % 8));
+                    }
                 }
             }
             progress.add(task_points.len() as u64 * day_steps);
@@ -155,7 +180,7 @@ pub fn bake_texel_sun_masks(
         rays,
         seconds: started.elapsed().as_secs_f64(),
     };
-    Ok(TexelSunMasks { texels: coverage.texels, words_per_texel: words as u32, masks, stats })
+    Ok(TexelSunMasks { texels: coverage.texels, words_per_texel: words as u32, masks, fractions, stats })
 }
 
 #[cfg(test)]
@@ -182,8 +207,9 @@ mod tests {
     /// included: every floor texel whose footprint lies wholly inside the
     /// shadow is dark, wholly outside it lit; a texel the edge crosses is
     /// lit when most of it is (its points' vote), checked where the lit
-    /// share is clearly above or below one half. The same bits on one
-    /// thread and on two.
+    /// share is clearly above or below one half; its stored lit share is
+    /// the analytic one within what 16 points resolve. The same bits on
+    /// one thread and on two.
     #[test]
     fn texel_sun_bits_match_an_analytic_shadow_edges_included() {
         let h = 0.3f32;
@@ -212,6 +238,7 @@ mod tests {
             a * (1.0 - l1 - l2) + b * l1 + c * l2
         };
         let (mut inside, mut outside, mut edge) = (0, 0, 0);
+        let mut worst_fraction = 0.0f32;
         for (k, sun) in suns.iter().enumerate() {
             let Some(s) = sun else {
                 assert_eq!(one.stats.lit_texels[k], 0, "night step {k}");
@@ -246,6 +273,10 @@ mod tests {
                 }
                 let lit_share = 1.0 - dark / all;
                 let bit = one.bit(i, k);
+                // The stored share: its points' vote, within what 16 points and 4 bits resolve.
+                let fraction = one.fraction(i, k);
+                assert!(bit == (fraction > 0.5) || (fraction - 0.5).abs() < 0.04, "step {k}: bit {bit}, fraction {fraction}");
+                worst_fraction = worst_fraction.max((fraction - lit_share).abs());
                 if lit_share == 0.0 {
                     inside += 1;
                     assert!(!bit, "step {k}: texel {} wholly in the shadow is lit", coverage.texels[i]);
@@ -258,7 +289,10 @@ mod tests {
                 }
             }
         }
-        eprintln!("texels checked: {inside} in the shadow, {outside} in the sun, {edge} on its edges");
+        eprintln!(
+            "texels checked: {inside} in the shadow, {outside} in the sun, {edge} on its edges; fraction off by at most {worst_fraction}"
+        );
+        assert!(worst_fraction < 0.35, "a texel's stored lit share is {worst_fraction} off the analytic one");
         assert!(inside > 500 && outside > 10_000 && edge > 40, "{inside} / {outside} / {edge}");
     }
 

@@ -47,6 +47,7 @@ pub(crate) const SUND: [u8; 4] = *b"SUND";
 pub(crate) const ATLS: [u8; 4] = *b"ATLS";
 pub(crate) const TXFR: [u8; 4] = *b"TXFR";
 pub(crate) const TSUN: [u8; 4] = *b"TSUN";
+pub(crate) const TSUF: [u8; 4] = *b"TSUF";
 /// Offset of the header CRC field; the CRC covers bytes `0..HEADER_CRC_AT` and the table.
 const HEADER_CRC_AT: usize = 28;
 

@@ -49,7 +49,7 @@ pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, 
 pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};
-use sections::{ReadRules, ATLS, MATL, MESH, META, SUND, SUNM, TSUN, TXFR, XFER};
+use sections::{ReadRules, ATLS, MATL, MESH, META, SUND, SUNM, TSUF, TSUN, TXFR, XFER};
 
 /// Encodes a bundle with the default options (zstd level 9 per section).
 ///
@@ -92,6 +92,11 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
     if let Some(sun) = b.sun.as_ref().filter(|s| !s.texel_masks.is_empty()) {
         let t = b.texels.as_ref().ok_or_else(|| BundleError::Invalid("texel sun masks without an atlas".into()))?;
         parts.push((TSUN, sections::encode_texel_sun_masks(sun, t.texels.len())?));
+        if !sun.texel_fractions.is_empty() {
+            parts.push((TSUF, sections::encode_texel_sun_fractions(sun, t.texels.len())?));
+        }
+    } else if b.sun.as_ref().is_some_and(|s| !s.texel_fractions.is_empty()) {
+        return Err(BundleError::Invalid("texel sun fractions without texel sun masks".into()));
     }
     if b.texels.as_ref().is_some_and(|t| t.transfer.is_none()) && b.sun.as_ref().is_none_or(|s| s.texel_masks.is_empty()) {
         return Err(BundleError::Invalid("an atlas with neither texel transfer nor texel sun masks".into()));
@@ -138,10 +143,14 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
             if steps.len() != step_count as usize {
                 return Err(BundleError::malformed(SUND, format!("{} steps, but SUNM has {step_count}", steps.len())));
             }
-            Some(SunSeries { sky_order, steps, words_per_vertex, masks, texel_masks: Vec::new() })
+            Some(SunSeries { sky_order, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() })
         }
     };
     let (atlas_raw, texel_transfer_raw, texel_sun_raw) = (section(ATLS)?, section(TXFR)?, section(TSUN)?);
+    let texel_fractions_raw = section(TSUF)?;
+    if texel_fractions_raw.is_some() && texel_sun_raw.is_none() {
+        return Err(BundleError::MissingSection(Tag(TSUN)));
+    }
     let texels = match atlas_raw {
         None if texel_transfer_raw.is_some() || texel_sun_raw.is_some() => return Err(BundleError::MissingSection(Tag(ATLS))),
         None => None,
@@ -159,6 +168,9 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
     if let (Some(raw), Some(t)) = (texel_sun_raw, &texels) {
         let series = sun.as_mut().ok_or(BundleError::MissingSection(Tag(SUNM)))?;
         series.texel_masks = sections::decode_texel_sun_masks(&raw, t.texels.len(), series.steps.len() as u32, rules)?;
+        if let Some(raw) = texel_fractions_raw {
+            series.texel_fractions = sections::decode_texel_sun_fractions(&raw, t.texels.len(), series.steps.len() as u32, rules)?;
+        }
     }
     Ok(Bundle { meta, mesh, transfer, sun, texels })
 }
@@ -203,8 +215,15 @@ pub fn encode_with_sun_on(
     let sun_masks = sections::encode_sun_masks(sun, vertex_count)?;
     let sun_data = sections::encode_sun_data(sun)?;
     let texel_sun = match (texels, sun.texel_masks.is_empty()) {
+        (_, true) if !sun.texel_fractions.is_empty() => {
+            return Err(BundleError::Invalid("texel sun fractions without texel sun masks".into()));
+        }
         (_, true) => None,
-        (Some(t), false) => Some(sections::encode_texel_sun_masks(sun, t.texels.len())?),
+        (Some(t), false) => {
+            let fractions =
+                (!sun.texel_fractions.is_empty()).then(|| sections::encode_texel_sun_fractions(sun, t.texels.len())).transpose()?;
+            Some((sections::encode_texel_sun_masks(sun, t.texels.len())?, fractions))
+        }
         (None, false) => return Err(BundleError::Invalid("texel sun masks, but the bundle has no atlas".into())),
     };
     // A 1.0 file's mesh and materials may hold values its writer did not bring
@@ -214,7 +233,7 @@ pub fn encode_with_sun_on(
     for info in &container.sections {
         match info.tag {
             META => parts.push((META, sections::encode_meta(meta)?)),
-            SUNM | SUND | TSUN => {}
+            SUNM | SUND | TSUN | TSUF => {}
             MESH if legacy_values => parts.push((MESH, sections::encode_mesh(&decoded.mesh)?)),
             MATL if legacy_values => parts.push((MATL, sections::encode_materials(&decoded.mesh.materials, &decoded.mesh.groups)?)),
             tag => parts.push((tag, container.payload(info)?.into_owned())),
@@ -225,8 +244,11 @@ pub fn encode_with_sun_on(
     if let Some((raw, _)) = added_atlas {
         parts.push((ATLS, raw));
     }
-    if let Some(masks) = texel_sun {
+    if let Some((masks, fractions)) = texel_sun {
         parts.push((TSUN, masks));
+        if let Some(fractions) = fractions {
+            parts.push((TSUF, fractions));
+        }
     }
     write_container(&parts, EncodeOptions::default())
 }

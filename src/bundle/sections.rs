@@ -14,7 +14,7 @@ use super::types::{LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Tra
 use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
-pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TSUN, TXFR, XFER};
+pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TSUF, TSUN, TXFR, XFER};
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;
@@ -434,6 +434,70 @@ pub(crate) fn decode_texel_sun_masks(raw: &[u8], covered: usize, step_count: u32
     }
     cur.finish()?;
     Ok(masks)
+}
+
+// ---------------------------------------------------------------- TSUF
+
+/// TSUF: u32 step_count, u32 bits per value (4), u32 covered_count, u32
+/// reserved, then per covered texel `ceil(step_count / 8)` words of 4-bit
+/// values (step k in bits `4 (k % 8)` of word `k / 8`), unused nibbles zero.
+pub(crate) fn encode_texel_sun_fractions(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
+    let steps = count_u32(sun.steps.len(), "step count")?;
+    let words = steps.div_ceil(8) as usize;
+    if Some(sun.texel_fractions.len()) != covered.checked_mul(words) {
+        return Err(invalid(format!("{} texel fraction words for {covered} covered texels × {words} words", sun.texel_fractions.len())));
+    }
+    if let Some(i) = first_texel_with_padding_nibbles(&sun.texel_fractions, steps) {
+        return Err(invalid(format!("sun fractions of covered texel {i} have values past step {steps}")));
+    }
+    let mut out = Vec::with_capacity(16 + 4 * sun.texel_fractions.len());
+    put_u32(&mut out, steps);
+    put_u32(&mut out, 4);
+    put_u32(&mut out, count_u32(covered, "covered texel count")?);
+    put_u32(&mut out, 0);
+    sun.texel_fractions.iter().for_each(|&w| put_u32(&mut out, w));
+    Ok(out)
+}
+
+/// The first texel whose last word has values at steps ≥ `step_count`.
+fn first_texel_with_padding_nibbles(words: &[u32], step_count: u32) -> Option<usize> {
+    let per_texel = step_count.div_ceil(8) as usize;
+    let used = step_count % 8;
+    if used == 0 || per_texel == 0 {
+        return None;
+    }
+    let unused = !((1u32 << (4 * used)) - 1);
+    words.chunks_exact(per_texel).position(|w| w.last().is_some_and(|w| w & unused != 0))
+}
+
+/// Decodes TSUF for an atlas of `covered` texels and `step_count` steps.
+pub(crate) fn decode_texel_sun_fractions(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
+    let mut cur = Cursor::new(raw, TSUF);
+    let steps = cur.u32("step count")?;
+    let bits = cur.u32("bits per value")?;
+    let declared = cur.u32("covered texel count")?;
+    let reserved = cur.u32("reserved")?;
+    if rules.reject_reserved && reserved != 0 {
+        return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
+    }
+    if steps != step_count {
+        return Err(cur.error(format!("{steps} steps, but SUNM has {step_count}")));
+    }
+    if bits != 4 {
+        return Err(cur.error(format!("{bits} bits per value; this reader knows 4")));
+    }
+    if declared as usize != covered {
+        return Err(cur.error(format!("fractions for {declared} texels, the atlas covers {covered}")));
+    }
+    let words = steps.div_ceil(8) as u64;
+    let expected = checked_len(&[(declared as u64, 4 * words)]);
+    check_exact_len(&cur, expected, || format!("{declared} texels × {words} words"))?;
+    let fractions = cur.u32s(declared as u64 * words, "fraction words")?;
+    if let Some(i) = first_texel_with_padding_nibbles(&fractions, steps) {
+        return Err(cur.error(format!("fractions of covered texel {i} have values past step {steps} (must be zero)")));
+    }
+    cur.finish()?;
+    Ok(fractions)
 }
 
 // ---------------------------------------------------------------- SUND

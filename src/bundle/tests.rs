@@ -69,7 +69,7 @@ pub(super) fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> S
         .collect();
     let bits: Vec<bool> = (0..vertices * step_count).map(|_| rng.next() & 1 == 1).collect();
     let (words_per_vertex, masks) = SunSeries::pack(step_count, vertices, |v, k| bits[v * step_count + k]);
-    SunSeries { sky_order: sky_order as u32, steps, words_per_vertex, masks, texel_masks: Vec::new() }
+    SunSeries { sky_order: sky_order as u32, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() }
 }
 
 fn random_bundle(seed: u64, vertices: usize, triangles: usize, quantization: Quantization) -> Bundle {
@@ -143,7 +143,14 @@ pub(super) fn small_regular_bundle() -> Bundle {
         meta: serde_json::json!({"tool": "prtbake golden", "note": "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa"}),
         mesh,
         transfer: Some(transfer),
-        sun: Some(SunSeries { sky_order: 1, steps: vec![step(0), step(1)], words_per_vertex, masks, texel_masks: Vec::new() }),
+        sun: Some(SunSeries {
+            sky_order: 1,
+            steps: vec![step(0), step(1)],
+            words_per_vertex,
+            masks,
+            texel_masks: Vec::new(),
+            texel_fractions: Vec::new(),
+        }),
         texels: None,
     }
 }
@@ -1085,8 +1092,12 @@ fn texel_sun_masks_round_trip_with_and_without_texel_transfer() {
     let mut rng = Rng(41);
     let mut sun = random_sun(&mut rng, bundle.mesh.vertex_count(), 40);
     let (words, texel_masks) = SunSeries::pack(40, covered, |i, k| (i * 7 + k * 3) % 5 < 2);
+    assert_eq!(words, 2);
     assert_eq!(words, sun.words_per_vertex);
     sun.texel_masks = texel_masks;
+    // Each texel's lit share in 4 bits (TSUF), 40 steps in 5 words a texel.
+    sun.texel_fractions =
+        (0..covered * 5).map(|w| if w % 5 == 4 { 0x0000_F00F } else { 0x1234_5678u32.rotate_left(w as u32 % 32) }).collect();
     bundle.sun = Some(sun.clone());
     let bytes = encode_bundle(&bundle).unwrap();
     let decoded = decode_bundle(&bytes).unwrap();
@@ -1094,6 +1105,15 @@ fn texel_sun_masks_round_trip_with_and_without_texel_transfer() {
     let series = decoded.sun.as_ref().unwrap();
     assert!(series.texel_bit(1, 0) == ((7 % 5) < 2) && !series.texel_bit(1, 40) && !series.texel_bit(covered, 0));
     assert!(list_sections(&bytes).unwrap().iter().any(|s| s.tag_name() == "TSUN"));
+    assert!(list_sections(&bytes).unwrap().iter().any(|s| s.tag_name() == "TSUF"));
+    assert_eq!(series.texel_sun(0, 1), 7.0 / 15.0);
+    // Fractions for another texel count, or without bits, are refused.
+    let mut short_fractions = bundle.clone();
+    short_fractions.sun.as_mut().unwrap().texel_fractions.pop();
+    assert!(encode_bundle(&short_fractions).is_err());
+    let mut no_bits = bundle.clone();
+    no_bits.sun.as_mut().unwrap().texel_masks.clear();
+    assert!(encode_bundle(&no_bits).is_err());
     // Sun-only: ATLS and TSUN without TXFR.
     let mut sun_only = bundle.clone();
     sun_only.transfer = None;

@@ -227,6 +227,11 @@ pub struct SunSeries {
     /// bundle's atlas, texel-major with `words_per_vertex` words each; empty
     /// when the sun was baked per vertex only.
     pub texel_masks: Vec<u32>,
+    /// Texel mode (section TSUF, with `sun --texel-fractions`): per covered
+    /// texel and step, the share of its footprint that sees the sun in
+    /// 4 bits (value/15), `ceil(steps / 8)` words a texel, step k in bits
+    /// `4 (k % 8)` of word `k / 8`; empty when not stored.
+    pub texel_fractions: Vec<u32>,
 }
 
 impl SunSeries {
@@ -258,6 +263,20 @@ impl SunSeries {
         let word =
             i.checked_mul(self.words_per_vertex as usize).and_then(|w| w.checked_add(step / 32)).and_then(|w| self.texel_masks.get(w));
         step < self.steps.len() && word.is_some_and(|w| (w >> (step % 32)) & 1 == 1)
+    }
+
+    /// The sunlit share of covered texel `i` at `step` (0..=1): its
+    /// fraction when stored, else its bit; 0 out of range.
+    pub fn texel_sun(&self, i: usize, step: usize) -> f32 {
+        if self.texel_fractions.is_empty() {
+            return if self.texel_bit(i, step) { 1.0 } else { 0.0 };
+        }
+        let words = self.steps.len().div_ceil(8);
+        let word = i.checked_mul(words).and_then(|w| w.checked_add(step / 8)).and_then(|w| self.texel_fractions.get(w));
+        match word {
+            Some(w) if step < self.steps.len() => ((w >> (4 * (step % 8))) & 0xF) as f32 / 15.0,
+            _ => 0.0,
+        }
     }
 
     /// Number of time steps.

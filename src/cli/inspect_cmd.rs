@@ -54,6 +54,7 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
                 "layers": x.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
             })),
             "sun_bits": b.sun.as_ref().is_some_and(|s| !s.texel_masks.is_empty()),
+            "sun_fractions": b.sun.as_ref().is_some_and(|s| !s.texel_fractions.is_empty()),
         })),
         "sections": sections.iter().map(|s| json!({
             "tag": s.tag_name(), "codec": s.codec_name(), "stored_bytes": s.stored_len, "raw_bytes": s.raw_len,
@@ -81,7 +82,11 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             let layers = x.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ");
             format!("order {}, {} channel(s), {}, layers {layers}", x.order, x.channels, x.quantization.name())
         });
-        let sun_bits = if b.sun.as_ref().is_some_and(|s| !s.texel_masks.is_empty()) { "; sun bits per texel" } else { "" };
+        let sun_bits = match &b.sun {
+            Some(s) if !s.texel_fractions.is_empty() => "; sun bits and lit shares per texel",
+            Some(s) if !s.texel_masks.is_empty() => "; sun bits per texel",
+            _ => "",
+        };
         println!(
             "  texels: atlas {} × {} of {} (world units), {} charts; {} covered texels ({:.1}% of the texture), {transfer}{sun_bits}",
             a.width,

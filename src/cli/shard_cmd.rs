@@ -171,6 +171,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             words_per_vertex: words,
             masks: vec![0; input.mesh.vertex_count() * words as usize],
             texel_masks: Vec::new(),
+            texel_fractions: Vec::new(),
         };
         let meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());
         part.frame = encode_sun_output(&input, meta, &series, &config.output)?;

@@ -73,6 +73,8 @@ pub struct SunConfig {
     /// Points per texel (`--texel-points`); default: the texel bundle's
     /// transfer bake's, else [`bake::texels::POINTS_PER_TEXEL`].
     pub texel_points: Option<u32>,
+    /// Also store each texel's lit share per step in 4 bits (`--texel-fractions`, section TSUF).
+    pub texel_fractions: bool,
 }
 
 /// What `sun` reports.
@@ -345,6 +347,9 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             );
         }
     }
+    if config.texel_fractions && config.texel_size.is_none() && input.atlas.is_none() {
+        anyhow::bail!("--texel-fractions: the sun is baked per vertex here; give --texel-size L, or a bundle with an atlas");
+    }
     if config.refine.is_some() && config.texel_size.is_some() {
         anyhow::bail!("--texel-size with --refine: texels already resolve the sun where vertices cannot; refine or bake texels");
     }
@@ -433,12 +438,14 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         words_per_vertex: masks.words_per_vertex,
         masks: masks.masks.clone(),
         texel_masks: texel_masks.as_ref().map(|(t, _)| t.masks.clone()).unwrap_or_default(),
+        texel_fractions: texel_masks.as_ref().filter(|_| config.texel_fractions).map(|(t, _)| t.fractions.clone()).unwrap_or_default(),
     };
     let mut sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
     if let (Some((t, _)), Some((atlas, _))) = (&texel_masks, &input.atlas) {
         sun_meta["texels"] = json!({
             "texel_size": atlas.texel_size,
             "points_per_texel": t.stats.points_per_texel,
+            "fractions": config.texel_fractions,
             "covered": t.stats.texels,
             "points": t.stats.points,
             "rays": t.stats.rays,

@@ -6,9 +6,11 @@
 // those that hold light only: charts are packed 2 texels apart, so the
 // reads never mix two charts, and a chart's rim needs no dilated copy.
 // With sun bits per texel (TEXEL_SUN, a constant the renderer appends), A
-// is 2 for a texel lit at the frame's step: A − 1 read bilinearly over the
-// same texels is the fragment's sun visibility, times its own cosine, so a
-// slat's shadow edge is drawn at the texel size, not the triangle's.
+// is 1 plus the texel's sunlit share at the frame's step (its bit, or its
+// stored fraction): A − 1 read bilinearly over the same texels is the
+// fragment's sun visibility, times its own cosine, so a slat's shadow edge
+// is drawn at the texel size, not the triangle's (inside a texel, with
+// fractions).
 // Without them the sun term is per vertex, as in shading.wgsl. A bundle with
 // texel sun bits but no texel transfer (TEXEL_SKY false, also a constant the
 // renderer appends) keeps the sky term per vertex.

@@ -117,6 +117,9 @@ pub struct LightmapScene {
     /// the sun stays per vertex) and their words per texel.
     pub sun_masks: Vec<u32>,
     pub words_per_texel: u32,
+    /// The texels' sunlit shares in 4 bits (`bundle::SunSeries::texel_fractions`),
+    /// read instead of the bits when present.
+    pub sun_fractions: Vec<u32>,
 }
 
 impl LightmapScene {
@@ -133,7 +136,8 @@ impl LightmapScene {
     /// Irradiance per texel of the whole texture for `lighting` (the SH dot
     /// product the vertex shader does per vertex), RGBA; the fragment shader
     /// reads it bilinearly. A is 0 where the texel holds no light, else 1,
-    /// plus 1 when it has sun bits and is lit at `sun_step`.
+    /// plus its sunlit share at `sun_step` when it has sun bits (its stored
+    /// fraction, else its bit).
     pub fn irradiance(&self, order: u32, channels: u32, lighting: &[[f32; 3]], sun_step: Option<usize>) -> Vec<[f32; 4]> {
         let n2 = (order * order) as usize;
         let stride = n2 * channels as usize;
@@ -152,11 +156,15 @@ impl LightmapScene {
                 }
             }
             let words = self.words_per_texel as usize;
-            let lit = sun_step
-                .filter(|_| words > 0)
-                .and_then(|k| self.sun_masks.get(i * words + k / 32).map(|w| (w >> (k % 32)) & 1 == 1))
-                .unwrap_or(false);
-            image[texel as usize] = [e[0], e[1], e[2], if lit { 2.0 } else { 1.0 }];
+            let fraction_words = self.sun_fractions.len() / self.texels.len().max(1);
+            let lit = sun_step.filter(|_| words > 0).map_or(0.0, |k| {
+                if fraction_words > 0 {
+                    self.sun_fractions.get(i * fraction_words + k / 8).map_or(0.0, |w| ((w >> (4 * (k % 8))) & 0xF) as f32 / 15.0)
+                } else {
+                    self.sun_masks.get(i * words + k / 32).map_or(0.0, |w| ((w >> (k % 32)) & 1) as f32)
+                }
+            });
+            image[texel as usize] = [e[0], e[1], e[2], 1.0 + lit];
         }
         image
     }
@@ -308,6 +316,7 @@ pub fn prepare_scene_with_panel(
                 None => (Vec::new(), vec![true; t.texels.len()]),
             };
             let sun_masks = bundle.sun.as_ref().map_or_else(Vec::new, |s| s.texel_masks.clone());
+            let sun_fractions = bundle.sun.as_ref().map_or_else(Vec::new, |s| s.texel_fractions.clone());
             Some(LightmapScene {
                 width: t.atlas.width,
                 height: t.atlas.height,
@@ -317,6 +326,7 @@ pub fn prepare_scene_with_panel(
                 transfer: texel_transfer,
                 words_per_texel: bundle.sun.as_ref().filter(|_| !sun_masks.is_empty()).map_or(0, |s| s.words_per_vertex),
                 sun_masks,
+                sun_fractions,
             })
         }
         None => None,
