@@ -332,7 +332,7 @@ pub(crate) fn encode_sun_masks(sun: &SunSeries, vertex_count: usize) -> Result<V
     if Some(sun.masks.len()) != vertex_count.checked_mul(sun.words_per_vertex as usize) {
         return Err(invalid(format!("{} mask words for {vertex_count} vertices × {} words", sun.masks.len(), sun.words_per_vertex)));
     }
-    if let Some(v) = first_vertex_with_padding_bits(&sun.masks, steps) {
+    if let Some(v) = first_with_values_past(&sun.masks, steps, 1) {
         return Err(invalid(format!("sun mask of vertex {v} has bits set past step {steps}")));
     }
     let mut out = Vec::with_capacity(16 + 4 * sun.masks.len());
@@ -342,17 +342,6 @@ pub(crate) fn encode_sun_masks(sun: &SunSeries, vertex_count: usize) -> Result<V
     put_u32(&mut out, 0);
     sun.masks.iter().for_each(|&w| put_u32(&mut out, w));
     Ok(out)
-}
-
-/// The first vertex whose last word has bits at steps ≥ `step_count`.
-fn first_vertex_with_padding_bits(masks: &[u32], step_count: u32) -> Option<usize> {
-    let words_per_vertex = step_count.div_ceil(32) as usize;
-    let used_bits = step_count % 32;
-    if used_bits == 0 || words_per_vertex == 0 {
-        return None;
-    }
-    let unused = !((1u32 << used_bits) - 1);
-    masks.chunks_exact(words_per_vertex).position(|words| words.last().is_some_and(|w| w & unused != 0))
 }
 
 /// Returns `(step_count, words_per_vertex, masks)`.
@@ -374,130 +363,125 @@ pub(crate) fn decode_sun_masks(raw: &[u8], vertex_count: usize, rules: ReadRules
     let expected = checked_len(&[(declared_vertices as u64, 4 * words_per_vertex as u64)]);
     check_exact_len(&cur, expected, || format!("{declared_vertices} vertices × {words_per_vertex} words"))?;
     let masks = cur.u32s(declared_vertices as u64 * words_per_vertex as u64, "mask words")?;
-    if let Some(v) = first_vertex_with_padding_bits(&masks, steps) {
+    if let Some(v) = first_with_values_past(&masks, steps, 1) {
         return Err(cur.error(format!("mask of vertex {v} has bits set past step {steps} (must be zero)")));
     }
     cur.finish()?;
     Ok((steps, words_per_vertex, masks))
 }
 
-// ---------------------------------------------------------------- TSUN
+// ---------------------------------------------------------------- TSUN, TSUF
+
+/// A texel sun section's values per step, packed texel-major in u32 words,
+/// step k at bit `bits · k` of its texel's words; a texel's last word is
+/// zero past the last step. TSUN holds a bit per step and stores its words
+/// per texel in the second header field; TSUF holds a 4-bit share per step
+/// and stores its bits per value there.
+#[derive(Clone, Copy)]
+struct TexelSteps {
+    tag: [u8; 4],
+    bits: u32,
+    what: &'static str,
+}
 
 /// TSUN: u32 step_count, u32 words_per_texel, u32 covered_count, u32
 /// reserved, then the words: SUNM's layout over the atlas's covered texels.
-pub(crate) fn encode_texel_sun_masks(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
-    let steps = count_u32(sun.steps.len(), "step count")?;
-    if Some(sun.texel_masks.len()) != covered.checked_mul(sun.words_per_vertex as usize) {
-        return Err(invalid(format!(
-            "{} texel mask words for {covered} covered texels × {} words",
-            sun.texel_masks.len(),
-            sun.words_per_vertex
-        )));
-    }
-    if let Some(i) = first_vertex_with_padding_bits(&sun.texel_masks, steps) {
-        return Err(invalid(format!("sun mask of covered texel {i} has bits set past step {steps}")));
-    }
-    let mut out = Vec::with_capacity(16 + 4 * sun.texel_masks.len());
-    put_u32(&mut out, steps);
-    put_u32(&mut out, sun.words_per_vertex);
-    put_u32(&mut out, count_u32(covered, "covered texel count")?);
-    put_u32(&mut out, 0);
-    sun.texel_masks.iter().for_each(|&w| put_u32(&mut out, w));
-    Ok(out)
-}
-
-/// Decodes TSUN for an atlas of `covered` texels and a series of
-/// `step_count` steps (SUNM's); returns the masks.
-pub(crate) fn decode_texel_sun_masks(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
-    let mut cur = Cursor::new(raw, TSUN);
-    let steps = cur.u32("step count")?;
-    let words = cur.u32("words per texel")?;
-    let declared = cur.u32("covered texel count")?;
-    let reserved = cur.u32("reserved")?;
-    if rules.reject_reserved && reserved != 0 {
-        return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
-    }
-    if steps != step_count {
-        return Err(cur.error(format!("{steps} steps, but SUNM has {step_count}")));
-    }
-    if words != steps.div_ceil(32) {
-        return Err(cur.error(format!("{words} words per texel for {steps} steps, expected {}", steps.div_ceil(32))));
-    }
-    if declared as usize != covered {
-        return Err(cur.error(format!("masks for {declared} texels, the atlas covers {covered}")));
-    }
-    let expected = checked_len(&[(declared as u64, 4 * words as u64)]);
-    check_exact_len(&cur, expected, || format!("{declared} texels × {words} words"))?;
-    let masks = cur.u32s(declared as u64 * words as u64, "mask words")?;
-    if let Some(i) = first_vertex_with_padding_bits(&masks, steps) {
-        return Err(cur.error(format!("mask of covered texel {i} has bits set past step {steps} (must be zero)")));
-    }
-    cur.finish()?;
-    Ok(masks)
-}
-
-// ---------------------------------------------------------------- TSUF
-
+const TEXEL_SUN_BITS: TexelSteps = TexelSteps { tag: TSUN, bits: 1, what: "sun mask" };
 /// TSUF: u32 step_count, u32 bits per value (4), u32 covered_count, u32
 /// reserved, then per covered texel `ceil(step_count / 8)` words of 4-bit
-/// values (step k in bits `4 (k % 8)` of word `k / 8`), unused nibbles zero.
-pub(crate) fn encode_texel_sun_fractions(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
-    let steps = count_u32(sun.steps.len(), "step count")?;
-    let words = steps.div_ceil(8) as usize;
-    if Some(sun.texel_fractions.len()) != covered.checked_mul(words) {
-        return Err(invalid(format!("{} texel fraction words for {covered} covered texels × {words} words", sun.texel_fractions.len())));
+/// values (step k in bits `4 (k % 8)` of word `k / 8`).
+const TEXEL_SUN_SHARES: TexelSteps = TexelSteps { tag: TSUF, bits: 4, what: "sun fraction" };
+
+impl TexelSteps {
+    fn words_per_texel(self, steps: u32) -> u64 {
+        (steps as u64 * self.bits as u64).div_ceil(32)
     }
-    if let Some(i) = first_texel_with_padding_nibbles(&sun.texel_fractions, steps) {
-        return Err(invalid(format!("sun fractions of covered texel {i} have values past step {steps}")));
+
+    /// The second header field for `steps`.
+    fn second_field(self, steps: u32) -> u64 {
+        if self.bits == 1 {
+            self.words_per_texel(steps)
+        } else {
+            self.bits as u64
+        }
     }
-    let mut out = Vec::with_capacity(16 + 4 * sun.texel_fractions.len());
-    put_u32(&mut out, steps);
-    put_u32(&mut out, 4);
-    put_u32(&mut out, count_u32(covered, "covered texel count")?);
-    put_u32(&mut out, 0);
-    sun.texel_fractions.iter().for_each(|&w| put_u32(&mut out, w));
-    Ok(out)
+
+    fn encode(self, values: &[u32], steps: usize, covered: usize) -> Result<Vec<u8>, BundleError> {
+        let steps = count_u32(steps, "step count")?;
+        let words = self.words_per_texel(steps) as usize;
+        if Some(values.len()) != covered.checked_mul(words) {
+            return Err(invalid(format!("{} {} words for {covered} covered texels × {words} words", values.len(), self.what)));
+        }
+        if let Some(i) = first_with_values_past(values, steps, self.bits) {
+            return Err(invalid(format!("{} of covered texel {i} has values past step {steps}", self.what)));
+        }
+        let mut out = Vec::with_capacity(16 + 4 * values.len());
+        put_u32(&mut out, steps);
+        put_u32(&mut out, self.second_field(steps) as u32);
+        put_u32(&mut out, count_u32(covered, "covered texel count")?);
+        put_u32(&mut out, 0);
+        values.iter().for_each(|&w| put_u32(&mut out, w));
+        Ok(out)
+    }
+
+    /// Decodes the section for an atlas of `covered` texels and a series of
+    /// `step_count` steps (SUNM's).
+    fn decode(self, raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
+        let mut cur = Cursor::new(raw, self.tag);
+        let steps = cur.u32("step count")?;
+        let second = cur.u32(if self.bits == 1 { "words per texel" } else { "bits per value" })?;
+        let declared = cur.u32("covered texel count")?;
+        let reserved = cur.u32("reserved")?;
+        if rules.reject_reserved && reserved != 0 {
+            return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
+        }
+        if steps != step_count {
+            return Err(cur.error(format!("{steps} steps, but SUNM has {step_count}")));
+        }
+        if second as u64 != self.second_field(steps) {
+            return Err(cur.error(format!("header field {second} for {steps} steps, expected {}", self.second_field(steps))));
+        }
+        if declared as usize != covered {
+            return Err(cur.error(format!("values for {declared} texels, the atlas covers {covered}")));
+        }
+        let words = self.words_per_texel(steps);
+        let expected = checked_len(&[(declared as u64, 4 * words)]);
+        check_exact_len(&cur, expected, || format!("{declared} texels × {words} words"))?;
+        let values = cur.u32s(declared as u64 * words, "value words")?;
+        if let Some(i) = first_with_values_past(&values, steps, self.bits) {
+            return Err(cur.error(format!("{} of covered texel {i} has values past step {steps} (must be zero)", self.what)));
+        }
+        cur.finish()?;
+        Ok(values)
+    }
 }
 
-/// The first texel whose last word has values at steps ≥ `step_count`.
-fn first_texel_with_padding_nibbles(words: &[u32], step_count: u32) -> Option<usize> {
-    let per_texel = step_count.div_ceil(8) as usize;
-    let used = step_count % 8;
-    if used == 0 || per_texel == 0 {
+/// The first receiver (rows of `ceil(step_count · bits / 32)` words) whose
+/// last word has non-zero bits past step `step_count`.
+fn first_with_values_past(words: &[u32], step_count: u32, bits: u32) -> Option<usize> {
+    let per_receiver = (step_count as u64 * bits as u64).div_ceil(32) as usize;
+    let used = (step_count as u64 * bits as u64 % 32) as u32;
+    if used == 0 || per_receiver == 0 {
         return None;
     }
-    let unused = !((1u32 << (4 * used)) - 1);
-    words.chunks_exact(per_texel).position(|w| w.last().is_some_and(|w| w & unused != 0))
+    let unused = !((1u32 << used) - 1);
+    words.chunks_exact(per_receiver).position(|w| w.last().is_some_and(|w| w & unused != 0))
 }
 
-/// Decodes TSUF for an atlas of `covered` texels and `step_count` steps.
+pub(crate) fn encode_texel_sun_masks(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
+    TEXEL_SUN_BITS.encode(&sun.texel_masks, sun.steps.len(), covered)
+}
+
+pub(crate) fn decode_texel_sun_masks(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
+    TEXEL_SUN_BITS.decode(raw, covered, step_count, rules)
+}
+
+pub(crate) fn encode_texel_sun_fractions(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
+    TEXEL_SUN_SHARES.encode(&sun.texel_fractions, sun.steps.len(), covered)
+}
+
 pub(crate) fn decode_texel_sun_fractions(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
-    let mut cur = Cursor::new(raw, TSUF);
-    let steps = cur.u32("step count")?;
-    let bits = cur.u32("bits per value")?;
-    let declared = cur.u32("covered texel count")?;
-    let reserved = cur.u32("reserved")?;
-    if rules.reject_reserved && reserved != 0 {
-        return Err(cur.error(format!("reserved field is {reserved:#x}, must be 0")));
-    }
-    if steps != step_count {
-        return Err(cur.error(format!("{steps} steps, but SUNM has {step_count}")));
-    }
-    if bits != 4 {
-        return Err(cur.error(format!("{bits} bits per value; this reader knows 4")));
-    }
-    if declared as usize != covered {
-        return Err(cur.error(format!("fractions for {declared} texels, the atlas covers {covered}")));
-    }
-    let words = steps.div_ceil(8) as u64;
-    let expected = checked_len(&[(declared as u64, 4 * words)]);
-    check_exact_len(&cur, expected, || format!("{declared} texels × {words} words"))?;
-    let fractions = cur.u32s(declared as u64 * words, "fraction words")?;
-    if let Some(i) = first_texel_with_padding_nibbles(&fractions, steps) {
-        return Err(cur.error(format!("fractions of covered texel {i} have values past step {steps} (must be zero)")));
-    }
-    cur.finish()?;
-    Ok(fractions)
+    TEXEL_SUN_SHARES.decode(raw, covered, step_count, rules)
 }
 
 // ---------------------------------------------------------------- SUND
