@@ -113,19 +113,16 @@ pub struct LightmapScene {
     /// The selected layers summed, `[texel][channel][coeff]`; empty when
     /// the bundle has texel sun bits only (the sky light is then per vertex).
     pub transfer: Vec<f32>,
-    /// Sun bits per covered texel (`bundle::SunSeries::texel_masks`; empty:
-    /// the sun stays per vertex) and their words per texel.
-    pub sun_masks: Vec<u32>,
-    pub words_per_texel: u32,
-    /// The texels' sunlit shares in 4 bits (`bundle::SunSeries::texel_fractions`),
-    /// read instead of the bits when present.
-    pub sun_fractions: Vec<u32>,
+    /// The bundle's time lapse when it has sun bits per texel (its
+    /// per-vertex masks left out: the vertex buffers carry them); `None`:
+    /// the sun stays per vertex.
+    pub texel_sun: Option<SunSeries>,
 }
 
 impl LightmapScene {
     /// Whether the texels carry their own sun bits (else the sun is per vertex).
     pub fn has_sun_bits(&self) -> bool {
-        self.words_per_texel > 0
+        self.texel_sun.is_some()
     }
 
     /// Whether the texels carry the sky light (else it is per vertex).
@@ -155,15 +152,10 @@ impl LightmapScene {
                     }
                 }
             }
-            let words = self.words_per_texel as usize;
-            let fraction_words = self.sun_fractions.len() / self.texels.len().max(1);
-            let lit = sun_step.filter(|_| words > 0).map_or(0.0, |k| {
-                if fraction_words > 0 {
-                    self.sun_fractions.get(i * fraction_words + k / 8).map_or(0.0, |w| ((w >> (4 * (k % 8))) & 0xF) as f32 / 15.0)
-                } else {
-                    self.sun_masks.get(i * words + k / 32).map_or(0.0, |w| ((w >> (k % 32)) & 1) as f32)
-                }
-            });
+            let lit = match (&self.texel_sun, sun_step) {
+                (Some(series), Some(k)) => series.texel_sun(i, k),
+                _ => 0.0,
+            };
             image[texel as usize] = [e[0], e[1], e[2], 1.0 + lit];
         }
         image
@@ -315,8 +307,14 @@ pub fn prepare_scene_with_panel(
                 // Sun bits alone (`sun --texel-size` on a mesh or a vertex bundle): the sky light stays per vertex.
                 None => (Vec::new(), vec![true; t.texels.len()]),
             };
-            let sun_masks = bundle.sun.as_ref().map_or_else(Vec::new, |s| s.texel_masks.clone());
-            let sun_fractions = bundle.sun.as_ref().map_or_else(Vec::new, |s| s.texel_fractions.clone());
+            let texel_sun = bundle.sun.as_ref().filter(|s| !s.texel_masks.is_empty()).map(|s| SunSeries {
+                sky_order: s.sky_order,
+                steps: s.steps.clone(),
+                words_per_vertex: s.words_per_vertex,
+                masks: Vec::new(),
+                texel_masks: s.texel_masks.clone(),
+                texel_fractions: s.texel_fractions.clone(),
+            });
             Some(LightmapScene {
                 width: t.atlas.width,
                 height: t.atlas.height,
@@ -324,9 +322,7 @@ pub fn prepare_scene_with_panel(
                 texels: t.texels.clone(),
                 valid,
                 transfer: texel_transfer,
-                words_per_texel: bundle.sun.as_ref().filter(|_| !sun_masks.is_empty()).map_or(0, |s| s.words_per_vertex),
-                sun_masks,
-                sun_fractions,
+                texel_sun,
             })
         }
         None => None,
