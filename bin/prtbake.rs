@@ -123,14 +123,18 @@ struct BakeArgs {
     /// (K: strength in standard errors; 0 = off). Not with --shard or --refine.
     #[arg(long, value_name = "K", default_value_t = 0.0)]
     denoise: f32,
-    /// Texel mode: also bake transfer per texel of a lightmap atlas (xatlas) at this size in
-    /// world units, for light that vertices cannot hold (slat and contact shadows on big
-    /// triangles). The vertices are baked as without it. Not with --shard, --refine, --view-box.
+    /// Texel mode: also bake transfer per texel of a lightmap atlas at this size in world units,
+    /// for light that vertices cannot hold (slat and contact shadows on big triangles): the
+    /// mesh's own atlas (glTF TEXCOORD_1) when it has one, else one unwrapped by xatlas. The
+    /// vertices are baked as without it. Not with --shard, --refine, --view-box.
     #[arg(long, value_name = "L")]
     texel_size: Option<f32>,
     /// With --texel-size: sample points per texel, spread over its footprint by area.
     #[arg(long, value_name = "N", default_value_t = prtbake::bake::texels::POINTS_PER_TEXEL, requires = "texel_size")]
     texel_points: u32,
+    /// With --texel-size: unwrap a new atlas (xatlas) even where the mesh has its own (TEXCOORD_1).
+    #[arg(long, requires = "texel_size")]
+    unwrap: bool,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -434,11 +438,15 @@ struct SunArgs {
     no_shadow_cache: bool,
     #[command(flatten)]
     refine: RefineArgs,
-    /// Texel mode: also a sun bit per texel of a lightmap atlas (xatlas) at this size in world
-    /// units (e.g. 0.02), for a mesh or a per-vertex bundle (whose sky light stays per vertex);
-    /// a texel bundle's own atlas is always used.
+    /// Texel mode: also a sun bit per texel of a lightmap atlas at this size in world units
+    /// (e.g. 0.02), for a mesh or a per-vertex bundle (whose sky light stays per vertex): a
+    /// mesh file's own atlas (glTF TEXCOORD_1) when it has one, else one unwrapped by xatlas
+    /// (a bundle keeps no TEXCOORD_1); a texel bundle's own atlas is always used.
     #[arg(long, value_name = "L", conflicts_with_all = ["refine", "shard"])]
     texel_size: Option<f32>,
+    /// With --texel-size: unwrap a new atlas (xatlas) even where the mesh has its own (TEXCOORD_1).
+    #[arg(long, requires = "texel_size")]
+    unwrap: bool,
     /// Sample points per texel for its sun bits (default: a texel bundle's bake's, else 4).
     #[arg(long, value_name = "N")]
     texel_points: Option<u32>,
@@ -833,7 +841,7 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
             if matches!(a.sampling, SamplingArg::Vertex) {
                 return Err(with("--sampling vertex", "texels sample inside their triangles"));
             }
-            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points })
+            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points, unwrap: a.unwrap })
         }
         None => None,
     };
@@ -977,6 +985,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         texel_size: a.texel_size,
         texel_points: a.texel_points,
         texel_fractions: a.texel_fractions,
+        unwrap: a.unwrap,
         refine: a.refine.request()?,
         shard: a.shard.as_deref().map(prtbake::shards::Shard::parse).transpose()?,
         input: a.input,

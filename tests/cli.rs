@@ -944,3 +944,88 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     assert!(err.contains("holds texels") && err.contains("one.prtb"), "{err}");
     assert!(!refused.exists(), "the refused sun run wrote its output");
 }
+
+/// A 2 m floor and a 0.8 m board above it, each one chart of its own
+/// lightmap (glTF `TEXCOORD_1`), side by side in the unit square.
+fn floor_and_board_with_lightmap() -> (prtbake::mesh::Mesh, fn(glam::Vec3) -> glam::Vec2) {
+    use prtbake::verify::shapes;
+    let mut mesh = shapes::plane_grid(4, 2.0);
+    let mut board = shapes::plane_grid(1, 0.8);
+    shapes::transform(&mut board, 1.0, glam::Vec3::new(0.0, 0.5, 0.0));
+    shapes::append(&mut mesh, &board);
+    fn lightmap(p: glam::Vec3) -> glam::Vec2 {
+        if p.y > 0.25 {
+            glam::Vec2::new(0.55 + 0.5 * (p.x + 0.4), 0.05 + 0.5 * (p.z + 0.4))
+        } else {
+            glam::Vec2::new(0.05 + 0.2 * (p.x + 1.0), 0.05 + 0.2 * (p.z + 1.0))
+        }
+    }
+    mesh.lightmap_uvs = mesh.positions.iter().map(|&p| lightmap(p)).collect();
+    (mesh, lightmap)
+}
+
+/// A glTF mesh with its own lightmap coordinates keeps them as its atlas
+/// through `clean`, `bake --texel-size` (with `--clean` too) and `sun
+/// --texel-size`; `--unwrap` unwraps a new one; an OBJ output says it drops them.
+#[test]
+fn a_mesh_with_its_own_texcoord_1_keeps_its_atlas() {
+    let dir = Scratch::new("lightmap");
+    let glb = dir.path("lit.glb");
+    let (mesh, lightmap) = floor_and_board_with_lightmap();
+    prtbake::mesh::write_glb(&glb, &mesh).unwrap();
+    let run = |args: &[&str]| {
+        let o = prtbake(args);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    // The atlas is the file's, scaled to the texel size: each atlas vertex at
+    // its mesh vertex's lightmap coordinates times the atlas's side.
+    let assert_own_atlas = |bundle: &std::path::Path| {
+        let b = prtbake::bundle::read_bundle(bundle).unwrap();
+        let atlas = &b.texels.as_ref().expect("texels").atlas;
+        // 4.64 m² on 0.32 of the atlas at 10 cm: ceil(38.08) = 39 texels across.
+        assert_eq!((atlas.width, atlas.height, atlas.chart_count), (39, 39, 2), "{}", bundle.display());
+        for (i, uv) in atlas.uv.iter().enumerate() {
+            let p = b.mesh.positions[atlas.source_vertex[i] as usize];
+            assert!(uv.abs_diff_eq(lightmap(p) * 39.0, 1e-3), "{}: atlas vertex {i} at {uv}, position {p}", bundle.display());
+        }
+        atlas.clone()
+    };
+    let shown = run(&["inspect", glb.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&shown.stdout).contains("lightmap atlas: its own (TEXCOORD_1)"));
+    let baked = dir.path("baked.prtb");
+    let o = run(&["bake", glb.to_str().unwrap(), "--clean", "--texel-size", "0.1", "--rays", "8", "-o", baked.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("2 charts of TEXCOORD_1"), "{}", String::from_utf8_lossy(&o.stdout));
+    let own = assert_own_atlas(&baked);
+    let sunned = dir.path("sun.prtb");
+    run(&["sun", glb.to_str().unwrap(), "--texel-size", "0.1", "--steps", "4", "-o", sunned.to_str().unwrap(), "--quiet"]);
+    assert_own_atlas(&sunned);
+    // --unwrap: xatlas's, another layout.
+    let unwrapped = dir.path("unwrapped.prtb");
+    let o = run(&["bake", glb.to_str().unwrap(), "--texel-size", "0.1", "--unwrap", "--rays", "8", "-o", unwrapped.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("of xatlas"));
+    let b = prtbake::bundle::read_bundle(&unwrapped).unwrap();
+    assert_ne!(b.texels.as_ref().unwrap().atlas.uv, own.uv);
+    // clean keeps TEXCOORD_1 in a GLB; an OBJ cannot hold it, and says so.
+    let cleaned = dir.path("cleaned.glb");
+    run(&["clean", glb.to_str().unwrap(), "-o", cleaned.to_str().unwrap()]);
+    let back = prtbake::mesh::load_mesh(&cleaned, &Default::default()).unwrap().mesh;
+    assert_eq!(back.lightmap_uvs.len(), back.vertex_count());
+    for (v, uv) in back.lightmap_uvs.iter().enumerate() {
+        assert!(uv.abs_diff_eq(lightmap(back.positions[v]), 1e-5), "cleaned vertex {v}");
+    }
+    let obj = dir.path("cleaned.obj");
+    let o = run(&["clean", glb.to_str().unwrap(), "-o", obj.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("TEXCOORD_1"), "{}", String::from_utf8_lossy(&o.stderr));
+    // Coordinates that would mix two places are refused, naming the way out.
+    let mut stacked = mesh.clone();
+    stacked.lightmap_uvs.iter_mut().filter(|uv| uv.x > 0.5).for_each(|uv| uv.x -= 0.5);
+    let bad = dir.path("stacked.glb");
+    prtbake::mesh::write_glb(&bad, &stacked).unwrap();
+    let refused = dir.path("refused.prtb");
+    let o = prtbake(&["bake", bad.to_str().unwrap(), "--texel-size", "0.1", "--rays", "8", "-o", refused.to_str().unwrap(), "--quiet"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_ne!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("stacked.glb") && err.contains("TEXCOORD_1") && err.contains("--unwrap"), "{err}");
+    assert!(!refused.exists());
+}

@@ -42,6 +42,12 @@ pub enum AtlasError {
     Refused(String),
     #[error("xatlas returned {got} triangles for {expected}")]
     Incomplete { got: usize, expected: usize },
+    #[error("the mesh's lightmap coordinates (TEXCOORD_1) leave the unit square at vertex {vertex}: {uv:?} (give --unwrap to unwrap a new atlas)")]
+    LightmapOutside { vertex: u32, uv: [f32; 2] },
+    #[error("the mesh's lightmap coordinates (TEXCOORD_1) cover no area (give --unwrap to unwrap a new atlas)")]
+    LightmapEmpty,
+    #[error("the mesh's lightmap coordinates (TEXCOORD_1) at texel size {texel_size}: {shared} texels lie under two charts or overlapping triangles and {beside} beside another chart's texel, so they would hold or blend the light of two places: choose a smaller texel size, or give --unwrap to unwrap a new atlas")]
+    LightmapShared { texel_size: f32, shared: usize, beside: usize },
 }
 
 /// A mesh's lightmap atlas (struct of arrays, `u32` indices).
@@ -68,6 +74,138 @@ pub struct Atlas {
 pub const NO_CHART: u32 = u32::MAX;
 
 impl Atlas {
+    /// The mesh's own lightmap atlas ([`Atlas::from_lightmap_uvs`]) when it
+    /// has one and `unwrap` is false, else a new one from xatlas.
+    pub fn for_mesh(mesh: &Mesh, texel_size: f32, unwrap: bool) -> Result<Atlas, AtlasError> {
+        if mesh.lightmap_uvs.is_empty() || unwrap {
+            Atlas::unwrap(mesh, texel_size)
+        } else {
+            Atlas::from_lightmap_uvs(mesh, texel_size)
+        }
+    }
+
+    /// The atlas of the mesh's own lightmap coordinates (glTF `TEXCOORD_1`,
+    /// in the unit square), at a square resolution whose texels are
+    /// `texel_size` on a side on average over the surface (world area over
+    /// atlas area). The layout is kept as authored: charts are the groups of
+    /// triangles joined by shared vertices; a triangle of zero atlas area
+    /// has no chart. Refused when a coordinate leaves the unit square, or
+    /// when a texel would mix two places' light: under two charts or
+    /// overlapping triangles, or beside another chart's texel (charts less
+    /// than a texel apart at this size: bilinear reads blend across).
+    pub fn from_lightmap_uvs(mesh: &Mesh, texel_size: f32) -> Result<Atlas, AtlasError> {
+        if !(texel_size.is_finite() && texel_size > 0.0) {
+            return Err(AtlasError::BadTexelSize(texel_size));
+        }
+        if mesh.triangle_count() == 0 {
+            return Err(AtlasError::Empty);
+        }
+        if let Some((v, uv)) =
+            mesh.lightmap_uvs.iter().enumerate().find(|(_, uv)| !(uv.cmpge(Vec2::ZERO).all() && uv.cmple(Vec2::ONE).all()))
+        {
+            return Err(AtlasError::LightmapOutside { vertex: v as u32, uv: uv.to_array() });
+        }
+        let uv_area = |t: usize| {
+            let [a, b, c] = mesh.triangle(t).map(|v| mesh.lightmap_uvs[v as usize].as_dvec2());
+            0.5 * (b - a).perp_dot(c - a).abs()
+        };
+        let (mut world, mut atlas_area) = (0.0f64, 0.0f64);
+        for t in 0..mesh.triangle_count() {
+            let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
+            world += 0.5 * (b - a).cross(c - a).length();
+            atlas_area += uv_area(t);
+        }
+        if atlas_area <= 0.0 {
+            return Err(AtlasError::LightmapEmpty);
+        }
+        // Texels per unit of atlas coordinate, so that the mean texel spans texel_size.
+        let side = ((world / atlas_area).sqrt() / texel_size as f64).ceil().max(1.0);
+        if side * side > MAX_TEXELS {
+            let fits = ((world / atlas_area).sqrt() / MAX_TEXELS.sqrt()) as f32;
+            return Err(AtlasError::TooManyTexels { asked: texel_size, texels: side * side, fits });
+        }
+        let resolution = side as u32;
+        // Charts: triangles joined through a shared vertex (a chart's border is
+        // a seam of split vertices, as glTF stores them).
+        let mut parent: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
+        fn root(parent: &mut [u32], mut v: u32) -> u32 {
+            while parent[v as usize] != v {
+                parent[v as usize] = parent[parent[v as usize] as usize];
+                v = parent[v as usize];
+            }
+            v
+        }
+        let live: Vec<bool> = (0..mesh.triangle_count()).map(|t| uv_area(t) > 0.0).collect();
+        for t in (0..mesh.triangle_count()).filter(|&t| live[t]) {
+            let [a, b, c] = mesh.triangle(t);
+            for (x, y) in [(a, b), (a, c)] {
+                let (rx, ry) = (root(&mut parent, x), root(&mut parent, y));
+                parent[rx.max(ry) as usize] = rx.min(ry);
+            }
+        }
+        let mut chart_of_root: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
+        let triangle_chart: Vec<u32> = (0..mesh.triangle_count())
+            .map(|t| {
+                if !live[t] {
+                    return NO_CHART;
+                }
+                let r = root(&mut parent, mesh.triangle(t)[0]);
+                let next = chart_of_root.len() as u32;
+                *chart_of_root.entry(r).or_insert(next)
+            })
+            .collect();
+        let atlas = Atlas {
+            width: resolution,
+            height: resolution,
+            texel_size,
+            uv: mesh.lightmap_uvs.iter().map(|&uv| uv * resolution as f32).collect(),
+            source_vertex: (0..mesh.vertex_count() as u32).collect(),
+            indices: mesh.indices.clone(),
+            triangle_chart,
+            chart_count: chart_of_root.len() as u32,
+        };
+        let (shared, beside) = atlas.texels_mixing_charts();
+        if shared + beside > 0 {
+            return Err(AtlasError::LightmapShared { texel_size, shared, beside });
+        }
+        Ok(atlas)
+    }
+
+    /// Texels the layout cannot keep to one place: those under triangles of
+    /// two charts or under overlapping triangles (overlaps adding up to more
+    /// than the texel), and those next to another chart's texel, which a
+    /// bilinear read between texel centres would mix with it.
+    fn texels_mixing_charts(&self) -> (usize, usize) {
+        const MIXED: u32 = u32::MAX - 1;
+        let coverage = coverage::Coverage::of(self);
+        let mut owner: std::collections::HashMap<u32, u32> = std::collections::HashMap::with_capacity(coverage.len());
+        let mut shared = 0;
+        for i in 0..coverage.len() {
+            let range = coverage.start[i] as usize..coverage.start[i + 1] as usize;
+            let first = self.triangle_chart[coverage.triangle[range.start] as usize];
+            let two_charts = range.clone().any(|k| self.triangle_chart[coverage.triangle[k] as usize] != first);
+            let overfull = coverage.area[range].iter().map(|&a| a as f64).sum::<f64>() > 1.0 + 1e-3;
+            if two_charts || overfull {
+                shared += 1;
+            }
+            owner.insert(coverage.texels[i], if two_charts { MIXED } else { first });
+        }
+        let (w, h) = (self.width as i64, self.height as i64);
+        let beside = coverage
+            .texels
+            .iter()
+            .filter(|&&texel| {
+                let chart = owner[&texel];
+                let (x, y) = ((texel % self.width) as i64, (texel / self.width) as i64);
+                chart != MIXED
+                    && (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy))).any(|(nx, ny)| {
+                        (0..w).contains(&nx) && (0..h).contains(&ny) && owner.get(&((ny * w + nx) as u32)).is_some_and(|&c| c != chart)
+                    })
+            })
+            .count();
+        (shared, beside)
+    }
+
     /// Unwraps `mesh` with xatlas at `texel_size` world units per texel.
     pub fn unwrap(mesh: &Mesh, texel_size: f32) -> Result<Atlas, AtlasError> {
         if !(texel_size.is_finite() && texel_size > 0.0) {

@@ -126,3 +126,78 @@ fn clipping_a_triangle_to_texels_adds_up() {
     assert!((polygon_area(&clip_to_texel(tri, 1, 1)) - 0.5).abs() < 1e-12);
     assert_eq!(polygon_area(&clip_to_texel(tri, 2, 2)), 0.0);
 }
+
+/// Lightmap coordinates of the 2 m planes below: `offset + scale · (position + 1)`.
+fn lightmap_of(p: glam::Vec3, offset: Vec2, scale: f32) -> Vec2 {
+    offset + scale * (Vec2::new(p.x, p.z) + Vec2::ONE)
+}
+
+/// Two 2 m planes 3 m apart, each one chart of its own lightmap at `offsets`, `scale` per metre.
+fn two_planes_with_lightmap(offsets: [Vec2; 2], scale: f32) -> Mesh {
+    let mut mesh = shapes::plane_grid(2, 2.0);
+    let mut other = shapes::plane_grid(2, 2.0);
+    shapes::transform(&mut other, 1.0, glam::Vec3::new(3.0, 0.0, 0.0));
+    shapes::append(&mut mesh, &other);
+    let half = mesh.vertex_count() / 2;
+    mesh.lightmap_uvs = (0..mesh.vertex_count())
+        .map(|v| {
+            let local = mesh.positions[v] - if v < half { glam::Vec3::ZERO } else { glam::Vec3::new(3.0, 0.0, 0.0) };
+            lightmap_of(local, offsets[usize::from(v >= half)], scale)
+        })
+        .collect();
+    mesh
+}
+
+#[test]
+fn a_mesh_with_its_own_lightmap_coordinates_keeps_its_atlas() {
+    let mut mesh = shapes::plane_grid(2, 2.0);
+    mesh.lightmap_uvs = mesh.positions.iter().map(|&p| lightmap_of(p, Vec2::splat(0.125), 0.25)).collect();
+    // 4 m² on a quarter of the atlas at 10 cm: 40 texels across, the layout scaled as authored.
+    let atlas = Atlas::for_mesh(&mesh, 0.1, false).unwrap();
+    assert_eq!((atlas.width, atlas.height, atlas.chart_count), (40, 40, 1));
+    assert_eq!(atlas.indices, mesh.indices);
+    assert_eq!(atlas.source_vertex, (0..mesh.vertex_count() as u32).collect::<Vec<_>>());
+    for (v, uv) in atlas.uv.iter().enumerate() {
+        assert!(uv.abs_diff_eq(mesh.lightmap_uvs[v] * 40.0, 1e-4), "vertex {v}: {uv}");
+    }
+    for t in 0..mesh.triangle_count() {
+        let expected = world_area(&mesh, t) / 0.01;
+        assert!((uv_area(&atlas, t) / expected - 1.0).abs() < 1e-4, "triangle {t}");
+    }
+    // Covered texels: exactly the chart's 20 × 20 (it spans texels 5..25 on each axis).
+    assert_eq!(Coverage::of(&atlas).len(), 400);
+    // --unwrap: xatlas's atlas instead.
+    let unwrapped = Atlas::for_mesh(&mesh, 0.1, true).unwrap();
+    assert_eq!(unwrapped, Atlas::unwrap(&mesh, 0.1).unwrap());
+    assert_ne!(unwrapped.uv, atlas.uv);
+    // Without lightmap coordinates: xatlas.
+    mesh.lightmap_uvs.clear();
+    assert_eq!(Atlas::for_mesh(&mesh, 0.1, false).unwrap(), unwrapped);
+}
+
+#[test]
+fn lightmap_coordinates_that_would_mix_two_places_are_refused() {
+    // Outside the unit square.
+    let mut mesh = shapes::plane_grid(2, 2.0);
+    mesh.lightmap_uvs = mesh.positions.iter().map(|&p| lightmap_of(p, Vec2::splat(0.8), 0.25)).collect();
+    assert!(matches!(Atlas::from_lightmap_uvs(&mesh, 0.1), Err(AtlasError::LightmapOutside { .. })));
+    // All on one point: no area.
+    mesh.lightmap_uvs = vec![Vec2::splat(0.5); mesh.vertex_count()];
+    assert_eq!(Atlas::from_lightmap_uvs(&mesh, 0.1), Err(AtlasError::LightmapEmpty));
+    // Two planes on the same spot of the atlas: every covered texel is under both.
+    let stacked = two_planes_with_lightmap([Vec2::splat(0.25); 2], 0.125);
+    match Atlas::from_lightmap_uvs(&stacked, 0.1) {
+        Err(AtlasError::LightmapShared { shared, .. }) => assert!(shared > 0),
+        other => panic!("stacked charts: {other:?}"),
+    }
+    // Charts 1/16 apart (each 1/4 wide; 8 m² on 1/8 of the atlas: 8 / L
+    // texels across): at 10 cm 5 texels apart, kept; at 1 m half a texel
+    // apart, so their border texels touch and bilinear reads would blend them.
+    let apart = two_planes_with_lightmap([Vec2::new(0.0, 0.25), Vec2::new(0.3125, 0.25)], 0.125);
+    let kept = Atlas::from_lightmap_uvs(&apart, 0.1).unwrap();
+    assert_eq!((kept.width, kept.chart_count), (80, 2));
+    match Atlas::from_lightmap_uvs(&apart, 1.0) {
+        Err(AtlasError::LightmapShared { shared: 0, beside, .. }) => assert!(beside > 0),
+        other => panic!("charts half a texel apart: {other:?}"),
+    }
+}

@@ -195,6 +195,9 @@ pub fn compact(mesh: &Mesh, keep: &[bool]) -> (Mesh, Vec<u32>) {
                 if !mesh.uvs.is_empty() {
                     out.uvs.push(mesh.uvs[v as usize]);
                 }
+                if !mesh.lightmap_uvs.is_empty() {
+                    out.lightmap_uvs.push(mesh.lightmap_uvs[v as usize]);
+                }
                 if !mesh.colors.is_empty() {
                     out.colors.push(mesh.colors[v as usize]);
                 }

@@ -205,6 +205,9 @@ pub(crate) fn augment(mesh: &Mesh, surfaces: &Surfaces, twinned: &[bool]) -> (Me
         if !mesh.uvs.is_empty() {
             aug.uvs.push(mesh.uvs[v]);
         }
+        if !mesh.lightmap_uvs.is_empty() {
+            aug.lightmap_uvs.push(mesh.lightmap_uvs[v]);
+        }
         if !mesh.colors.is_empty() {
             aug.colors.push(mesh.colors[v]);
         }

@@ -138,7 +138,8 @@ pub(crate) fn decode_mesh(raw: &[u8], rules: ReadRules) -> Result<Mesh, BundleEr
     cur.padding(4, "triangle materials")?;
     let tri_group = cur.u32s(t, "triangle groups")?;
     cur.finish()?;
-    let mut mesh = Mesh { positions, normals, uvs, colors, indices, tri_material, tri_group, materials: Vec::new(), groups: Vec::new() };
+    // The bundle keeps the atlas (ATLS), not the file's lightmap coordinates.
+    let mut mesh = Mesh { positions, normals, uvs, colors, indices, tri_material, tri_group, ..Mesh::default() };
     if rules.bring_legacy_values_into_range {
         mesh = values::legacy_mesh_in_range(mesh).map_err(BundleError::bad_value(MESH))?;
     }

@@ -35,6 +35,8 @@ pub(super) fn random_mesh(rng: &mut Rng, vertices: usize, triangles: usize) -> M
         positions: (0..vertices).map(|_| v3(rng) * 10.0).collect(),
         normals: (0..vertices).map(|_| v3(rng).normalize_or(Vec3::Y)).collect(),
         uvs: (0..vertices).map(|_| Vec2::new(rng.unit(), rng.unit())).collect(),
+        // A bundle keeps its atlas (ATLS), not the file's TEXCOORD_1.
+        lightmap_uvs: Vec::new(),
         colors: (0..vertices).map(|_| [rng.unit(), rng.unit(), rng.unit()]).collect(),
         indices: (0..3 * triangles).map(|_| rng.below(vertices) as u32).collect(),
         tri_material: (0..triangles).map(|_| rng.below(2) as u16).collect(),

@@ -50,6 +50,12 @@ pub fn uv_at(p: Vec3) -> Vec2 {
     Vec2::new(0.25 * p.x + 0.125 * p.y, 0.25 * p.z - 0.0625 * p.y)
 }
 
+/// Lightmap coordinates (`TEXCOORD_1`) of every fixture vertex: another
+/// linear function of position, so a repair's interpolation keeps it exact.
+pub fn lightmap_at(p: Vec3) -> Vec2 {
+    Vec2::new(0.5 + 0.0625 * p.x - 0.03125 * p.z, 0.5 + 0.0625 * p.y + 0.03125 * p.x)
+}
+
 /// Vertex colour of every fixture vertex: a linear function of position.
 pub fn color_at(p: Vec3) -> [f32; 3] {
     [0.5 + 0.05 * p.x, 0.5 + 0.05 * p.y, 0.5 + 0.05 * p.z]
@@ -91,6 +97,7 @@ impl Builder {
         self.mesh.positions.push(p);
         self.mesh.normals.push(n);
         self.mesh.uvs.push(uv_at(p));
+        self.mesh.lightmap_uvs.push(lightmap_at(p));
         self.mesh.colors.push(color_at(p));
         (self.mesh.positions.len() - 1) as u32
     }

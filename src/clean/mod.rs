@@ -516,6 +516,9 @@ fn check_input(mesh: &Mesh) -> Result<(), CleanError> {
     if let Some(v) = mesh.uvs.iter().position(|uv| !uv.is_finite()) {
         return Err(non_finite(v, "uv", format!("{:?}", mesh.uvs[v])));
     }
+    if let Some(v) = mesh.lightmap_uvs.iter().position(|uv| !uv.is_finite()) {
+        return Err(non_finite(v, "lightmap uv", format!("{:?}", mesh.lightmap_uvs[v])));
+    }
     if let Some(v) = mesh.colors.iter().position(|c| !c.iter().all(|x| x.is_finite())) {
         return Err(non_finite(v, "colour", format!("{:?}", mesh.colors[v])));
     }
@@ -555,6 +558,9 @@ fn write_vertices(work: &Work, input: &Mesh, used: &[bool]) -> Mesh {
         out.normals.push(work.normals[v]);
         if !work.uvs.is_empty() {
             out.uvs.push(work.uvs[v]);
+        }
+        if !work.lightmap_uvs.is_empty() {
+            out.lightmap_uvs.push(work.lightmap_uvs[v]);
         }
         if !work.colors.is_empty() {
             out.colors.push(work.colors[v]);

@@ -1,7 +1,7 @@
 //! Tests of the whole pipeline on the fixtures: exact repair counts, the properties
 //! after cleaning, idempotence and determinism.
 
-use super::fixtures::{self, color_at, uv_at, Fixture};
+use super::fixtures::{self, color_at, lightmap_at, uv_at, Fixture};
 use super::*;
 use glam::Vec3;
 use std::collections::HashSet;
@@ -101,7 +101,7 @@ fn check_properties(f: &Fixture, out: &Mesh, r: &CleanReport) {
     let by_repairs = (r.area_after - r.area_before + r.redundant_area_removed) / input_area;
     // Only closing a crack changes the area (by the crack's band: 1.0e-5 on the cylinder).
     assert!(by_repairs.abs() <= 2e-5, "{n}: the repairs changed the area by {by_repairs:+.2e} of the input's");
-    // Attributes survive: tables, roles, per-triangle (material, group) pairs, UVs, colours.
+    // Attributes survive: tables, roles, per-triangle (material, group) pairs, UVs, lightmap UVs, colours.
     assert_eq!(out.materials, f.mesh.materials, "{n}: materials");
     assert_eq!(out.groups, f.mesh.groups, "{n}: groups");
     let pairs: HashSet<(u16, u32)> = f.mesh.tri_material.iter().copied().zip(f.mesh.tri_group.iter().copied()).collect();
@@ -109,10 +109,12 @@ fn check_properties(f: &Fixture, out: &Mesh, r: &CleanReport) {
         assert!(pairs.contains(&(*m, *g)), "{n}: new material/group pair {m}/{g}");
     }
     assert_eq!(out.uvs.len(), out.vertex_count(), "{n}: uvs");
+    assert_eq!(out.lightmap_uvs.len(), out.vertex_count(), "{n}: lightmap uvs");
     assert_eq!(out.colors.len(), out.vertex_count(), "{n}: colours");
     for v in 0..out.vertex_count() {
         let p = out.positions[v];
         assert!(out.uvs[v].abs_diff_eq(uv_at(p), ATTRIBUTE_TOL), "{n}: uv of vertex {v}");
+        assert!(out.lightmap_uvs[v].abs_diff_eq(lightmap_at(p), ATTRIBUTE_TOL), "{n}: lightmap uv of vertex {v}");
         let c = color_at(p);
         assert!((0..3).all(|i| (out.colors[v][i] - c[i]).abs() <= ATTRIBUTE_TOL), "{n}: colour of vertex {v}");
         assert!((out.normals[v].length() - 1.0).abs() < 1e-5, "{n}: normal of vertex {v}");

@@ -42,6 +42,7 @@ pub(crate) fn weld_points(mesh: &Mesh, tol: f32) -> Work {
         vertex_point,
         normals: mesh.normals.clone(),
         uvs: mesh.uvs.clone(),
+        lightmap_uvs: mesh.lightmap_uvs.clone(),
         colors: mesh.colors.clone(),
         tris,
         tri_material: mesh.tri_material.clone(),
@@ -196,8 +197,11 @@ fn attributes_agree(work: &Work, a: u32, b: u32, cos_hard_edge: f32) -> bool {
     let (la, lb) = (na.length(), nb.length());
     let normals_agree = if la == 0.0 || lb == 0.0 { la == lb } else { na.dot(nb) >= cos_hard_edge * la * lb };
     let uvs_agree = work.uvs.is_empty() || work.uvs[a].abs_diff_eq(work.uvs[b], UV_WELD_TOLERANCE);
+    // A lightmap chart's border stays a seam: welding across it would pull
+    // one chart's corner into another's texels.
+    let lightmap_agree = work.lightmap_uvs.is_empty() || work.lightmap_uvs[a].abs_diff_eq(work.lightmap_uvs[b], UV_WELD_TOLERANCE);
     let colors_agree = work.colors.is_empty() || (0..3).all(|i| (work.colors[a][i] - work.colors[b][i]).abs() <= COLOR_WELD_TOLERANCE);
-    normals_agree && uvs_agree && colors_agree
+    normals_agree && uvs_agree && lightmap_agree && colors_agree
 }
 
 #[cfg(test)]

@@ -22,6 +22,8 @@ pub(crate) struct Work {
     pub normals: Vec<Vec3>,
     /// Empty when the input has no UVs.
     pub uvs: Vec<Vec2>,
+    /// Empty when the input has no lightmap atlas (`TEXCOORD_1`).
+    pub lightmap_uvs: Vec<Vec2>,
     /// Empty when the input has no colours.
     pub colors: Vec<[f32; 3]>,
     /// Triangles as vertex-id triples, counter-clockwise front.
@@ -82,6 +84,10 @@ impl Work {
             let uv = self.uvs[a].lerp(self.uvs[b], t);
             self.uvs.push(uv);
         }
+        if !self.lightmap_uvs.is_empty() {
+            let uv = self.lightmap_uvs[a].lerp(self.lightmap_uvs[b], t);
+            self.lightmap_uvs.push(uv);
+        }
         if !self.colors.is_empty() {
             let (ca, cb) = (self.colors[a], self.colors[b]);
             self.colors.push([0, 1, 2].map(|i| ca[i] + (cb[i] - ca[i]) * t));
@@ -101,6 +107,10 @@ impl Work {
             let uv = self.uvs[v[0]] * w[0] + self.uvs[v[1]] * w[1] + self.uvs[v[2]] * w[2];
             self.uvs.push(uv);
         }
+        if !self.lightmap_uvs.is_empty() {
+            let uv = self.lightmap_uvs[v[0]] * w[0] + self.lightmap_uvs[v[1]] * w[1] + self.lightmap_uvs[v[2]] * w[2];
+            self.lightmap_uvs.push(uv);
+        }
         if !self.colors.is_empty() {
             let c = [0, 1, 2].map(|i| self.colors[v[0]][i] * w[0] + self.colors[v[1]][i] * w[1] + self.colors[v[2]][i] * w[2]);
             self.colors.push(c);
@@ -115,6 +125,9 @@ impl Work {
         self.normals.push(self.normals[v]);
         if !self.uvs.is_empty() {
             self.uvs.push(self.uvs[v]);
+        }
+        if !self.lightmap_uvs.is_empty() {
+            self.lightmap_uvs.push(self.lightmap_uvs[v]);
         }
         if !self.colors.is_empty() {
             self.colors.push(self.colors[v]);

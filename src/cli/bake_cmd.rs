@@ -41,11 +41,13 @@ pub struct BakeConfig {
     pub texels: Option<TexelRequest>,
 }
 
-/// `--texel-size L --texel-points N`.
+/// `--texel-size L --texel-points N [--unwrap]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TexelRequest {
     pub size: f32,
     pub points: u32,
+    /// Unwrap a new atlas even where the mesh has its own (`TEXCOORD_1`).
+    pub unwrap: bool,
 }
 
 /// What the user asked of adaptive refinement ([`crate::refine`]); the
@@ -174,6 +176,8 @@ pub struct BakeReport {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct TexelReport {
     pub texel_size: f32,
+    /// Whose atlas: "TEXCOORD_1" (the mesh's own) or "xatlas" (unwrapped).
+    pub atlas: &'static str,
     pub width: u32,
     pub height: u32,
     pub charts: u32,
@@ -277,7 +281,7 @@ fn bake_texels_to_bundle(
     let baked = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = surfaces_of(mesh, config).with_context(|| input.clone())?;
         let clock = std::time::Instant::now();
-        let atlas = crate::atlas::Atlas::unwrap(mesh, request.size).with_context(|| format!("{input}: --texel-size"))?;
+        let atlas = crate::atlas::Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?;
         let atlas_seconds = clock.elapsed().as_secs_f64();
         let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).with_context(|| input.clone())?;
         let (result, texels) =
@@ -285,8 +289,10 @@ fn bake_texels_to_bundle(
         Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds))
     })??;
     let (result, texels, surfaces, build_seconds, atlas_seconds) = baked;
+    let atlas_source = if mesh.lightmap_uvs.is_empty() || request.unwrap { "xatlas" } else { "TEXCOORD_1" };
     let texel_report = TexelReport {
         texel_size: request.size,
+        atlas: atlas_source,
         width: texels.atlas.width,
         height: texels.atlas.height,
         charts: texels.atlas.chart_count,
@@ -303,6 +309,7 @@ fn bake_texels_to_bundle(
     let mut meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
     meta["texels"] = json!({
         "texel_size": request.size,
+        "atlas": atlas_source,
         "points_per_texel": request.points,
         "covered": texels.texels.len(),
         "points": texels.points,
@@ -525,11 +532,12 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     if let Some(t) = &report.texels {
         let seconds: f64 = t.seconds_per_bounce.iter().sum();
         println!(
-            "texels: {} covered of {} × {} ({} charts, {} per texel), {} points ({} inside geometry), {} rays traced in {:.2}s ({:.2} Mrays/s); the vertices' figures above are their own",
+            "texels: {} covered of {} × {} ({} charts of {}, {} per texel), {} points ({} inside geometry), {} rays traced in {:.2}s ({:.2} Mrays/s); the vertices' figures above are their own",
             t.covered,
             t.width,
             t.height,
             t.charts,
+            t.atlas,
             t.texel_size,
             t.points,
             t.points_rejected,

@@ -88,6 +88,12 @@ pub fn run(config: &CleanConfig) -> anyhow::Result<()> {
             config.output.display()
         );
     }
+    if mtl.is_some() && !cleaned.lightmap_uvs.is_empty() {
+        eprintln!(
+            "warning: {}: OBJ holds one set of texture coordinates, so the mesh's lightmap atlas (TEXCOORD_1) is not written; write .glb to keep it",
+            config.output.display()
+        );
+    }
     // All outputs land together or none does.
     let start = Instant::now();
     let mut staged = Staged::new();

@@ -149,6 +149,9 @@ fn inspect_mesh(path: &Path, as_json: bool) -> anyhow::Result<()> {
         return super::print_json(&json!({ "file": super::json_path(path), "mesh": inv }));
     }
     println!("{}: {} vertices, {} triangles, area {}", path.display(), inv.vertices, inv.triangles, super::significant(inv.area, 4));
+    if inv.lightmap_atlas {
+        println!("  lightmap atlas: its own (TEXCOORD_1), which texel mode keeps (--unwrap: a new one)");
+    }
     let role = |e: &crate::mesh::inventory::Entry| match e.role {
         Some(crate::mesh::MaterialRole::Window) => "window",
         Some(crate::mesh::MaterialRole::Panel) => "panel",

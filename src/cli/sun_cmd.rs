@@ -75,6 +75,8 @@ pub struct SunConfig {
     pub texel_points: Option<u32>,
     /// Also store each texel's lit share per step in 4 bits (`--texel-fractions`, section TSUF).
     pub texel_fractions: bool,
+    /// Unwrap a new atlas even where the mesh has its own (`--unwrap`; `TEXCOORD_1`).
+    pub unwrap: bool,
 }
 
 /// What `sun` reports.
@@ -387,7 +389,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             let atlas_start = Instant::now();
             let atlas = match (&input.atlas, config.texel_size) {
                 (Some((atlas, _)), _) => Some(atlas.clone()),
-                (None, Some(size)) => Some(crate::atlas::Atlas::unwrap(&input.mesh, size).with_context(in_input)?),
+                (None, Some(size)) => Some(crate::atlas::Atlas::for_mesh(&input.mesh, size, config.unwrap).with_context(in_input)?),
                 (None, None) => None,
             };
             let atlas_seconds = if input.atlas.is_some() { 0.0 } else { atlas_start.elapsed().as_secs_f64() };

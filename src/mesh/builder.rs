@@ -19,6 +19,9 @@ pub(crate) struct MeshBuilder {
     mesh: Mesh,
     any_uvs: bool,
     any_colors: bool,
+    /// Lightmap coordinates as pushed (glTF `TEXCOORD_1`); kept only when
+    /// every vertex has one ([`MeshBuilder::finish`]).
+    lightmap: Vec<Option<Vec2>>,
     /// Vertices pushed without a normal (so not a fault of the file).
     normals_absent: usize,
     group_lookup: HashMap<String, u32>,
@@ -31,6 +34,7 @@ impl MeshBuilder {
             mesh: Mesh { materials, ..Mesh::default() },
             any_uvs: false,
             any_colors: false,
+            lightmap: Vec::new(),
             normals_absent: 0,
             group_lookup: HashMap::new(),
         }
@@ -86,6 +90,12 @@ impl MeshBuilder {
         }
     }
 
+    /// Sets the lightmap coordinates of the vertex just pushed (`None`: it has none).
+    pub(crate) fn push_lightmap_uv(&mut self, uv: Option<Vec2>) {
+        self.lightmap.resize(self.mesh.positions.len() - 1, None);
+        self.lightmap.push(uv);
+    }
+
     /// Appends a triangle of absolute vertex indices (checked in `finish`).
     pub(crate) fn push_triangle(&mut self, corners: [u32; 3], material: u16, group: u32) {
         self.mesh.indices.extend_from_slice(&corners);
@@ -104,7 +114,7 @@ impl MeshBuilder {
     /// positions, fills in missing or unusable normals, replaces non-finite
     /// uvs/colours (with a warning) and verifies every [`Mesh`] invariant.
     pub(crate) fn finish(self, path: &Path, warnings: &mut Vec<String>) -> Result<Mesh, MeshError> {
-        let MeshBuilder { mut mesh, normals_absent, .. } = self;
+        let MeshBuilder { mut mesh, normals_absent, lightmap, .. } = self;
         if mesh.indices.is_empty() {
             return Err(MeshError::Empty { path: path.to_path_buf(), notes: warnings.clone() });
         }
@@ -135,6 +145,21 @@ impl MeshBuilder {
         let bad_colors = mesh.colors.iter_mut().filter(|c| !c.iter().all(|x| x.is_finite())).map(|c| *c = DEFAULT_COLOR).count();
         if bad_colors > 0 {
             warnings.push(format!("{bad_colors} non-finite vertex colours were set to white"));
+        }
+        // A lightmap atlas is all or nothing: texel mode keeps it whole or unwraps its own.
+        let with_lightmap = lightmap.iter().filter(|uv| uv.is_some()).count();
+        if with_lightmap > 0 {
+            let finite = lightmap.iter().flatten().all(|uv| uv.is_finite());
+            if with_lightmap == mesh.positions.len() && finite {
+                mesh.lightmap_uvs = lightmap.into_iter().flatten().collect();
+            } else if !finite {
+                warnings.push("TEXCOORD_1 has non-finite lightmap coordinates: ignored (texel mode unwraps its own atlas)".into());
+            } else {
+                warnings.push(format!(
+                    "TEXCOORD_1 on {with_lightmap} of {} vertices: ignored, a lightmap atlas needs every vertex (texel mode unwraps its own)",
+                    mesh.positions.len()
+                ));
+            }
         }
         // Loaders check indices against their parts, so a failure here is a loader bug.
         mesh.validate().map_err(|message| MeshError::Inconsistent { path: path.to_path_buf(), message })?;

@@ -205,7 +205,7 @@ fn convert_materials(document: &gltf::Document, base_color_given: &[bool]) -> Ve
 /// Attribute accessors that make up a vertex: primitives sharing them under the
 /// same world transform share their vertices, across glTF meshes too (prtbake's
 /// own GLB gives every group's primitives one vertex pool).
-type VertexKey = [Option<usize>; 4];
+type VertexKey = [Option<usize>; 5];
 
 /// A [`VertexKey`] placed by a world transform (its bits).
 type PlacedVertexKey = (VertexKey, [u32; 16]);
@@ -222,6 +222,7 @@ struct LocalVertices {
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
     uvs: Option<Vec<Vec2>>,
+    lightmap_uvs: Option<Vec<Vec2>>,
     colors: Option<Vec<[f32; 3]>>,
 }
 
@@ -268,8 +269,13 @@ impl PrimitiveLoader<'_> {
             let Some(position_accessor) = attribute(Semantic::Positions) else {
                 return Err(MeshError::gltf(self.path, format!("mesh {mesh_label} primitive {p} has no POSITION")));
             };
-            let key: VertexKey =
-                [Some(position_accessor), attribute(Semantic::Normals), attribute(Semantic::TexCoords(0)), attribute(Semantic::Colors(0))];
+            let key: VertexKey = [
+                Some(position_accessor),
+                attribute(Semantic::Normals),
+                attribute(Semantic::TexCoords(0)),
+                attribute(Semantic::Colors(0)),
+                attribute(Semantic::TexCoords(1)),
+            ];
             // Vertices placed before (a shared pool) are neither decoded nor pushed again.
             let placed = (key, world_bits);
             let vertices = match self.placed_vertices.get(&placed) {
@@ -326,10 +332,11 @@ impl PrimitiveLoader<'_> {
     }
 
     /// Decodes POSITION (refusing non-finite values) and the optional NORMAL,
-    /// TEXCOORD_0 and COLOR_0 (dropped with a warning when their count differs).
+    /// TEXCOORD_0, COLOR_0 and TEXCOORD_1 (the lightmap's; dropped with a
+    /// warning when their count differs).
     fn read_vertices(&self, key: &VertexKey, mesh_label: &str, p: usize, warnings: &mut Vec<String>) -> Result<LocalVertices, MeshError> {
         let context = |what: &str, e: String| MeshError::gltf(self.path, format!("mesh {mesh_label} primitive {p} {what}: {e}"));
-        let [position_accessor, normal_accessor, uv_accessor, color_accessor] = *key;
+        let [position_accessor, normal_accessor, uv_accessor, color_accessor, lightmap_accessor] = *key;
         let (flat, _) =
             read_floats(self.root, position_accessor.unwrap_or(usize::MAX), self.buffers, &[3]).map_err(|e| context("POSITION", e))?;
         let positions: Vec<Vec3> = flat.chunks_exact(3).map(Vec3::from_slice).collect();
@@ -356,7 +363,8 @@ impl PrimitiveLoader<'_> {
         let normals = optional(normal_accessor, "NORMAL", &[3])?.map(|(v, _)| v.chunks_exact(3).map(Vec3::from_slice).collect());
         let uvs = optional(uv_accessor, "TEXCOORD_0", &[2])?.map(|(v, _)| v.chunks_exact(2).map(Vec2::from_slice).collect());
         let colors = optional(color_accessor, "COLOR_0", &[3, 4])?.map(|(v, k)| v.chunks_exact(k).map(|c| [c[0], c[1], c[2]]).collect());
-        Ok(LocalVertices { positions, normals, uvs, colors })
+        let lightmap_uvs = optional(lightmap_accessor, "TEXCOORD_1", &[2])?.map(|(v, _)| v.chunks_exact(2).map(Vec2::from_slice).collect());
+        Ok(LocalVertices { positions, normals, uvs, lightmap_uvs, colors })
     }
 
     /// Transforms and appends a primitive's vertices; returns the index of the first.
@@ -373,6 +381,7 @@ impl PrimitiveLoader<'_> {
             let uv = local.uvs.as_ref().and_then(|u| u.get(i)).copied();
             let color = local.colors.as_ref().and_then(|c| c.get(i)).copied();
             self.builder.push_vertex(world.transform_point3(position), normal, uv, color);
+            self.builder.push_lightmap_uv(local.lightmap_uvs.as_ref().and_then(|u| u.get(i)).copied());
         }
         Ok(base_u32)
     }

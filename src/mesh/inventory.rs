@@ -28,6 +28,8 @@ pub struct Inventory {
     pub vertices: u64,
     pub triangles: u64,
     pub area: f64,
+    /// The mesh has its own lightmap atlas (glTF `TEXCOORD_1`), which texel mode keeps.
+    pub lightmap_atlas: bool,
     pub materials: Vec<Entry>,
     pub groups: Vec<Entry>,
 }
@@ -86,7 +88,14 @@ pub fn inventory(mesh: &Mesh) -> Inventory {
     let by_area = |a: &Entry, b: &Entry| b.area.total_cmp(&a.area).then_with(|| a.name.cmp(&b.name));
     materials.sort_by(by_area);
     groups.sort_by(by_area);
-    Inventory { vertices: mesh.vertex_count() as u64, triangles: mesh.triangle_count() as u64, area: total, materials, groups }
+    Inventory {
+        vertices: mesh.vertex_count() as u64,
+        triangles: mesh.triangle_count() as u64,
+        area: total,
+        lightmap_atlas: !mesh.lightmap_uvs.is_empty(),
+        materials,
+        groups,
+    }
 }
 
 #[cfg(test)]

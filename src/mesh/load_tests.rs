@@ -360,6 +360,9 @@ fn sample_mesh() -> Mesh {
         mesh.positions.extend(quad(0.0 - 2.5 * run as f32));
         mesh.normals.extend([Vec3::Z; 4]);
         mesh.uvs.extend([Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.125, 1.0)]);
+        // A lightmap chart per quad, side by side (TEXCOORD_1; GLB only).
+        let corner = Vec2::new(0.25 * run as f32, 0.0);
+        mesh.lightmap_uvs.extend([Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y].map(|c| corner + 0.2 * c));
         mesh.colors.extend([[1.0, 0.5, 0.25 * run as f32]; 4]);
         mesh.indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
         mesh.tri_group.extend([group; 2]);
@@ -403,6 +406,7 @@ fn obj_round_trip_keeps_positions_indices_materials_and_groups() {
     assert_eq!(back.indices, mesh.indices);
     assert_eq!(back.normals, mesh.normals);
     assert_eq!(back.uvs, mesh.uvs);
+    assert!(back.lightmap_uvs.is_empty(), "OBJ has one texture coordinate set");
     assert_eq!(back.colors, mesh.colors);
     assert_eq!(back.groups, mesh.groups);
     assert_eq!(back.tri_group, mesh.tri_group);

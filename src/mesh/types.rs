@@ -36,7 +36,7 @@ impl Material {
 ///
 /// Invariants (checked by [`Mesh::validate`]): `indices.len() == 3 * triangle_count`,
 /// every index `< positions.len()`, `normals.len() == positions.len()`,
-/// `uvs` and `colors` are empty or one per vertex, `tri_material` and `tri_group`
+/// `uvs`, `lightmap_uvs` and `colors` are empty or one per vertex, `tri_material` and `tri_group`
 /// have one entry per triangle and index into `materials` / `groups`,
 /// every coordinate is finite.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -46,6 +46,10 @@ pub struct Mesh {
     pub normals: Vec<Vec3>,
     /// Texture coordinates, empty when the file has none.
     pub uvs: Vec<Vec2>,
+    /// The file's own lightmap coordinates (glTF `TEXCOORD_1`, in [0, 1]),
+    /// empty when it has none: texel mode keeps this atlas instead of
+    /// unwrapping one ([`crate::atlas::Atlas::for_mesh`]).
+    pub lightmap_uvs: Vec<Vec2>,
     /// Vertex colours (linear RGB), empty when the file has none.
     pub colors: Vec<[f32; 3]>,
     /// Triangle list: triangle `t` is `indices[3t..3t+3]`, counter-clockwise front.
@@ -137,6 +141,7 @@ impl Mesh {
             positions: gather(&self.positions),
             normals: gather(&self.normals),
             uvs: if self.uvs.is_empty() { Vec::new() } else { old_of_new.iter().map(|&v| self.uvs[v as usize]).collect() },
+            lightmap_uvs: old_of_new.iter().filter(|_| !self.lightmap_uvs.is_empty()).map(|&v| self.lightmap_uvs[v as usize]).collect(),
             colors: if self.colors.is_empty() { Vec::new() } else { old_of_new.iter().map(|&v| self.colors[v as usize]).collect() },
             indices,
             tri_material: order.iter().map(|&t| self.tri_material[t as usize]).collect(),
@@ -157,6 +162,9 @@ impl Mesh {
         }
         if !self.uvs.is_empty() && self.uvs.len() != n {
             return Err(format!("{} uvs for {} vertices", self.uvs.len(), n));
+        }
+        if !self.lightmap_uvs.is_empty() && self.lightmap_uvs.len() != n {
+            return Err(format!("{} lightmap uvs for {} vertices", self.lightmap_uvs.len(), n));
         }
         if !self.colors.is_empty() && self.colors.len() != n {
             return Err(format!("{} colours for {} vertices", self.colors.len(), n));

@@ -1,7 +1,8 @@
 //! Writers: OBJ (+ `.mtl`) and GLB. Both write a temp file beside the target and
 //! rename it, so a reader never sees a half-written file.
 //!
-//! Both preserve what `load_mesh` reads back: positions, normals, uvs, colours,
+//! Both preserve what `load_mesh` reads back: positions, normals, uvs (GLB also
+//! the lightmap's, `TEXCOORD_1`), colours,
 //! triangle order within each (group, material) run, material names, albedos,
 //! roles and transmittance, group names. Floats are written with Rust's shortest
 //! round-tripping formatting (`{}`), so OBJ positions reload bit-exactly.
@@ -340,6 +341,11 @@ pub fn stage_glb_with(
     if !mesh.uvs.is_empty() {
         let data: Vec<u8> = mesh.uvs.iter().flat_map(|uv| uv.to_array()).flat_map(f32::to_le_bytes).collect();
         attributes["TEXCOORD_0"] =
+            json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": pool.len(), "type": "VEC2"})));
+    }
+    if !mesh.lightmap_uvs.is_empty() {
+        let data: Vec<u8> = mesh.lightmap_uvs.iter().flat_map(|uv| uv.to_array()).flat_map(f32::to_le_bytes).collect();
+        attributes["TEXCOORD_1"] =
             json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": pool.len(), "type": "VEC2"})));
     }
     if !mesh.colors.is_empty() {
