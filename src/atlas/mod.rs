@@ -46,6 +46,8 @@ pub enum AtlasError {
     LightmapOutside { vertex: u32, uv: [f32; 2] },
     #[error("the mesh's lightmap coordinates (TEXCOORD_1) cover no area (give --unwrap to unwrap a new atlas)")]
     LightmapEmpty,
+    #[error("the mesh's lightmap coordinates (TEXCOORD_1) give {triangles} triangles of positive area none in the atlas (first: triangle {first}), so their light would have no texel (give --unwrap to unwrap a new atlas)")]
+    LightmapFolded { triangles: usize, first: u32 },
     #[error("the mesh's lightmap coordinates (TEXCOORD_1) at texel size {texel_size}: {shared} texels lie under two charts or overlapping triangles and {beside} beside another chart's texel, so they would hold or blend the light of two places: choose a smaller texel size, or give --unwrap to unwrap a new atlas")]
     LightmapShared { texel_size: f32, shared: usize, beside: usize },
 }
@@ -88,8 +90,10 @@ impl Atlas {
     /// in the unit square), at a square resolution whose texels are
     /// `texel_size` on a side on average over the surface (world area over
     /// atlas area). The layout is kept as authored: charts are the groups of
-    /// triangles joined by shared vertices; a triangle of zero atlas area
-    /// has no chart. Refused when a coordinate leaves the unit square, or
+    /// triangles joined by shared vertices; a triangle of zero area has no
+    /// chart. Refused when a coordinate leaves the unit square, when a
+    /// triangle of positive area has none in the atlas (its light would have
+    /// no texel), or
     /// when a texel would mix two places' light: under two charts or
     /// overlapping triangles, or beside another chart's texel (charts less
     /// than a texel apart at this size: bilinear reads blend across).
@@ -136,6 +140,14 @@ impl Atlas {
             v
         }
         let live: Vec<bool> = (0..mesh.triangle_count()).map(|t| uv_area(t) > 0.0).collect();
+        let world_area = |t: usize| {
+            let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
+            (b - a).cross(c - a).length()
+        };
+        let lost: Vec<usize> = (0..mesh.triangle_count()).filter(|&t| !live[t] && world_area(t) > 0.0).collect();
+        if let Some(&first) = lost.first() {
+            return Err(AtlasError::LightmapFolded { triangles: lost.len(), first: first as u32 });
+        }
         for t in (0..mesh.triangle_count()).filter(|&t| live[t]) {
             let [a, b, c] = mesh.triangle(t);
             for (x, y) in [(a, b), (a, c)] {

@@ -184,6 +184,14 @@ fn lightmap_coordinates_that_would_mix_two_places_are_refused() {
     // All on one point: no area.
     mesh.lightmap_uvs = vec![Vec2::splat(0.5); mesh.vertex_count()];
     assert_eq!(Atlas::from_lightmap_uvs(&mesh, 0.1), Err(AtlasError::LightmapEmpty));
+    // One row of the grid folded onto a line: its triangles would have no texel.
+    mesh.lightmap_uvs = mesh.positions.iter().map(|&p| lightmap_of(p, Vec2::splat(0.125), 0.25)).collect();
+    let row: Vec<usize> = (0..mesh.vertex_count()).filter(|&v| mesh.positions[v].z > 0.5).collect();
+    row.iter().for_each(|&v| mesh.lightmap_uvs[v].y = 0.375);
+    match Atlas::from_lightmap_uvs(&mesh, 0.1) {
+        Err(AtlasError::LightmapFolded { triangles, .. }) => assert_eq!(triangles, 4),
+        other => panic!("a folded row: {other:?}"),
+    }
     // Two planes on the same spot of the atlas: every covered texel is under both.
     let stacked = two_planes_with_lightmap([Vec2::splat(0.25); 2], 0.125);
     match Atlas::from_lightmap_uvs(&stacked, 0.1) {
