@@ -3,7 +3,7 @@
 bundle beside Mitsuba 3's rendering of the same mesh, camera and light.
 
 usage:
-    target/mitsuba-venv/bin/python benches/pathtracer_compare.py BUNDLE MESH.obj \\
+    target/mitsuba-venv/bin/python benches/pathtracer_compare.py BUNDLE [MESH.obj|MESH.glb] \\
         (--env MAP.exr | --step K) --camera EX,EY,EZ,TX,TY,TZ [--fov 50] [--size 320x240] \\
         [--bounces B] [--spp 512] [--prtbake target/release/prtbake] -o OUTDIR [--json]
 
@@ -14,9 +14,13 @@ Needs numpy, mitsuba and flip-evaluator (PyPI) in a virtualenv:
 
 The mesh is the OBJ the bundle was baked from (loaded as prtbake loads it:
 Y up, no clean), every surface Lambertian and two-sided with its MTL Kd (0.8
-where there is none), RGB. Windows (MTL `prtbake_role window`, or the
-bundle's `--window` patterns) of transmittance 1 are left out of Mitsuba's
-scene: light passes them unchanged, as the bake counts it (a window of
+where there is none), RGB. Without MESH (or with a GLB that `prtbake export`
+wrote) the mesh is the bundle's own, exported into OUTDIR/mesh.glb: the
+triangles the bake saw after `--clean`, each material's albedo as the
+viewer shades it (a GLB or glTF model as downloaded is not read here: its
+node transforms and textures are prtbake's to resolve). Windows (MTL or
+glTF `prtbake_role window`, or the bundle's `--window` patterns) of
+transmittance 1 are left out of Mitsuba's scene: light passes them unchanged, as the bake counts it (a window of
 transmittance below 1 is refused: Mitsuba would refract or reflect at it).
 
 `--step K` compares a time-lapse step instead of an environment map: the
@@ -35,14 +39,24 @@ max_depth = B + 2 (camera hit, light, B bounces), Russian roulette off:
   so numpy's own basis gives the viewer's lighting). This measures the bake:
   per-vertex storage, interpolation across triangles, ray noise, bias;
 - (b) under the full map: what a user sees, SH truncation included.
+With `--reference window` (an --env only), (a) follows window mode's own
+model instead: light reaches the scene only through its glass (a ray whose
+first hit is glass takes the map in its direction; one that escapes without
+meeting glass takes nothing), path traced here with cosine-weighted bounces
+on two-sided Lambertian surfaces. That is the reference for a mesh with gaps
+(a car's body: window mode ignores light through them by design), where the
+open one measures the gaps, not the bake. (b) stays open.
 
 prtbake's side is `view --screenshot OUT.exr` (linear radiance) at
 --supersample times the size (default 4), box-averaged (Mitsuba's box filter
 averages over each pixel too). Only pixels wholly on geometry count: all 64
-rays of an 8x8 grid through the pixel meet geometry. A pixel a silhouette
-crosses holds backdrop in both images, but not the same backdrop (black in
-Mitsuba, the sky in the viewer): on the grey-white room's window bars a 2x2
-test let those pixels through, and they carried a quarter of the error.
+rays of an 8x8 grid through the pixel meet geometry, before any glass. A
+pixel a silhouette crosses holds backdrop in both images, but not the same
+backdrop (black in Mitsuba, the sky in the viewer): on the grey-white room's
+window bars a 2x2 test let those pixels through, and they carried a quarter
+of the error. Behind glass the viewer draws the backdrop and Mitsuba what
+lies there (the Ferrari's hood and mirrors: 99.9% of its squared error
+before they were left out).
 
 Printed per reference: relative L2 over pixels, sqrt(sum (x-y)^2 / sum y^2)
 over RGB ("image error"); mean relMSE, mean((x-y)^2 / (y^2 + 0.01 mean(y)^2));
@@ -50,8 +64,8 @@ and mean FLIP (flip-evaluator, LDR) on both images tone-mapped alike
 (exposure 0.18 / the reference's mean luminance, Reinhard, sRGB). The
 reference's own noise is the same L2 between two Mitsuba seeds divided by
 sqrt(2); the bake's own error is then sqrt(L2^2 - noise^2) (independent
-errors add in squares), printed beside the raw figure. Writes OUTDIR/{prtbake,mitsuba_a,mitsuba_b}.exr, tone-mapped PNGs and
-the FLIP error maps (flip_a.png, flip_b.png).
+errors add in squares), printed beside the raw figure. Writes OUTDIR/{prtbake,mitsuba_a,mitsuba_b}.exr, tone-mapped PNGs, the
+FLIP error maps (flip_a.png, flip_b.png) and the counted pixels (mask.npy).
 """
 import argparse
 import hashlib
@@ -106,15 +120,69 @@ def load_obj_rgb(path):
     return np.array(positions, dtype=np.float32), np.array(tris, dtype=np.uint32), np.array(tri_mat), materials
 
 
-def window_materials(obj_path, materials, meta):
-    """Names of the OBJ's window materials: MTL `prtbake_role window`, or a
-    match of the bundle's recorded `--window` patterns. Exits on one whose
+def load_export_glb(path):
+    """A GLB as `prtbake export` writes it: one triangle primitive per mesh,
+    nodes without transforms, albedo in baseColorFactor, the role and the
+    transmittance in the material. Returns what load_obj_rgb returns, plus
+    {material: role} and {material: transmittance}."""
+    import struct
+    with open(path, "rb") as f:
+        data = f.read()
+    if len(data) < 20 or data[:4] != b"glTF":
+        sys.exit(f"{path}: not a GLB")
+    json_len = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + json_len])
+    bin_start = 20 + json_len + 8
+    if "prtbake" not in doc.get("extras", {}):
+        sys.exit(f"{path}: not written by `prtbake export` (give the bundle alone and the script exports its mesh)")
+
+    def accessor(i):
+        a = doc["accessors"][i]
+        view = doc["bufferViews"][a["bufferView"]]
+        width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[a["type"]]
+        dtype = {5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}[a["componentType"]]
+        offset = bin_start + view.get("byteOffset", 0) + a.get("byteOffset", 0)
+        return np.frombuffer(data, dtype=dtype, count=a["count"] * width, offset=offset).reshape(a["count"], width)
+
+    materials, roles, tau = [], {}, {}
+    for m in doc.get("materials", []):
+        name = m.get("name", f"material{len(materials)}")
+        rgb = m.get("pbrMetallicRoughness", {}).get("baseColorFactor", [DEFAULT_ALBEDO] * 3)[:3]
+        materials.append([name, tuple(min(max(float(x), 0.0), 1.0) for x in rgb)])
+        roles[name] = m.get("extras", {}).get("prtbake_role", "opaque")
+        tau[name] = m.get("extensions", {}).get("KHR_materials_transmission", {}).get("transmissionFactor", 1.0)
+    # Primitives index vertex pools (prtbake's export shares one): each pool once.
+    positions, tris, tri_mat, pool_base = [], [], [], {}
+    base = 0
+    for node in doc.get("nodes", []):
+        if any(k in node for k in ("matrix", "translation", "rotation", "scale", "children")):
+            sys.exit(f"{path}: node {node.get('name')!r} has a transform: not a GLB that `prtbake export` wrote")
+        for prim in doc["meshes"][node["mesh"]]["primitives"] if "mesh" in node else []:
+            if prim.get("mode", 4) != 4:
+                sys.exit(f"{path}: a primitive of mode {prim['mode']}: triangles only")
+            pool = prim["attributes"]["POSITION"]
+            if pool not in pool_base:
+                pool_base[pool] = base
+                positions.append(accessor(pool).astype(np.float32))
+                base += len(positions[-1])
+            t = accessor(prim["indices"]).reshape(-1, 3).astype(np.uint32) + pool_base[pool]
+            tris.append(t)
+            tri_mat.append(np.full(len(t), prim.get("material", 0)))
+    return np.concatenate(positions), np.concatenate(tris), np.concatenate(tri_mat), materials, roles, tau
+
+
+def window_materials(obj_path, materials, meta, glb_roles=None):
+    """Names of the mesh's window materials: `prtbake_role window` (MTL, or
+    the GLB's materials given as `glb_roles`), or a match of the bundle's
+    recorded `--window` patterns. Exits on one whose
     transmittance is below 1."""
     import fnmatch
-    roles, tau = {}, {}
+    roles, tau = glb_roles or ({}, {})
     base = os.path.dirname(obj_path)
-    with open(obj_path) as f:
-        libs = [" ".join(l.split()[1:]) for l in f if l.startswith("mtllib")]
+    libs = []
+    if glb_roles is None:
+        with open(obj_path) as f:
+            libs = [" ".join(l.split()[1:]) for l in f if l.startswith("mtllib")]
     for lib in libs:
         name = None
         with open(os.path.join(base, lib)) as f:
@@ -222,7 +290,8 @@ def errors(test, ref, mask):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("bundle")
-    ap.add_argument("mesh")
+    ap.add_argument("mesh", nargs="?", default=None,
+                    help="the OBJ the bundle was baked from, or a GLB of `prtbake export`; default: the bundle's own mesh, exported")
     light = ap.add_mutually_exclusive_group(required=True)
     light.add_argument("--env")
     light.add_argument("--step", type=int, help="a time-lapse step: its sky and sun (needs examples/sky_env)")
@@ -235,6 +304,10 @@ def main():
     ap.add_argument("--supersample", type=int, default=4, help="prtbake renders at K times the size, box-averaged K x K")
     ap.add_argument("--env-yaw", type=float, default=180.0,
                     help="Mitsuba's envmap turned about +Y so its texels point where prtbake's do (its u = 0 looks down -Z, prtbake's u = 0.5)")
+    ap.add_argument("--reference", choices=["open", "window"], default="open",
+                    help="(a)'s light transport: open (windows removed, light enters wherever the mesh lets it: "
+                         "right for a closed room) or window (window mode's own model: a ray counts the sky only "
+                         "where its first hit is glass; for meshes with gaps, such as a car)")
     ap.add_argument("--prtbake", default=os.path.join(ROOT, "target", "release", "prtbake"))
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("-o", "--out", required=True)
@@ -285,12 +358,19 @@ def main():
         # Bundles of one scene and day share their references.
         light_key = [args.step, step, hashlib.sha256(env_sh.tobytes() + env.tobytes()).hexdigest()]
 
-    positions, tris, tri_mat, materials = load_obj_rgb(args.mesh)
-    windows = window_materials(args.mesh, materials, meta)
-    shapes = {}
+    if args.mesh is None:
+        args.mesh = os.path.join(args.out, "mesh.glb")
+        subprocess.run([args.prtbake, "export", args.bundle, "-o", args.mesh, "--force"], check=True, capture_output=True)
+    if args.mesh.lower().endswith((".glb", ".gltf")):
+        positions, tris, tri_mat, materials, roles, tau = load_export_glb(args.mesh)
+        windows = window_materials(args.mesh, materials, meta, (roles, tau))
+    else:
+        positions, tris, tri_mat, materials = load_obj_rgb(args.mesh)
+        windows = window_materials(args.mesh, materials, meta)
+    shapes, glass = {}, {}
     for m, (name, rgb) in enumerate(materials):
         sel = tris[tri_mat == m]
-        if len(sel) == 0 or name in windows:
+        if len(sel) == 0:
             continue
         used, remap = np.unique(sel, return_inverse=True)
         mesh = mi.Mesh(f"m{m}", len(used), len(sel), has_vertex_normals=False)
@@ -299,7 +379,11 @@ def main():
         params["faces"] = mi.UInt32(remap.astype(np.uint32).ravel())
         params.update()
         mesh.set_bsdf(mi.load_dict({"type": "twosided", "material": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(rgb)}}}))
-        shapes[f"m{m}"] = mesh
+        (glass if name in windows else shapes)[f"m{m}"] = mesh
+    if args.reference == "window" and not args.env:
+        sys.exit("--reference window is for --env (a step's sun through glass is not modelled there yet)")
+    if args.reference == "window" and not glass:
+        sys.exit(f"{args.mesh}: --reference window needs window materials, and this mesh has none")
     e = [float(x) for x in args.camera.split(",")]
     sensor = {
         "type": "perspective", "fov": args.fov, "fov_axis": "y",
@@ -327,6 +411,8 @@ def main():
         return np.array(mi.render(scene, seed=seed, spp=spp or args.spp))[..., :3]
 
     def render_a(seed):
+        if args.reference == "window":
+            return render_window_mode(mi, dr, shapes, glass, sensor, env_sh, bounces, args.spp, seed, width, height)
         # The lighting the bundle sees: the SH sky with its bounces, the sun direct only.
         image = render_signed(env_sh, seed)
         if sun is not None:
@@ -342,11 +428,14 @@ def main():
             image = image - render(negative, seed + 1000)
         return image
 
-    mask = coverage_mask(mi, dr, mi.load_dict({"type": "scene", **shapes, "sensor": sensor}), width, height)
+    mask = coverage_mask(mi, dr, mi.load_dict({"type": "scene", **shapes, "sensor": sensor}), width, height,
+                         mi.load_dict({"type": "scene", **glass}) if glass else None)
     # The references depend on the scene, light, camera and samples only: kept
     # in --cache (default: OUTDIR) under a key of those, so bundles of one
     # scene are compared against the same images.
-    scene_key = [os.path.abspath(args.mesh), os.path.getsize(args.mesh), *light_key] + ([sorted(windows)] if windows else [])
+    # The triangles' corners, not the vertex arrays: the same triangles however the vertices are pooled.
+    mesh_hash = hashlib.sha256(positions[tris].tobytes() + tri_mat.astype(np.int64).tobytes() + json.dumps(materials).encode()).hexdigest()
+    scene_key = [mesh_hash, *light_key] + ([args.reference] if args.reference != "open" else []) + ([sorted(windows)] if windows else [])
     key = hashlib.sha256(json.dumps(scene_key + [args.camera, args.fov, width, height, args.spp, bounces, order, args.env_yaw]).encode()).hexdigest()[:16]
     cache = os.path.join(args.cache or args.out, f"mitsuba-{key}.npz")
     if os.path.exists(cache):
@@ -368,6 +457,7 @@ def main():
               "covered_pixels": int(mask.sum()), "supersample": k, "mask_grid": MASK_GRID, "view_seconds": view_seconds, "mitsuba_seconds_per_image": mitsuba_seconds,
               "reference_noise_rel_l2": ref_noise}
     mi.Bitmap(ours.astype(np.float32)).write(os.path.join(args.out, "prtbake.exr"))
+    np.save(os.path.join(args.out, "mask.npy"), mask)
     save_png(mi, tonemap(ours, key), os.path.join(args.out, "prtbake.png"))
     for name, ref in refs.items():
         mi.Bitmap(ref.astype(np.float32)).write(os.path.join(args.out, f"mitsuba_{name}.exr"))
@@ -406,10 +496,61 @@ def main():
 MASK_GRID = 8
 
 
-def coverage_mask(mi, dr, scene, width, height):
+def render_window_mode(mi, dr, shapes, glass, sensor_dict, env, bounces, spp, seed, width, height, batch=8):
+    """Window mode's model, path traced: from each camera hit, cosine-sampled
+    bounces (two-sided Lambertian); a ray whose first hit is glass takes the
+    equirect `env` (prtbake's convention, nearest texel) in its direction, a
+    ray that escapes without meeting glass takes nothing (a gap in the body).
+    Camera rays see through glass. Box filter: uniform jitter in the pixel."""
+    opaque = mi.load_dict({"type": "scene", **shapes, "sensor": sensor_dict})
+    everything = mi.load_dict({"type": "scene", **shapes, **glass})
+    sensor = opaque.sensors()[0]
+    env_h, env_w = env.shape[:2]
+    ys, xs = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    xs, ys = np.tile(xs.ravel(), batch), np.tile(ys.ravel(), batch)
+    n = xs.size
+    rng = np.random.default_rng(seed)
+    total = np.zeros((n, 3))
+    passes = max(1, spp // batch)
+    for _ in range(passes):
+        jitter = rng.random((n, 2))
+        pos = mi.Point2f(mi.Float((xs + jitter[:, 0]) / width), mi.Float((ys + jitter[:, 1]) / height))
+        rays, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+        si = opaque.ray_intersect(rays)
+        alive = np.array(si.is_valid())
+        throughput = np.ones((n, 3))
+        for _depth in range(bounces + 1):
+            albedo = np.array(si.bsdf().eval_diffuse_reflectance(si, mi.Bool(alive)))
+            albedo = albedo.T if albedo.shape == (3, n) else albedo  # Dr.Jit gives channels first
+            throughput *= np.where(alive[:, None], albedo, 0.0)
+            u = rng.random((n, 2))
+            local = mi.warp.square_to_cosine_hemisphere(mi.Point2f(mi.Float(u[:, 0]), mi.Float(u[:, 1])))
+            # Two-sided: sample the side the ray arrived on.
+            flip = mi.Float(np.where(np.array(si.wi.z) < 0, -1.0, 1.0))
+            local = mi.Vector3f(local.x, local.y, local.z * flip)
+            ray = si.spawn_ray(si.to_world(local))
+            hit_opaque = opaque.ray_intersect(ray)
+            hit_any = everything.ray_intersect(ray)
+            t_opaque = np.where(np.array(hit_opaque.is_valid()), np.array(hit_opaque.t), np.inf)
+            t_any = np.where(np.array(hit_any.is_valid()), np.array(hit_any.t), np.inf)
+            through_glass = alive & (t_any < t_opaque)
+            d = np.stack([np.array(ray.d.x), np.array(ray.d.y), np.array(ray.d.z)], -1)
+            v = np.arccos(np.clip(d[:, 1], -1, 1)) / math.pi
+            uu = np.mod(np.arctan2(d[:, 0], -d[:, 2]) / (2 * math.pi) + 0.5, 1.0)
+            texel = env[np.minimum((v * env_h).astype(int), env_h - 1), np.minimum((uu * env_w).astype(int), env_w - 1)]
+            total += np.where(through_glass[:, None], throughput * texel, 0.0)
+            alive = alive & ~through_glass & np.isfinite(t_opaque)
+            si = hit_opaque
+    return (total / passes).reshape(batch, height, width, 3).mean(axis=0).astype(np.float32)
+
+
+def coverage_mask(mi, dr, scene, width, height, glass_only=None):
     """Pixels wholly on geometry: all rays of a MASK_GRID x MASK_GRID grid
-    through the pixel meet it. The backdrop and the pixels a silhouette
-    crosses, which are not the bake's, are left out."""
+    through the pixel meet it, and (given `glass_only`, a scene of the
+    windows alone) meet it clear of any glass. The backdrop, the pixels a silhouette
+    crosses and those seen through glass (the viewer draws the backdrop
+    behind glass, Mitsuba what lies there: a car's hood, its mirrors), which
+    are not the bake's, are left out."""
     sensor = scene.sensors()[0]
     hits = np.ones((height, width), dtype=bool)
     ys, xs = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
@@ -419,7 +560,14 @@ def coverage_mask(mi, dr, scene, width, height):
             pos = mi.Point2f(mi.Float(((xs + dx) / width).ravel()), mi.Float(((ys + dy) / height).ravel()))
             rays, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
             si = scene.ray_intersect(rays)
-            hits &= np.array(si.is_valid()).reshape(height, width)
+            hit = np.array(si.is_valid())
+            if glass_only is not None:
+                # Glass in front of the hit, or within a thousandth of its
+                # distance behind it (a pane's rim in a frame): the viewer may
+                # draw the pane there.
+                pane = glass_only.ray_intersect(rays)
+                hit &= ~(np.array(pane.is_valid()) & (np.array(pane.t) <= np.array(si.t) * (1 + 1e-3)))
+            hits &= hit.reshape(height, width)
     return hits
 
 
