@@ -997,6 +997,8 @@ fn a_mesh_with_its_own_texcoord_1_keeps_its_atlas() {
     let o = run(&["bake", glb.to_str().unwrap(), "--clean", "--texel-size", "0.1", "--rays", "8", "-o", baked.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("2 charts of TEXCOORD_1"), "{}", String::from_utf8_lossy(&o.stdout));
     let own = assert_own_atlas(&baked);
+    let shown = run(&["inspect", baked.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&shown.stdout).contains("2 charts of TEXCOORD_1"), "{}", String::from_utf8_lossy(&shown.stdout));
     let sunned = dir.path("sun.prtb");
     run(&["sun", glb.to_str().unwrap(), "--texel-size", "0.1", "--steps", "4", "-o", sunned.to_str().unwrap(), "--quiet"]);
     assert_own_atlas(&sunned);

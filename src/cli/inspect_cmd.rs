@@ -87,8 +87,10 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             Some(s) if !s.texel_masks.is_empty() => "; sun bits per texel",
             _ => "",
         };
+        // Whose atlas, where the bake recorded it: the mesh's own (TEXCOORD_1) or xatlas's.
+        let whose = b.meta.pointer("/texels/atlas").and_then(|v| v.as_str()).map(|s| format!(" of {s}")).unwrap_or_default();
         println!(
-            "  texels: atlas {} × {} of {} (world units), {} charts; {} covered texels ({:.1}% of the texture), {transfer}{sun_bits}",
+            "  texels: atlas {} × {} of {} (world units), {} charts{whose}; {} covered texels ({:.1}% of the texture), {transfer}{sun_bits}",
             a.width,
             a.height,
             a.texel_size,
