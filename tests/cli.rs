@@ -1002,6 +1002,8 @@ fn a_mesh_with_its_own_texcoord_1_keeps_its_atlas() {
     let sunned = dir.path("sun.prtb");
     run(&["sun", glb.to_str().unwrap(), "--texel-size", "0.1", "--steps", "4", "-o", sunned.to_str().unwrap(), "--quiet"]);
     assert_own_atlas(&sunned);
+    let shown = run(&["inspect", sunned.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&shown.stdout).contains("2 charts of TEXCOORD_1"), "{}", String::from_utf8_lossy(&shown.stdout));
     // --unwrap: xatlas's, another layout.
     let unwrapped = dir.path("unwrapped.prtb");
     let o = run(&["bake", glb.to_str().unwrap(), "--texel-size", "0.1", "--unwrap", "--rays", "8", "-o", unwrapped.to_str().unwrap()]);

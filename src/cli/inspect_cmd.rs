@@ -88,7 +88,11 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             _ => "",
         };
         // Whose atlas, where the bake recorded it: the mesh's own (TEXCOORD_1) or xatlas's.
-        let whose = b.meta.pointer("/texels/atlas").and_then(|v| v.as_str()).map(|s| format!(" of {s}")).unwrap_or_default();
+        let whose = ["/texels/atlas", "/sun/texels/atlas"]
+            .iter()
+            .find_map(|p| b.meta.pointer(p).and_then(|v| v.as_str()))
+            .map(|s| format!(" of {s}"))
+            .unwrap_or_default();
         println!(
             "  texels: atlas {} × {} of {} (world units), {} charts{whose}; {} covered texels ({:.1}% of the texture), {transfer}{sun_bits}",
             a.width,

@@ -422,8 +422,11 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             };
             Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None, texel_masks))
         })??;
+    // Whose atlas a new one is: the mesh's own (TEXCOORD_1) or xatlas's.
+    let mut new_atlas_source = None;
     if let Some((masks, atlas, _)) = &texel_masks {
         if input.atlas.is_none() {
+            new_atlas_source = Some(if input.mesh.lightmap_uvs.is_empty() || config.unwrap { "xatlas" } else { "TEXCOORD_1" });
             input.atlas = Some((atlas.clone(), masks.texels.clone()));
         }
     }
@@ -454,6 +457,9 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             "lit_texels": t.stats.lit_texels,
             "bit_rule": "lit iff a strict majority of the texel's points (its footprint on its triangles, each weighted by the area it stands for; window triangles' left out) see the sun, each tested as a vertex's sample",
         });
+        if let Some(source) = new_atlas_source {
+            sun_meta["texels"]["atlas"] = json!(source);
+        }
     }
     if let Some(r) = &refine {
         sun_meta["refine"] = r.meta();
