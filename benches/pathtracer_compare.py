@@ -15,7 +15,7 @@ Needs numpy, mitsuba and flip-evaluator (PyPI) in a virtualenv:
 The mesh is the OBJ the bundle was baked from (loaded as prtbake loads it:
 Y up, no clean), every surface Lambertian and two-sided with its MTL Kd (0.8
 where there is none), RGB. Without MESH (or with a GLB that `prtbake export`
-wrote) the mesh is the bundle's own, exported into OUTDIR/mesh.glb: the
+wrote) the mesh is the bundle's own, exported into OUTDIR/prtbake_export.glb: the
 triangles the bake saw after `--clean`, each material's albedo as the
 viewer shades it (a GLB or glTF model as downloaded is not read here: its
 node transforms and textures are prtbake's to resolve). Windows (MTL or
@@ -118,6 +118,19 @@ def load_obj_rgb(path):
                 for m in materials:
                     m[1] = kd.get(m[0], m[1])
     return np.array(positions, dtype=np.float32), np.array(tris, dtype=np.uint32), np.array(tri_mat), materials
+
+
+def is_export_glb(path):
+    """Whether `path` is a GLB that `prtbake export` wrote (its JSON's extras name prtbake)."""
+    import struct
+    with open(path, "rb") as f:
+        head = f.read(20)
+        if len(head) < 20 or head[:4] != b"glTF":
+            return False
+        try:
+            return "prtbake" in json.loads(f.read(struct.unpack_from("<I", head, 12)[0])).get("extras", {})
+        except ValueError:
+            return False
 
 
 def load_export_glb(path):
@@ -359,8 +372,11 @@ def main():
         light_key = [args.step, step, hashlib.sha256(env_sh.tobytes() + env.tobytes()).hexdigest()]
 
     if args.mesh is None:
-        args.mesh = os.path.join(args.out, "mesh.glb")
-        subprocess.run([args.prtbake, "export", args.bundle, "-o", args.mesh, "--force"], check=True, capture_output=True)
+        # Into OUTDIR, never over a file the script did not write there.
+        args.mesh = os.path.join(args.out, "prtbake_export.glb")
+        if os.path.exists(args.mesh) and not is_export_glb(args.mesh):
+            sys.exit(f"{args.mesh}: exists and is not a GLB of `prtbake export`; not overwritten")
+        subprocess.run([args.prtbake, "export", args.bundle, "-o", args.mesh], check=True, capture_output=True)
     if args.mesh.lower().endswith((".glb", ".gltf")):
         positions, tris, tri_mat, materials, roles, tau = load_export_glb(args.mesh)
         windows = window_materials(args.mesh, materials, meta, (roles, tau))

@@ -50,7 +50,7 @@ import argparse, json, os, re, sys
 from collections import defaultdict
 
 # Lowest first: a room may use only rooms before it. `bin` is above them all.
-LAYERS = ["files", "colour", "sampling", "sh", "mesh", "atlas", "sky", "trace", "clean", "fixtures", "brdf", "bake",
+LAYERS = ["disjoint", "files", "colour", "sampling", "sh", "mesh", "atlas", "sky", "trace", "clean", "fixtures", "brdf", "bake",
           "bundle", "shards", "verify", "refine", "panel", "chart", "view", "cli"]
 
 TOK = re.compile(r'//|/\*|(?<!\w)[bc]?r(#*)"|"|\'')

@@ -13,6 +13,7 @@ pub mod chart;
 pub mod clean;
 pub mod cli;
 pub mod colour;
+pub(crate) mod disjoint;
 pub mod files;
 pub mod fixtures;
 pub mod mesh;

@@ -19,6 +19,7 @@
 pub mod coverage;
 mod xatlas_ffi;
 
+use crate::disjoint::{find, union};
 use crate::mesh::Mesh;
 use glam::Vec2;
 
@@ -113,12 +114,13 @@ impl Atlas {
             let [a, b, c] = mesh.triangle(t).map(|v| mesh.lightmap_uvs[v as usize].as_dvec2());
             0.5 * (b - a).perp_dot(c - a).abs()
         };
-        let (mut world, mut atlas_area) = (0.0f64, 0.0f64);
-        for t in 0..mesh.triangle_count() {
+        let world_area = |t: usize| {
             let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
-            world += 0.5 * (b - a).cross(c - a).length();
-            atlas_area += uv_area(t);
-        }
+            0.5 * (b - a).cross(c - a).length()
+        };
+        let triangles = 0..mesh.triangle_count();
+        let world: f64 = triangles.clone().map(world_area).sum();
+        let atlas_area: f64 = triangles.clone().map(uv_area).sum();
         if atlas_area <= 0.0 {
             return Err(AtlasError::LightmapEmpty);
         }
@@ -129,31 +131,18 @@ impl Atlas {
             return Err(AtlasError::TooManyTexels { asked: texel_size, texels: side * side, fits });
         }
         let resolution = side as u32;
-        // Charts: triangles joined through a shared vertex (a chart's border is
-        // a seam of split vertices, as glTF stores them).
-        let mut parent: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
-        fn root(parent: &mut [u32], mut v: u32) -> u32 {
-            while parent[v as usize] != v {
-                parent[v as usize] = parent[parent[v as usize] as usize];
-                v = parent[v as usize];
-            }
-            v
-        }
-        let live: Vec<bool> = (0..mesh.triangle_count()).map(|t| uv_area(t) > 0.0).collect();
-        let world_area = |t: usize| {
-            let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
-            (b - a).cross(c - a).length()
-        };
-        let lost: Vec<usize> = (0..mesh.triangle_count()).filter(|&t| !live[t] && world_area(t) > 0.0).collect();
+        let live: Vec<bool> = triangles.clone().map(|t| uv_area(t) > 0.0).collect();
+        let lost: Vec<usize> = triangles.clone().filter(|&t| !live[t] && world_area(t) > 0.0).collect();
         if let Some(&first) = lost.first() {
             return Err(AtlasError::LightmapFolded { triangles: lost.len(), first: first as u32 });
         }
-        for t in (0..mesh.triangle_count()).filter(|&t| live[t]) {
+        // Charts: triangles joined through a shared vertex (a chart's border is
+        // a seam of split vertices, as glTF stores them).
+        let mut parent: Vec<u32> = (0..mesh.vertex_count() as u32).collect();
+        for t in triangles.clone().filter(|&t| live[t]) {
             let [a, b, c] = mesh.triangle(t);
-            for (x, y) in [(a, b), (a, c)] {
-                let (rx, ry) = (root(&mut parent, x), root(&mut parent, y));
-                parent[rx.max(ry) as usize] = rx.min(ry);
-            }
+            union(&mut parent, a, b);
+            union(&mut parent, a, c);
         }
         let mut chart_of_root: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
         let triangle_chart: Vec<u32> = (0..mesh.triangle_count())
@@ -161,7 +150,7 @@ impl Atlas {
                 if !live[t] {
                     return NO_CHART;
                 }
-                let r = root(&mut parent, mesh.triangle(t)[0]);
+                let r = find(&mut parent, mesh.triangle(t)[0]);
                 let next = chart_of_root.len() as u32;
                 *chart_of_root.entry(r).or_insert(next)
             })

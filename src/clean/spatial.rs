@@ -6,6 +6,7 @@
 //! The tree is a plain median-split BVH: built once, queried many times, and
 //! deterministic (ties broken by item index).
 
+pub(crate) use crate::disjoint::{find, union};
 use glam::Vec3;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -284,26 +285,6 @@ impl Hasher for CellHasher {
     }
     fn finish(&self) -> u64 {
         self.0
-    }
-}
-
-/// The root of `i`'s set (path halving).
-pub(crate) fn find(parent: &mut [u32], mut i: u32) -> u32 {
-    while parent[i as usize] != i {
-        let up = parent[parent[i as usize] as usize];
-        parent[i as usize] = up;
-        i = up;
-    }
-    i
-}
-
-/// Joins two sets; the smaller root stays the root, so roots are the smallest members.
-pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        // Attach the larger root under the smaller: roots stay deterministic.
-        let (lo, hi) = (ra.min(rb), ra.max(rb));
-        parent[hi as usize] = lo;
     }
 }
 
