@@ -72,6 +72,7 @@ mod duplicates;
 pub mod fixtures;
 mod hub_pairs;
 mod intersect;
+mod needles;
 mod orient;
 mod planar;
 mod refine;
@@ -85,6 +86,7 @@ mod zip;
 pub use report::{CleanReport, DefectKind, DefectReport, OverlapReport, UnorientableComponent};
 pub use split::{split_edges, EdgeSplit};
 
+use std::collections::HashSet;
 use std::time::Instant;
 
 use crate::mesh::Mesh;
@@ -280,6 +282,22 @@ pub fn clean_mesh_timed(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, Clea
 /// in 3 rounds, the grey-white room (143k, many coplanar overlaps) in 7.
 pub const MAX_ROUNDS: usize = 8;
 
+/// The cut's triangles under this angle (degrees) are repaired after it
+/// ([`needles`]): a vertex interpolated across a thinner triangle cannot
+/// resolve the light along it.
+const NEEDLE_ANGLE_DEG: f64 = 1.0;
+
+/// A triangle's corner positions (bits, sorted): what it is, whatever its ids.
+fn corner_key(work: &Work, t: usize) -> [[u32; 3]; 3] {
+    sorted_bits(work.tri_positions(t))
+}
+
+fn sorted_bits(corners: [glam::Vec3; 3]) -> [[u32; 3]; 3] {
+    let mut k = corners.map(|p| p.to_array().map(f32::to_bits));
+    k.sort_unstable();
+    k
+}
+
 /// The result of one round of the pipeline.
 struct Round {
     mesh: Mesh,
@@ -399,12 +417,19 @@ fn clean_once(
     times.lap("zip", &mut clock);
 
     // 5b. Cut where triangles cross (after zipping: cracks closed, copies gone).
+    // The triangles before the cut, or (rounds after it) this round's input:
+    // what is not among them was made here, and its needles are repaired.
+    let mut before_cut: Option<HashSet<[[u32; 3]; 3]>> = None;
+    if params.cut_intersections && memo.has_cut() {
+        before_cut = Some((0..mesh.triangle_count()).map(|t| sorted_bits(mesh.triangle_positions(t))).collect());
+    }
     let mut cut_seams = weld::SeamEdges::new();
     // Once per clean: the rounds after it meet the cut's own pieces, whose
     // points f32 rounded off their lines, and cutting those again made new
     // slivers for the next round to remove (20 thin triangles crossing at a
     // point: 5,285 triangles, not converged after 8 rounds).
     if params.cut_intersections && !memo.has_cut() {
+        before_cut = Some((0..work.tris.len()).filter(|&t| work.tri_alive[t]).map(|t| corner_key(&work, t)).collect());
         let tolerances =
             intersect::CutTolerances { plane: plane_tol as f64, contact: contact_tol, min_length: zip_tol as f64, min_angle: sliver_rad };
         let c = intersect::cut_intersections(&mut work, &tolerances, memo);
@@ -436,6 +461,29 @@ fn clean_once(
     cut_seams.extend(seams(&work));
     r.welded_vertices += merge(&mut work, cos_hard_edge, split, &cut_seams, &mut r);
     times.lap("orient", &mut clock);
+
+    // 6b. Needles made since the cut: collapsed or refined away (after the
+    // weld, so vertices agree across the edges they may flip).
+    if let Some(before) = before_cut.filter(|_| memo.has_cut()) {
+        let made: Vec<bool> = (0..work.tris.len()).map(|t| work.tri_alive[t] && !before.contains(&corner_key(&work, t))).collect();
+        let tolerances = needles::NeedleTolerances {
+            min_angle: NEEDLE_ANGLE_DEG.to_radians(),
+            collapse: zip_tol as f64,
+            plane: plane_tol as f64,
+            height: weld_tol as f64,
+            spacing: zip_tol as f64,
+        };
+        let n = needles::repair_needles(&mut work, &made, &tolerances);
+        r.cut_needles_repaired = n.needles_before.saturating_sub(n.needles_after);
+        r.cut_needles_left = n.needles_after;
+        r.cut_needle_collapses = n.sides_collapsed;
+        r.cut_needle_points = n.points_inserted + n.edges_split;
+        if n.min_angle_after.is_finite() {
+            r.cut_min_angle_deg = Some(n.min_angle_after.to_degrees() as f32);
+        }
+        work.compact_triangles();
+        times.lap("cut needles", &mut clock);
+    }
 
     // 7. Refine.
     let slivers_before = refine::count_slivers(&work, sliver_rad);

@@ -111,6 +111,14 @@ pub struct CleanReport {
     /// Triangles removed with an edge two surfaces shared that was too short
     /// to take a point (its two ends became one point of the line).
     pub cut_edges_collapsed: usize,
+    /// Triangles the cut made under 1° that were repaired after it (a short
+    /// side collapsed, or points inserted with flips around them), and those
+    /// left (their small angle lies between two constrained edges).
+    pub cut_needles_repaired: usize,
+    pub cut_needles_left: usize,
+    /// Sides collapsed, points inserted and edges split by that repair.
+    pub cut_needle_collapses: usize,
+    pub cut_needle_points: usize,
     /// Smallest angle (degrees) of the triangles the cut made, and of the
     /// triangles they replaced, over all rounds (`None` when nothing was cut).
     pub cut_min_angle_deg: Option<f32>,
@@ -170,7 +178,7 @@ const LISTED_EDGE_FRACTION: f32 = 0.5;
 
 impl CleanReport {
     /// Every repair count by name, as in the JSON report.
-    pub fn repair_counts(&self) -> [(&'static str, usize); 14] {
+    pub fn repair_counts(&self) -> [(&'static str, usize); 15] {
         [
             ("welded_vertices", self.welded_vertices),
             ("degenerate_removed", self.degenerate_removed),
@@ -182,6 +190,7 @@ impl CleanReport {
             ("intersections_cut", self.intersections_cut),
             ("cut_points_added", self.cut_points_added),
             ("cut_lines_separated", self.cut_lines_separated),
+            ("cut_needles_repaired", self.cut_needles_repaired),
             ("seam_vertices_split", self.seam_vertices_split),
             ("edges_split", self.edges_split),
             ("sliver_flips", self.sliver_flips),
@@ -211,6 +220,10 @@ impl CleanReport {
         self.cut_lines_separated += later.cut_lines_separated;
         self.cut_shared_edges_left += later.cut_shared_edges_left;
         self.cut_edges_collapsed += later.cut_edges_collapsed;
+        self.cut_needles_repaired += later.cut_needles_repaired;
+        self.cut_needles_left += later.cut_needles_left;
+        self.cut_needle_collapses += later.cut_needle_collapses;
+        self.cut_needle_points += later.cut_needle_points;
         let least = |a: Option<f32>, b: Option<f32>| match (a, b) {
             (Some(x), Some(y)) => Some(x.min(y)),
             (x, y) => x.or(y),
@@ -304,6 +317,11 @@ impl CleanReport {
                 s,
                 "cut quality            {} points added, {} lines separated ({} shared edges left, {} triangles collapsed with a too short one); smallest angle {made:.3}° (replaced triangles: {replaced:.3}°)",
                 self.cut_points_added, self.cut_lines_separated, self.cut_shared_edges_left, self.cut_edges_collapsed
+            );
+            let _ = writeln!(
+                s,
+                "cut needles            {} under 1° repaired ({} sides collapsed, {} points inserted), {} left",
+                self.cut_needles_repaired, self.cut_needle_collapses, self.cut_needle_points, self.cut_needles_left
             );
         }
         let _ = writeln!(s, "edges split            {}", self.edges_split);
