@@ -26,15 +26,19 @@
 //!    in its diametral circle, splits that edge at its midpoint instead, in
 //!    every triangle that uses it; then **flip** the free edges around the
 //!    new point while that raises the smaller angle of their two triangles
-//!    (Lawson).
+//!    (Lawson);
+//! 4. at a small angle between two constrained edges (which no point can
+//!    raise), **flip across a crease**: an edge of a curved surface whose
+//!    flip moves the surface by less than the zip tolerance, each new
+//!    triangle facing within 30° of both old ones.
 //!
-//! Left as they are: a small angle between two constrained edges (on a
-//! curved surface every edge is one; the input's facets allow no better
-//! there), and a point that would come closer than the zip tolerance to a
-//! corner of its triangle or than a few weld tolerances to any point
-//! (another sheet's, which the next round's weld would join to it). Flips
-//! and new points keep the area exactly; collapses and snaps move points by
-//! less than the zip tolerance.
+//! Left as they are: a small angle between two edges that cannot flip (a
+//! hard edge, a seam, a sharper crease), and a point that would come closer
+//! than the zip tolerance to a corner of its triangle or than a few weld
+//! tolerances to any point (another sheet's, which the next round's weld
+//! would join to it). In-plane flips and new points keep the area exactly;
+//! collapses, snaps and crease flips move the surface by less than the zip
+//! tolerance.
 
 use super::work::{edge_runs, min_angle, sorted_edges, Work};
 use glam::DVec3;
@@ -78,6 +82,8 @@ const COLLAPSE_MIN_COS: f64 = 0.984_807_753; // cos 10°
 /// No new point within this many height tolerances of any point (another
 /// sheet's too), which the next round's weld would join to it.
 const CROWD_HEIGHTS: f64 = 4.0;
+/// A flip across a crease makes triangles facing within this (cosine, 30°) of both old ones.
+const CREASE_MIN_COS: f64 = 0.866_025_404;
 /// A flip must raise the smaller angle by more than this (radians).
 const FLIP_MARGIN: f64 = 1e-7;
 
@@ -330,6 +336,14 @@ impl<'a> Surface<'a> {
         let free_before = self.across_free(t, (k + 2) % 3, tol.plane).is_some();
         let free_after = self.across_free(t, k, tol.plane).is_some();
         if !free_before && !free_after {
+            // On a curved surface: a flip across a crease at that corner,
+            // moving the surface by less than the collapse distance.
+            for e in [(k + 2) % 3, k] {
+                if let Some(u) = self.flip_within(t, e, tol.collapse, tol) {
+                    out.edges_flipped += 1;
+                    return vec![t, u];
+                }
+            }
             return Vec::new();
         }
         let Some(centre) = circumcentre(c) else { return Vec::new() };
@@ -555,7 +569,15 @@ impl<'a> Surface<'a> {
     /// Flips edge `e` of `t` (a→b, its third corner c; the other side b→a→d)
     /// to c–d when free, convex and better; returns the other triangle.
     fn flip(&mut self, t: u32, e: usize, tol: &NeedleTolerances) -> Option<u32> {
-        let (u, j) = self.across_free(t, e, tol.plane)?;
+        self.flip_within(t, e, tol.plane, tol)
+    }
+
+    /// [`Self::flip`] across an edge whose two triangles lie within `plane`
+    /// of one plane. Beyond the plane tolerance (a crease of a curved
+    /// surface) the flip moves the surface by at most that much, and each
+    /// new triangle must face within [`CREASE_MIN_COS`] of both old ones.
+    fn flip_within(&mut self, t: u32, e: usize, plane: f64, tol: &NeedleTolerances) -> Option<u32> {
+        let (u, j) = self.across_free(t, e, plane)?;
         let p = self.work.tri_points(t as usize);
         let (a, b, c) = (p[e], p[(e + 1) % 3], p[(e + 2) % 3]);
         let d = self.work.tri_points(u as usize)[j];
@@ -567,6 +589,13 @@ impl<'a> Surface<'a> {
         let sound = |x: [DVec3; 3]| cross(x).dot(n) > 0.0 && height(x) >= tol.height;
         if !sound([pa, pd, pc]) || !sound([pd, pb, pc]) {
             return None;
+        }
+        if plane > tol.plane {
+            let old = [cross([pa, pb, pc]).normalize(), cross([pb, pa, pd]).normalize()];
+            let facing = |x: [DVec3; 3]| old.iter().all(|o| cross(x).normalize().dot(*o) > CREASE_MIN_COS);
+            if !facing([pa, pd, pc]) || !facing([pd, pb, pc]) {
+                return None;
+            }
         }
         let before = min_angle([pa, pb, pc]).min(min_angle([pb, pa, pd]));
         let after = min_angle([pa, pd, pc]).min(min_angle([pd, pb, pc]));
@@ -773,5 +802,22 @@ mod tests {
         assert_eq!(work.tri_alive.iter().filter(|&&a| a).count(), 4);
         assert!((work.total_area() - area).abs() < 1e-9);
         assert_eq!(edge_counts(&work), (4, 0));
+    }
+
+    #[test]
+    fn a_needle_on_a_crease_flips_across_it_when_the_surface_moves_less_than_the_collapse_distance() {
+        // A cap (0.57°) whose long side is a crease: the triangle across it
+        // bends 1.5 mm out of its plane, within the collapse distance (2 mm).
+        let pts = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.01, 0.0], [1.0, -1.0, 0.0015]];
+        let mut work = work_of(&pts, &[[0, 1, 2], [1, 0, 3]]);
+        let out = repair_needles(&mut work, &[true, false], &tolerances());
+        assert_eq!((out.needles_before, out.needles_after, out.edges_flipped), (1, 0, 1), "{out:?}");
+        assert!(worst(&work) > 40f64.to_radians());
+        assert_eq!(edge_counts(&work), (4, 0));
+        // Bent 3 mm, the flip would move the surface more than that: left.
+        let pts = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.01, 0.0], [1.0, -1.0, 0.003]];
+        let mut work = work_of(&pts, &[[0, 1, 2], [1, 0, 3]]);
+        let out = repair_needles(&mut work, &[true, false], &tolerances());
+        assert_eq!((out.needles_after, out.edges_flipped), (1, 0), "{out:?}");
     }
 }
