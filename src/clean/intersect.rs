@@ -190,9 +190,7 @@ impl CutMemo {
 
 impl CutMemo {
     fn key(work: &Work, t: usize) -> [[u32; 3]; 3] {
-        let mut k = work.tri_positions(t).map(|p| p.to_array().map(f32::to_bits));
-        k.sort_unstable();
-        k
+        super::work::corner_key(work.tri_positions(t))
     }
 }
 

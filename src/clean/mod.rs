@@ -90,7 +90,7 @@ use std::collections::HashSet;
 use std::time::Instant;
 
 use crate::mesh::Mesh;
-use work::{count_boundary_and_non_manifold, Work};
+use work::{corner_key, count_boundary_and_non_manifold, Work};
 
 /// A length given relative to the mesh's bounding-box diagonal, or absolutely.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -287,17 +287,6 @@ pub const MAX_ROUNDS: usize = 8;
 /// resolve the light along it.
 const NEEDLE_ANGLE_DEG: f64 = 1.0;
 
-/// A triangle's corner positions (bits, sorted): what it is, whatever its ids.
-fn corner_key(work: &Work, t: usize) -> [[u32; 3]; 3] {
-    sorted_bits(work.tri_positions(t))
-}
-
-fn sorted_bits(corners: [glam::Vec3; 3]) -> [[u32; 3]; 3] {
-    let mut k = corners.map(|p| p.to_array().map(f32::to_bits));
-    k.sort_unstable();
-    k
-}
-
 /// The result of one round of the pipeline.
 struct Round {
     mesh: Mesh,
@@ -419,17 +408,17 @@ fn clean_once(
     // 5b. Cut where triangles cross (after zipping: cracks closed, copies gone).
     // The triangles before the cut, or (rounds after it) this round's input:
     // what is not among them was made here, and its needles are repaired.
-    let mut before_cut: Option<HashSet<[[u32; 3]; 3]>> = None;
-    if params.cut_intersections && memo.has_cut() {
-        before_cut = Some((0..mesh.triangle_count()).map(|t| sorted_bits(mesh.triangle_positions(t))).collect());
-    }
+    let before_cut: Option<HashSet<[[u32; 3]; 3]>> = match (params.cut_intersections, memo.has_cut()) {
+        (true, true) => Some((0..mesh.triangle_count()).map(|t| corner_key(mesh.triangle_positions(t))).collect()),
+        (true, false) => Some((0..work.tris.len()).filter(|&t| work.tri_alive[t]).map(|t| corner_key(work.tri_positions(t))).collect()),
+        (false, _) => None,
+    };
     let mut cut_seams = weld::SeamEdges::new();
     // Once per clean: the rounds after it meet the cut's own pieces, whose
     // points f32 rounded off their lines, and cutting those again made new
     // slivers for the next round to remove (20 thin triangles crossing at a
     // point: 5,285 triangles, not converged after 8 rounds).
     if params.cut_intersections && !memo.has_cut() {
-        before_cut = Some((0..work.tris.len()).filter(|&t| work.tri_alive[t]).map(|t| corner_key(&work, t)).collect());
         let tolerances =
             intersect::CutTolerances { plane: plane_tol as f64, contact: contact_tol, min_length: zip_tol as f64, min_angle: sliver_rad };
         let c = intersect::cut_intersections(&mut work, &tolerances, memo);
@@ -465,7 +454,8 @@ fn clean_once(
     // 6b. Needles made since the cut: collapsed or refined away (after the
     // weld, so vertices agree across the edges they may flip).
     if let Some(before) = before_cut.filter(|_| memo.has_cut()) {
-        let made: Vec<bool> = (0..work.tris.len()).map(|t| work.tri_alive[t] && !before.contains(&corner_key(&work, t))).collect();
+        let made: Vec<bool> =
+            (0..work.tris.len()).map(|t| work.tri_alive[t] && !before.contains(&corner_key(work.tri_positions(t)))).collect();
         let tolerances = needles::NeedleTolerances {
             min_angle: NEEDLE_ANGLE_DEG.to_radians(),
             collapse: zip_tol as f64,

@@ -53,9 +53,11 @@ pub(crate) struct NeedleTolerances {
     pub collapse: f64,
     /// Distance within which two triangles count as one plane.
     pub plane: f64,
-    /// No new triangle has a height under this (the weld tolerance); no new
-    /// point comes closer than `spacing` to another.
+    /// No new triangle has a height under this (the weld tolerance), and no
+    /// new point comes within a few of it of any point.
     pub height: f64,
+    /// No new point comes closer than this to a corner of the triangle it
+    /// goes in, or to an end of the edge it splits or lands on.
     pub spacing: f64,
 }
 
@@ -77,8 +79,8 @@ pub(crate) struct NeedleOutcome {
 const OPS_PER_NEEDLE: usize = 64;
 /// Steps of the walk to a circumcentre.
 const MAX_WALK: usize = 256;
-/// Points, and triangles turning by more than this (cosine) under a collapse, refuse it.
-const COLLAPSE_MIN_COS: f64 = 0.984_807_753; // cos 10°
+/// A collapse or snap that turns a triangle by more than this (cosine of 10°) is refused.
+const COLLAPSE_MIN_COS: f64 = 0.984_807_753;
 /// No new point within this many height tolerances of any point (another
 /// sheet's too), which the next round's weld would join to it.
 const CROWD_HEIGHTS: f64 = 4.0;
@@ -128,11 +130,11 @@ struct Surface<'a> {
     made: Vec<bool>,
     users: HashMap<(u32, u32), Vec<u32>>,
     around: Vec<Vec<u32>>,
-    /// Points by cell of side `spacing`: a new point comes no closer than
+    /// Points by cell of side `crowd`: a new point comes no closer than
     /// that to any point, another sheet's too (which the next round's weld
-    /// or zip would otherwise join to it, making non-manifold edges).
+    /// would otherwise join to it, making non-manifold edges).
     cells: HashMap<[i64; 3], Vec<u32>>,
-    spacing: f64,
+    crowd: f64,
 }
 
 fn key(a: u32, b: u32) -> (u32, u32) {
@@ -171,7 +173,7 @@ enum Walk {
 }
 
 impl<'a> Surface<'a> {
-    fn new(work: &'a mut Work, made: &[bool], spacing: f64) -> Self {
+    fn new(work: &'a mut Work, made: &[bool], crowd: f64) -> Self {
         let mut users: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
         let edges = sorted_edges(work);
         for run in edge_runs(&edges) {
@@ -187,7 +189,7 @@ impl<'a> Surface<'a> {
         }
         let mut made = made.to_vec();
         made.resize(work.tris.len(), false);
-        let mut surface = Surface { work, made, users, around, cells: HashMap::new(), spacing };
+        let mut surface = Surface { work, made, users, around, cells: HashMap::new(), crowd };
         for p in 0..surface.around.len() as u32 {
             if !surface.around[p as usize].is_empty() {
                 surface.add_to_cell(p);
@@ -197,7 +199,7 @@ impl<'a> Surface<'a> {
     }
 
     fn cell(&self, x: DVec3) -> [i64; 3] {
-        (x / self.spacing).floor().as_i64vec3().to_array()
+        (x / self.crowd).floor().as_i64vec3().to_array()
     }
 
     fn add_to_cell(&mut self, p: u32) {
@@ -205,7 +207,7 @@ impl<'a> Surface<'a> {
         self.cells.entry(c).or_default().push(p);
     }
 
-    /// True when a point other than `except` lies within `spacing` of `x`.
+    /// True when a point other than `except` lies within `crowd` of `x`.
     fn crowded(&self, x: DVec3, except: &[u32]) -> bool {
         let c = self.cell(x);
         (-1..=1).any(|i| {
@@ -213,7 +215,7 @@ impl<'a> Surface<'a> {
                 (-1..=1).any(|k| {
                     self.cells
                         .get(&[c[0] + i, c[1] + j, c[2] + k])
-                        .is_some_and(|ps| ps.iter().any(|&p| !except.contains(&p) && self.pos(p).distance(x) < self.spacing))
+                        .is_some_and(|ps| ps.iter().any(|&p| !except.contains(&p) && self.pos(p).distance(x) < self.crowd))
                 })
             })
         })
@@ -551,7 +553,10 @@ impl<'a> Surface<'a> {
         let mut stack: Vec<u32> = self.around[point as usize].clone();
         let mut flips = 0;
         while let Some(t) = stack.pop() {
-            if flips > 4 * OPS_PER_NEEDLE || !self.work.tri_alive[t as usize] {
+            if flips > 4 * OPS_PER_NEEDLE {
+                break;
+            }
+            if !self.work.tri_alive[t as usize] {
                 continue;
             }
             let p = self.work.tri_points(t as usize);

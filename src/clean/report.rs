@@ -112,11 +112,11 @@ pub struct CleanReport {
     /// to take a point (its two ends became one point of the line).
     pub cut_edges_collapsed: usize,
     /// Triangles the cut made under 1° that were repaired after it (a short
-    /// side collapsed, or points inserted with flips around them), and those
-    /// left (their small angle lies between two constrained edges).
+    /// side collapsed, a cap snapped, points inserted with flips around
+    /// them, a crease flipped), and those left (see `clean::needles`).
     pub cut_needles_repaired: usize,
     pub cut_needles_left: usize,
-    /// Sides collapsed, points inserted and edges split by that repair.
+    /// Collapses (sides and caps), and points added (inserted or splitting an edge), by that repair.
     pub cut_needle_collapses: usize,
     pub cut_needle_points: usize,
     /// Smallest angle (degrees) of the triangles the cut made, and of the

@@ -170,6 +170,14 @@ impl Work {
     }
 }
 
+/// A triangle's corner positions as bits, sorted: what it is, whatever its
+/// ids or corner order (to tell triangles one step made from those it kept).
+pub(crate) fn corner_key(corners: [Vec3; 3]) -> [[u32; 3]; 3] {
+    let mut k = corners.map(|p| p.to_array().map(f32::to_bits));
+    k.sort_unstable();
+    k
+}
+
 /// Interior angles (radians) of a triangle at its three corners; zero for a corner
 /// with a zero-length side.
 pub(crate) fn triangle_angles(p: [DVec3; 3]) -> [f64; 3] {
