@@ -333,6 +333,13 @@ impl<'a> Surface<'a> {
                 return touched;
             }
         }
+        // 2b. A cap whose long side is free: flipping that side may be enough.
+        if angles[big] > std::f64::consts::FRAC_PI_2 {
+            if let Some(u) = self.flip(t, (big + 1) % 3, tol) {
+                out.edges_flipped += 1;
+                return vec![t, u];
+            }
+        }
         // 3. Its smallest angle between two constrained edges: no point helps.
         let k = (0..3).min_by(|&i, &j| angles[i].total_cmp(&angles[j])).unwrap_or(0);
         let free_before = self.across_free(t, (k + 2) % 3, tol.plane).is_some();
@@ -724,25 +731,8 @@ impl<'a> Surface<'a> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::work::work_of;
     use super::*;
-    use glam::Vec3;
-
-    /// A work mesh of the given points and triangles (one material, one group).
-    pub(super) fn work_of(points: &[[f32; 3]], tris: &[[u32; 3]]) -> Work {
-        let mut w = Work { points: points.iter().map(|&p| Vec3::from(p)).collect(), ..Work::default() };
-        for i in 0..points.len() as u32 {
-            w.vertex_point.push(i);
-            w.normals.push(Vec3::Z);
-        }
-        for (i, &t) in tris.iter().enumerate() {
-            w.tris.push(t);
-            w.tri_material.push(0);
-            w.tri_group.push(0);
-            w.tri_origin.push(i as u32);
-            w.tri_alive.push(true);
-        }
-        w
-    }
 
     fn tolerances() -> NeedleTolerances {
         NeedleTolerances { min_angle: 1f64.to_radians(), collapse: 2e-3, plane: 1e-5, height: 1e-6, spacing: 1e-4 }
@@ -806,6 +796,19 @@ mod tests {
         assert_eq!(out.needles_after, 0);
         assert_eq!(work.tri_alive.iter().filter(|&&a| a).count(), 4);
         assert!((work.total_area() - area).abs() < 1e-9);
+        assert_eq!(edge_counts(&work), (4, 0));
+    }
+
+    #[test]
+    fn a_cap_whose_long_side_is_free_flips_it_without_a_new_point() {
+        // A cap (0.57°, its corner 5 mm off its 1 m side: too far to snap)
+        // and a wide triangle across that side, in one plane.
+        let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.005, 0.0], [0.5, -1.0, 0.0]];
+        let mut work = work_of(&pts, &[[0, 1, 2], [1, 0, 3]]);
+        let area = work.total_area();
+        let out = repair_needles(&mut work, &[true, false], &tolerances());
+        assert_eq!((out.needles_after, out.edges_flipped, out.points_inserted, out.edges_split), (0, 1, 0, 0), "{out:?}");
+        assert!(worst(&work) > 20f64.to_radians() && (work.total_area() - area).abs() < 1e-9);
         assert_eq!(edge_counts(&work), (4, 0));
     }
 

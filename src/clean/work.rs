@@ -250,3 +250,21 @@ pub(crate) fn count_boundary_and_non_manifold(work: &Work) -> (usize, usize) {
     }
     (boundary, non_manifold)
 }
+
+#[cfg(test)]
+/// A work mesh of the given points and triangles (one material, one group).
+pub(crate) fn work_of(points: &[[f32; 3]], tris: &[[u32; 3]]) -> Work {
+    let mut w = Work { points: points.iter().map(|&p| Vec3::from(p)).collect(), ..Work::default() };
+    for i in 0..points.len() as u32 {
+        w.vertex_point.push(i);
+        w.normals.push(Vec3::Z);
+    }
+    for (i, &t) in tris.iter().enumerate() {
+        w.tris.push(t);
+        w.tri_material.push(0);
+        w.tri_group.push(0);
+        w.tri_origin.push(i as u32);
+        w.tri_alive.push(true);
+    }
+    w
+}

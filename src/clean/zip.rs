@@ -23,6 +23,7 @@
 
 use super::spatial::{cluster_points_limited, Aabb, AabbTree};
 use super::work::{count_boundary_and_non_manifold, edge_runs, sorted_edges, EdgeUse, Work};
+use std::collections::{HashMap, HashSet};
 
 /// Upper bound on T-junction passes (each pass splits one edge per triangle).
 const MAX_PASSES: usize = 16;
@@ -94,6 +95,7 @@ fn weld_boundary_points(work: &mut Work, tol: f32) -> (usize, usize) {
             welded += 1;
         }
     }
+    welded -= undo_non_manifold_merges(work, &mut remap);
     let mut collapsed = 0;
     if welded > 0 {
         work.remap_points(&remap);
@@ -106,6 +108,49 @@ fn weld_boundary_points(work: &mut Work, tol: f32) -> (usize, usize) {
         }
     }
     (welded, collapsed)
+}
+
+/// Undoes the merges of `remap` that would join three or more triangles on
+/// one edge (the rims of two sheets within the tolerance of each other are no
+/// crack: joining them makes a non-manifold edge). Returns the points kept apart.
+fn undo_non_manifold_merges(work: &Work, remap: &mut [u32]) -> usize {
+    let mut kept = 0;
+    for _ in 0..MAX_PASSES {
+        let moved: HashSet<u32> = (0..remap.len() as u32).filter(|&p| remap[p as usize] != p).collect();
+        if moved.is_empty() {
+            break;
+        }
+        let involved: HashSet<u32> = moved.iter().map(|&p| remap[p as usize]).chain(moved.iter().copied()).collect();
+        // Users of each edge at an involved point after the merge, and whether a moved corner made it.
+        let mut users: HashMap<(u32, u32), (u32, bool)> = HashMap::new();
+        for t in 0..work.tris.len() {
+            let p = work.tri_points(t);
+            if !work.tri_alive[t] || !p.iter().any(|q| involved.contains(q)) {
+                continue;
+            }
+            let m = p.map(|q| remap[q as usize]);
+            if m[0] == m[1] || m[1] == m[2] || m[2] == m[0] {
+                continue;
+            }
+            for i in 0..3 {
+                let key = (m[i].min(m[(i + 1) % 3]), m[i].max(m[(i + 1) % 3]));
+                let entry = users.entry(key).or_insert((0, false));
+                entry.0 += 1;
+                entry.1 |= moved.contains(&p[i]) || moved.contains(&p[(i + 1) % 3]);
+            }
+        }
+        let blamed: HashSet<u32> = users.iter().filter(|(_, &(n, by_merge))| n > 2 && by_merge).flat_map(|(&(a, b), _)| [a, b]).collect();
+        if blamed.is_empty() {
+            break;
+        }
+        for p in 0..remap.len() {
+            if remap[p] != p as u32 && blamed.contains(&remap[p]) {
+                remap[p] = p as u32;
+                kept += 1;
+            }
+        }
+    }
+    kept
 }
 
 fn boundary_edges(edges: &[EdgeUse]) -> impl Iterator<Item = EdgeUse> + '_ {
@@ -254,4 +299,28 @@ fn split_triangle_edge(work: &mut Work, splits: &[Split]) -> usize {
         work.push_tri_like([w[0], w[1], vc], t);
     }
     splits.len()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::work::work_of;
+    use super::*;
+
+    #[test]
+    fn rims_within_the_tolerance_are_not_joined_onto_an_edge_that_two_triangles_share() {
+        // A square of two triangles, and a fin whose base runs 1 mm above the
+        // square's diagonal: welding the fin's base corners onto the diagonal's
+        // ends would make the diagonal an edge of three triangles.
+        let pts =
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.001], [1.0, 1.0, 0.001], [0.5, 0.5, 1.0]];
+        let mut work = work_of(&pts, &[[0, 1, 2], [0, 2, 3], [4, 5, 6]]);
+        let out = zip_boundaries(&mut work, 0.002);
+        assert_eq!(count_boundary_and_non_manifold(&work), (7, 0), "{out:?}");
+        assert_eq!((out.welded_points, out.collapsed), (0, 0));
+        // Without the square's second triangle the diagonal is a rim: a crack, zipped.
+        let mut work = work_of(&pts, &[[0, 1, 2], [4, 5, 6]]);
+        let out = zip_boundaries(&mut work, 0.002);
+        assert_eq!(count_boundary_and_non_manifold(&work), (4, 0), "{out:?}");
+        assert_eq!(out.welded_points, 2);
+    }
 }
