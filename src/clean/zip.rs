@@ -7,7 +7,9 @@
 //!    smallest point id, i.e. the older patch keeps its position), and closer
 //!    than either point's shortest boundary edge: a boundary whose own edges are
 //!    shorter than the tolerance (a finely tessellated rim) is not a crack, and
-//!    welding along it would collapse it.
+//!    welding along it would collapse it. Nor where the weld would put three or
+//!    more triangles on one edge: two sheets' rims that close are no crack
+//!    (a chair's tube ends in the dining room made non-manifold edges so).
 //! 2. *Split at T-junctions*: a boundary point within the tolerance of the interior
 //!    of another triangle's boundary edge (and farther than the tolerance from both
 //!    of its ends) splits that triangle there. The split vertex takes the point
