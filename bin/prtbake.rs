@@ -668,7 +668,7 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Write the bundle's mesh as GLB with transfer and sun masks as _PRT_ vertex attributes.
+    /// Write the bundle's mesh as GLB with transfer and sun masks as _PRT_ vertex attributes (texel bundles: texels as textures on TEXCOORD_1).
     #[command(allow_negative_numbers = true)]
     Export {
         bundle: PathBuf,

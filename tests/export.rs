@@ -209,3 +209,112 @@ fn exports_are_valid_gltf_and_empty_results_are_errors() {
         assert!(!dir.path(out).exists() && !dir.path("c.mtl").exists());
     }
 }
+
+/// Decodes PNG image `index` of a GLB (stored in its BIN chunk) to samples:
+/// 16-bit images as u16 (big-endian in the file), 8-bit as u8 widened.
+fn png_samples(gltf: &gltf::Gltf, blob: &[u8], index: usize) -> (u32, u32, usize, Vec<u32>) {
+    let image = gltf.images().nth(index).expect("image");
+    let gltf::image::Source::View { view, mime_type } = image.source() else { panic!("image {index} is not in the BIN chunk") };
+    assert_eq!(mime_type, "image/png");
+    let bytes = &blob[view.offset()..view.offset() + view.length()];
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().expect("a PNG");
+    let mut data = vec![0; reader.output_buffer_size().expect("a size")];
+    let info = reader.next_frame(&mut data).expect("PNG data");
+    let channels = info.color_type.samples();
+    let samples = match info.bit_depth {
+        png::BitDepth::Sixteen => data[..info.buffer_size()].chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]]) as u32).collect(),
+        png::BitDepth::Eight => data[..info.buffer_size()].iter().map(|&b| b as u32).collect(),
+        other => panic!("bit depth {other:?}"),
+    };
+    (info.width, info.height, channels, samples)
+}
+
+/// A texel bundle exports its atlas: one vertex per atlas vertex with the
+/// atlas position as TEXCOORD_1, every covered texel's transfer in 16-bit
+/// textures within the quantization step its extras give, its sun bits
+/// exact, a coverage mask, and per-vertex values following their vertices.
+#[test]
+fn a_texel_bundle_exports_its_texels_as_textures_on_its_lightmap_uvs() {
+    let dir = Scratch::new("export-texels");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &shapes::room_with_walls_running_past()).unwrap();
+    let (baked, sunned, out) = (dir.path("t.prtb"), dir.path("ts.prtb"), dir.path("t.glb"));
+    let bake =
+        ["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "8", "--bounces", "1", "--texel-size", "0.25", "--quiet"];
+    let o = prtbake(&bake);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = prtbake(&["sun", baked.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--steps", "40", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = prtbake(&["export", sunned.to_str().unwrap(), "-o", out.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let b = bundle::read_bundle(&sunned).unwrap();
+    let t = b.texels.as_ref().unwrap();
+    let (atlas, sun) = (&t.atlas, b.sun.as_ref().unwrap());
+    let texel_transfer = t.transfer.as_ref().unwrap().total();
+    let per_texel = t.transfer.as_ref().unwrap().values_per_vertex() as usize;
+    let words = sun.words_per_vertex as usize;
+    assert!(!sun.texel_masks.is_empty() && words == 2);
+    // Coverage, ⌈9/4⌉ transfer textures, two sun words.
+    assert_eq!(report["report"]["texel_textures"], 1 + 3 + 2);
+    assert_eq!(report["report"]["vertices"], atlas.uv.len());
+
+    let bytes = std::fs::read(&out).unwrap();
+    let gltf = gltf::Gltf::from_slice(&bytes).expect("a valid GLB");
+    let blob = gltf.blob.as_deref().unwrap();
+    let extras: serde_json::Value = serde_json::from_str(gltf.document.as_json().extras.as_ref().unwrap().get()).unwrap();
+    let meta = &extras["prtbake"]["texels"];
+    assert_eq!((meta["width"].as_u64(), meta["height"].as_u64()), (Some(atlas.width as u64), Some(atlas.height as u64)));
+    let (w, h) = (atlas.width, atlas.height);
+
+    // Vertices: the atlas's, positions and TEXCOORD_1 from it; the vertex transfer follows its vertex.
+    let vertex_transfer = b.transfer.as_ref().unwrap().total();
+    let mut triangles = 0;
+    for mesh in gltf.meshes() {
+        for primitive in mesh.primitives() {
+            let reader = primitive.reader(|_| Some(blob));
+            triangles += reader.read_indices().unwrap().into_u32().count() / 3;
+            let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+            let uvs: Vec<[f32; 2]> = reader.read_tex_coords(1).expect("TEXCOORD_1").into_f32().collect();
+            let dc: Vec<[f32; 4]> = read_attribute(&primitive, "_PRT_TRANSFER_0", blob);
+            assert_eq!((positions.len(), uvs.len()), (atlas.uv.len(), atlas.uv.len()));
+            for (a, &v) in atlas.source_vertex.iter().enumerate() {
+                assert_eq!(positions[a], b.mesh.positions[v as usize].to_array());
+                assert!((uvs[a][0] * w as f32 - atlas.uv[a].x).abs() < 1e-3 && (uvs[a][1] * h as f32 - atlas.uv[a].y).abs() < 1e-3);
+                assert_eq!(dc[a][0], vertex_transfer[v as usize * per_texel]);
+            }
+        }
+    }
+    assert_eq!(triangles, b.mesh.triangle_count());
+
+    // Coverage: exactly the covered texels.
+    let (cw, ch, channels, coverage) = png_samples(&gltf, blob, meta["coverage_texture"].as_u64().unwrap() as usize);
+    assert_eq!((cw, ch, channels), (w, h, 1));
+    let covered: Vec<u32> = (0..w * h).filter(|&i| coverage[i as usize] == 255).collect();
+    assert_eq!(covered, t.texels);
+    // Transfer: every covered texel's values within half a quantization step.
+    for (k, texture) in meta["transfer"]["textures"].as_array().unwrap().iter().enumerate() {
+        let (_, _, channels, q) = png_samples(&gltf, blob, texture.as_u64().unwrap() as usize);
+        assert_eq!(channels, 4);
+        for c in 0..4 {
+            let (offset, scale) = (meta["transfer"]["offset"][k][c].as_f64().unwrap(), meta["transfer"]["scale"][k][c].as_f64().unwrap());
+            let j = 4 * k + c;
+            for (row, &texel) in t.texels.iter().enumerate() {
+                let got = offset + scale * q[texel as usize * 4 + c] as f64 / 65535.0;
+                let want = if j < per_texel { texel_transfer[row * per_texel + j] as f64 } else { 0.0 };
+                assert!((got - want).abs() <= scale / 131_070.0 * 1.001 + 1e-7, "texel {texel} value {j}: {got} against {want}");
+            }
+        }
+    }
+    // Sun bits: exact, step 32k + 8j + b in bit b of channel j of texture k.
+    for (k, texture) in meta["sun"]["textures"].as_array().unwrap().iter().enumerate() {
+        let (_, _, channels, bytes) = png_samples(&gltf, blob, texture.as_u64().unwrap() as usize);
+        assert_eq!(channels, 4);
+        for (row, &texel) in t.texels.iter().enumerate() {
+            for step in 32 * k..(32 * k + 32).min(sun.step_count()) {
+                let (j, bit) = ((step % 32) / 8, step % 8);
+                assert_eq!((bytes[texel as usize * 4 + j] >> bit) & 1 == 1, sun.texel_bit(row, step), "texel {texel}, step {step}");
+            }
+        }
+    }
+}

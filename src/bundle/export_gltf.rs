@@ -10,11 +10,15 @@
 //!   little-endian bytes of sun-mask word k: step `32k + 8j + b` is bit b of byte j.
 //! - Document `extras.prtbake`: order, channels, layer, attribute counts, and per
 //!   step the sun direction, irradiance, time, night flag and sky SH.
+//! - A texel bundle: the mesh split along the atlas's seams with `TEXCOORD_1`,
+//!   and its texels as PNG textures named by `extras.prtbake.texels`
+//!   ([`super::export_texels`]); per-vertex attributes follow their vertices.
 
 use std::path::Path;
 
 use serde_json::{json, Value};
 
+use super::export_texels::{atlas_mesh, texel_images};
 use super::values::check_bundle;
 use super::{Bundle, LayerKind};
 use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, MeshError};
@@ -37,6 +41,8 @@ pub struct GltfExportReport {
     pub sun_attributes: usize,
     /// Which layer the transfer attributes hold: `total` or `bounce N`.
     pub layer: String,
+    /// Texel bundles: the PNG textures written (coverage, transfer, sun bits); 0 otherwise.
+    pub texel_textures: usize,
 }
 
 /// The transfer attributes of `values` (S per vertex), 4 floats each, zero-padded.
@@ -62,11 +68,18 @@ pub fn transfer_attributes(values: &[f32], per_vertex: usize, vertex_count: usiz
 /// when a value is out of its range (NaN, albedo above 1, …: glTF has no NaN, and
 /// JSON would get `null`), or when the mesh cannot be written (see [`write_glb_with`]).
 pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Result<GltfExportReport, MeshError> {
-    let mesh = &bundle.mesh;
-    let vertex_count = mesh.vertex_count();
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
     // Decoded bundles passed these checks already; bundles built in memory did not.
     check_bundle(bundle).map_err(|e| invalid(e.to_string()))?;
+    // A texel bundle's vertices are split along the atlas's seams: each written
+    // vertex carries the values of the bundle vertex it copies.
+    let split = bundle.texels.as_ref().map(|t| atlas_mesh(&bundle.mesh, &t.atlas));
+    let mesh = split.as_ref().unwrap_or(&bundle.mesh);
+    let vertex_count = mesh.vertex_count();
+    let source: Vec<usize> = match &bundle.texels {
+        Some(t) => t.atlas.source_vertex.iter().map(|&v| v as usize).collect(),
+        None => (0..vertex_count).collect(),
+    };
     let mut attributes = Vec::new();
     let mut layer_name = "none".to_string();
     let mut transfer_meta = Value::Null;
@@ -87,6 +100,7 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
             let vertex = j / per_vertex.max(1);
             return Err(invalid(format!("transfer {layer_name} value {j} (vertex {vertex}) is {}: the bounces sum past f32", values[j])));
         }
+        let values: Vec<f32> = source.iter().flat_map(|&v| values[v * per_vertex..(v + 1) * per_vertex].iter().copied()).collect();
         attributes.extend(transfer_attributes(&values, per_vertex, vertex_count));
         transfer_meta = json!({
             "order": t.order, "channels": t.channels, "values_per_vertex": per_vertex, "layer": layer_name,
@@ -101,7 +115,7 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
     if let Some(sun) = &bundle.sun {
         let words = sun.words_per_vertex as usize;
         for k in 0..words {
-            let data = (0..vertex_count).map(|v| sun.masks[v * words + k].to_le_bytes()).collect();
+            let data = source.iter().map(|&v| sun.masks[v * words + k].to_le_bytes()).collect();
             attributes.push(CustomAttribute { semantic: format!("{SUN_ATTRIBUTE_PREFIX}{k}"), values: AttributeValues::U8x4(data) });
         }
         let steps: Vec<Value> = sun
@@ -119,19 +133,41 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         });
     }
     let sun_count = attributes.len() - transfer_count;
+    let mut images = Vec::new();
+    let mut texel_meta = Value::Null;
+    if let Some(t) = &bundle.texels {
+        let values = match (&t.transfer, layer) {
+            (None, _) => None,
+            (Some(x), None | Some(LayerKind::Total)) => Some(x.total()),
+            (Some(x), Some(kind)) => {
+                Some(x.layer(kind).map(|l| l.data.clone()).ok_or_else(|| invalid(format!("the texels store no {kind} layer")))?)
+            }
+        };
+        let per_texel = t.transfer.as_ref().map_or(0, |x| x.values_per_vertex() as usize);
+        let texel_layer = match layer {
+            Some(LayerKind::Bounce(b)) => format!("bounce {b}"),
+            _ => "total".to_string(),
+        };
+        let transfer = values.as_deref().map(|v| (v, per_texel, texel_layer.as_str()));
+        let (written, meta) = texel_images(t, transfer, bundle.sun.as_ref()).map_err(|e| invalid(format!("texel images: {e}")))?;
+        images = written;
+        texel_meta = meta;
+    }
     let extras = json!({ "prtbake": {
         "format": GLTF_EXPORT_FORMAT,
         "transfer": transfer_meta,
         "sun": sun_meta,
+        "texels": texel_meta,
         "shading": "radiance = albedo * (sum_i L_i t_i + bit * max(n.s, 0) * sun_rgb / pi); L_i = integral of L(w) y_i(w) dw",
         "conventions": bundle.meta.get("conventions").cloned().unwrap_or(Value::Null),
     }});
-    write_glb_with(path, mesh, &attributes, Some(extras))?;
+    write_glb_with(path, mesh, &attributes, Some(extras), &images)?;
     Ok(GltfExportReport {
         vertices: vertex_count,
         triangles: mesh.triangle_count(),
         transfer_attributes: transfer_count,
         sun_attributes: sun_count,
         layer: layer_name,
+        texel_textures: images.len(),
     })
 }

@@ -9,7 +9,8 @@
 //! - `container`: header, section table, codecs, checksums (knows no content).
 //! - `sections`: typed encode/decode of META, MESH, MATL, XFER, SUNM, SUND, ATLS, TXFR, TSUN.
 //! - `quantize`: f32 / f16 / i16-with-per-vertex-scale transfer storage.
-//! - `export_gltf`: the mesh as GLB with transfer and sun masks as `_PRT_…` vertex attributes.
+//! - `export_gltf`: the mesh as GLB with transfer and sun masks as `_PRT_…` vertex attributes;
+//!   `export_texels`: a texel bundle's atlas split, `TEXCOORD_1` and texel textures for it.
 //!
 //! Decoding never panics on hostile bytes: counts are checked against section
 //! lengths before allocation and every failure is a [`BundleError`] naming the
@@ -21,6 +22,7 @@ mod container;
 mod cursor;
 mod error;
 mod export_gltf;
+mod export_texels;
 mod quantize;
 pub mod recipe;
 mod sections;

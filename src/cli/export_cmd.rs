@@ -1,5 +1,6 @@
 //! `prtbake export BUNDLE -o OUT.glb`: the bake for other glTF engines, with
-//! transfer and sun masks as `_PRT_…` vertex attributes (docs/viewer.md).
+//! transfer and sun masks as `_PRT_…` vertex attributes, and a texel bundle's
+//! texels as textures on `TEXCOORD_1` (docs/viewer.md).
 
 use std::path::Path;
 
@@ -30,13 +31,14 @@ pub fn run(input: &Path, output: &Path, layer: Option<LayerKind>, as_json: bool,
         return super::print_json(&serde_json::json!({ "output": super::json_path(output), "report": report }));
     }
     println!(
-        "wrote {}: {} vertices, {} triangles, {} _PRT_TRANSFER_ attributes ({}), {} _PRT_SUN_ attributes",
+        "wrote {}: {} vertices, {} triangles, {} _PRT_TRANSFER_ attributes ({}), {} _PRT_SUN_ attributes{}",
         output.display(),
         report.vertices,
         report.triangles,
         report.transfer_attributes,
         report.layer,
-        report.sun_attributes
+        report.sun_attributes,
+        if report.texel_textures > 0 { format!(", {} texel textures on TEXCOORD_1", report.texel_textures) } else { String::new() }
     );
     Ok(())
 }

@@ -361,6 +361,9 @@ impl PrimitiveLoader<'_> {
             Ok(Some((values, components)))
         };
         let normals = optional(normal_accessor, "NORMAL", &[3])?.map(|(v, _)| v.chunks_exact(3).map(Vec3::from_slice).collect());
+        // Set 0 on set 1's accessor is how a mesh with a lightmap atlas and no
+        // texture coordinates is written (glTF wants set 0 first): none.
+        let uv_accessor = uv_accessor.filter(|&a| Some(a) != lightmap_accessor);
         let uvs = optional(uv_accessor, "TEXCOORD_0", &[2])?.map(|(v, _)| v.chunks_exact(2).map(Vec2::from_slice).collect());
         let colors = optional(color_accessor, "COLOR_0", &[3, 4])?.map(|(v, k)| v.chunks_exact(k).map(|c| [c[0], c[1], c[2]]).collect());
         let lightmap_uvs = optional(lightmap_accessor, "TEXCOORD_1", &[2])?.map(|(v, _)| v.chunks_exact(2).map(Vec2::from_slice).collect());

@@ -389,6 +389,20 @@ fn glb_round_trip_is_exact() {
     assert_eq!(loaded.mesh, mesh);
     // The writer left no temp file behind.
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    // A lightmap atlas without texture coordinates: glTF wants set 0 before
+    // set 1, so set 0 is set 1's accessor, which reads back as none.
+    let mut atlas_only = mesh.clone();
+    atlas_only.uvs.clear();
+    let path = dir.path().join("atlas-only.glb");
+    write_glb(&path, &atlas_only).unwrap();
+    let document = gltf::Gltf::open(&path).unwrap();
+    for primitive in document.meshes().flat_map(|m| m.primitives().collect::<Vec<_>>()) {
+        let set = |i: u32| primitive.get(&gltf::Semantic::TexCoords(i)).map(|a| a.index());
+        assert!(set(0).is_some() && set(0) == set(1));
+    }
+    let loaded = load(&path).unwrap();
+    assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
+    assert_eq!(loaded.mesh, atlas_only);
 }
 
 #[test]

@@ -211,18 +211,31 @@ fn material_json(material: &Material) -> Value {
 /// One glTF mesh (named after the group) per non-empty group, each placed by an
 /// identity node, with one primitive per material used in it (triangles keep
 /// their relative order). A group's primitives share its vertex accessors:
-/// POSITION (with min/max), NORMAL, TEXCOORD_0 and COLOR_0 when the mesh has
+/// POSITION (with min/max), NORMAL, TEXCOORD_0, TEXCOORD_1 (a lightmap atlas; set 0 repeats it
+/// when the mesh has no texture coordinates, as glTF wants set 0 first) and COLOR_0 when the mesh has
 /// them, holding the group's vertices in ascending original index order. Indices
 /// are u32. Materials carry `baseColorFactor`, `KHR_materials_transmission` for
 /// windows, and `extras.prtbake_role`. Refuses a mesh that fails [`Mesh::validate`]
 /// or would exceed GLB's 4 GiB limit.
 pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
-    write_glb_with(path, mesh, &[], None)
+    write_glb_with(path, mesh, &[], None, &[])
 }
 
 /// [`write_glb`] into a command's staged outputs.
 pub fn stage_glb(staged: &mut Staged, path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
-    stage_glb_with(staged, path, mesh, &[], None)
+    stage_glb_with(staged, path, mesh, &[], None, &[])
+}
+
+/// A PNG stored in the GLB's binary chunk, with a glTF image and a texture
+/// of the same index (`images[i]`, `textures[i]`) that no material uses:
+/// data for an engine to bind (lightmaps), named by the document's extras.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmbeddedImage {
+    pub name: String,
+    /// The encoded PNG file.
+    pub png: Vec<u8>,
+    /// Sample with nearest filtering (bit masks), else linear.
+    pub nearest: bool,
 }
 
 /// Per-vertex values written as an application-specific glTF vertex attribute.
@@ -293,9 +306,15 @@ impl CustomAttribute {
 /// POSITION accessor that every primitive shares. Refuses (with [`MeshError::InvalidForWrite`]) semantics that do
 /// not start with `_` or repeat, lengths that do not match the vertex count,
 /// and non-finite floats.
-pub fn write_glb_with(path: &Path, mesh: &Mesh, attributes_in: &[CustomAttribute], extras: Option<Value>) -> Result<(), MeshError> {
+pub fn write_glb_with(
+    path: &Path,
+    mesh: &Mesh,
+    attributes_in: &[CustomAttribute],
+    extras: Option<Value>,
+    images: &[EmbeddedImage],
+) -> Result<(), MeshError> {
     let mut staged = Staged::new();
-    stage_glb_with(&mut staged, path, mesh, attributes_in, extras)?;
+    stage_glb_with(&mut staged, path, mesh, attributes_in, extras, images)?;
     commit(staged, path)
 }
 
@@ -306,6 +325,7 @@ pub fn stage_glb_with(
     mesh: &Mesh,
     attributes_in: &[CustomAttribute],
     extras: Option<Value>,
+    images: &[EmbeddedImage],
 ) -> Result<(), MeshError> {
     check_writable(path, mesh)?;
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
@@ -347,6 +367,11 @@ pub fn stage_glb_with(
         let data: Vec<u8> = mesh.lightmap_uvs.iter().flat_map(|uv| uv.to_array()).flat_map(f32::to_le_bytes).collect();
         attributes["TEXCOORD_1"] =
             json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": pool.len(), "type": "VEC2"})));
+        // glTF wants set 0 before set 1: without texture coordinates, set 0
+        // is the same accessor (the loader reads that back as none).
+        if mesh.uvs.is_empty() {
+            attributes["TEXCOORD_0"] = attributes["TEXCOORD_1"].clone();
+        }
     }
     if !mesh.colors.is_empty() {
         attributes["COLOR_0"] = json!(bin.push_vec3s(mesh.colors.iter().copied(), false));
@@ -373,6 +398,16 @@ pub fn stage_glb_with(
         meshes.push(json!({"name": mesh.groups[group], "primitives": primitives}));
     }
 
+    let mut image_json = Vec::new();
+    for image in images {
+        while bin.bytes.len() % 4 != 0 {
+            bin.bytes.push(0);
+        }
+        bin.views.push(json!({"buffer": 0, "byteOffset": bin.bytes.len(), "byteLength": image.png.len()}));
+        bin.bytes.extend_from_slice(&image.png);
+        image_json.push(json!({"bufferView": bin.views.len() - 1, "mimeType": "image/png", "name": image.name}));
+    }
+
     let nodes: Vec<Value> = meshes.iter().enumerate().map(|(i, m)| json!({"mesh": i, "name": m["name"]})).collect();
     let mut document = json!({
         "asset": {"version": "2.0", "generator": concat!("prtbake ", env!("CARGO_PKG_VERSION"))},
@@ -389,6 +424,17 @@ pub fn stage_glb_with(
     }
     if let Some(extras) = extras {
         document["extras"] = extras;
+    }
+    if !images.is_empty() {
+        const NEAREST: u32 = 9728;
+        const LINEAR: u32 = 9729;
+        document["samplers"] = json!([{"magFilter": LINEAR, "minFilter": LINEAR}, {"magFilter": NEAREST, "minFilter": NEAREST}]);
+        document["textures"] = images
+            .iter()
+            .enumerate()
+            .map(|(i, image)| json!({"source": i, "sampler": usize::from(image.nearest), "name": image.name}))
+            .collect();
+        document["images"] = json!(image_json);
     }
     if mesh.materials.iter().any(|m| m.role == MaterialRole::Window) {
         document["extensionsUsed"] = json!(["KHR_materials_transmission"]);

@@ -1,0 +1,171 @@
+//! Texel mode in a GLB export (docs/viewer.md, "Texel bundles"): the mesh
+//! split along the atlas's seams (one vertex per atlas vertex, its atlas
+//! position as `TEXCOORD_1`), the texel transfer as 16-bit RGBA PNGs, the
+//! texel sun bits as 8-bit RGBA PNGs and a coverage mask, all the atlas's
+//! size, row `y` of an image being the texels `y · width + x`.
+//!
+//! Why 16-bit PNG with an affine map per channel: glTF core takes PNG and
+//! JPEG only, transfer values are signed, and 16 bits over each channel's
+//! own range keep the rounding under 1/131,070 of that range. The images are
+//! dilated one texel past their coverage so that bilinear filtering at a
+//! chart's border reads the chart's own light, not the empty atlas around it.
+
+use glam::Vec2;
+use serde_json::{json, Value};
+
+use super::types::{SunSeries, TexelLayers};
+use crate::atlas::Atlas;
+use crate::mesh::{EmbeddedImage, Mesh};
+
+/// The mesh with one vertex per atlas vertex: attributes copied from the
+/// vertex it comes from, `lightmap_uvs` the atlas position over the atlas
+/// size (in [0, 1], v down as glTF's), triangles in the mesh's order.
+pub(super) fn atlas_mesh(mesh: &Mesh, atlas: &Atlas) -> Mesh {
+    let from = |v: &u32| *v as usize;
+    let size = Vec2::new(atlas.width as f32, atlas.height as f32);
+    let copy = |values: &[Vec2]| if values.is_empty() { Vec::new() } else { atlas.source_vertex.iter().map(|v| values[from(v)]).collect() };
+    Mesh {
+        positions: atlas.source_vertex.iter().map(|v| mesh.positions[from(v)]).collect(),
+        normals: atlas.source_vertex.iter().map(|v| mesh.normals[from(v)]).collect(),
+        uvs: copy(&mesh.uvs),
+        lightmap_uvs: atlas.uv.iter().map(|&uv| uv / size).collect(),
+        colors: if mesh.colors.is_empty() { Vec::new() } else { atlas.source_vertex.iter().map(|v| mesh.colors[from(v)]).collect() },
+        indices: atlas.indices.clone(),
+        tri_material: mesh.tri_material.clone(),
+        tri_group: mesh.tri_group.clone(),
+        materials: mesh.materials.clone(),
+        groups: mesh.groups.clone(),
+    }
+}
+
+/// Where each texel of the atlas reads its values: its own covered row, or
+/// for an empty texel next to covered ones the first of its eight
+/// neighbours that is covered (left to right, top to bottom); `None` elsewhere.
+fn dilated_rows(width: u32, height: u32, covered: &[u32]) -> Vec<Option<u32>> {
+    let (w, h) = (width as i64, height as i64);
+    let mut own = vec![None; (width as usize) * (height as usize)];
+    for (row, &texel) in covered.iter().enumerate() {
+        own[texel as usize] = Some(row as u32);
+    }
+    (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            own[(y * w + x) as usize].or_else(|| {
+                (-1..=1)
+                    .flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)))
+                    .filter(|&(nx, ny)| (0..w).contains(&nx) && (0..h).contains(&ny))
+                    .find_map(|(nx, ny)| own[(ny * w + nx) as usize])
+            })
+        })
+        .collect()
+}
+
+fn encode_png(width: u32, height: u32, colour: png::ColorType, depth: png::BitDepth, data: &[u8]) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, width, height);
+        encoder.set_color(colour);
+        encoder.set_depth(depth);
+        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(data).map_err(|e| e.to_string())?;
+    }
+    Ok(out)
+}
+
+/// The images of a texel bundle and the `extras.prtbake.texels` that
+/// names them. `transfer`: the chosen layer's values, `per_texel` a covered
+/// texel; `layer` its name. Image (and texture) 0 is the coverage mask.
+pub(super) fn texel_images(
+    texels: &TexelLayers,
+    transfer: Option<(&[f32], usize, &str)>,
+    sun: Option<&SunSeries>,
+) -> Result<(Vec<EmbeddedImage>, Value), String> {
+    let atlas = &texels.atlas;
+    let (width, height) = (atlas.width, atlas.height);
+    let rows = dilated_rows(width, height, &texels.texels);
+    let mut images = Vec::new();
+
+    let mut coverage = vec![0u8; rows.len()];
+    for &texel in &texels.texels {
+        coverage[texel as usize] = 255;
+    }
+    let png = encode_png(width, height, png::ColorType::Grayscale, png::BitDepth::Eight, &coverage)?;
+    images.push(EmbeddedImage { name: "prtbake_coverage".into(), png, nearest: true });
+
+    let mut transfer_meta = Value::Null;
+    if let Some((values, per_texel, layer)) = transfer {
+        let (mut offsets, mut scales, mut textures) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..per_texel.div_ceil(4) {
+            let mut offset = [0f32; 4];
+            let mut scale = [0f32; 4];
+            for c in 0..4 {
+                let j = 4 * k + c;
+                if j < per_texel {
+                    let column = values.iter().skip(j).step_by(per_texel);
+                    let (lo, hi) = column.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+                    if lo.is_finite() {
+                        offset[c] = lo;
+                        scale[c] = hi - lo;
+                    }
+                }
+            }
+            let mut data = Vec::with_capacity(rows.len() * 8);
+            for row in &rows {
+                for c in 0..4 {
+                    let j = 4 * k + c;
+                    let q = match row {
+                        Some(r) if j < per_texel && scale[c] > 0.0 => {
+                            ((values[*r as usize * per_texel + j] - offset[c]) / scale[c] * 65535.0).round().clamp(0.0, 65535.0) as u16
+                        }
+                        _ => 0,
+                    };
+                    data.extend_from_slice(&q.to_be_bytes());
+                }
+            }
+            let png = encode_png(width, height, png::ColorType::Rgba, png::BitDepth::Sixteen, &data)?;
+            textures.push(images.len());
+            images.push(EmbeddedImage { name: format!("prtbake_transfer_{k}"), png, nearest: false });
+            offsets.push(offset);
+            scales.push(scale);
+        }
+        transfer_meta = json!({
+            "layer": layer, "values_per_texel": per_texel, "textures": textures, "offset": offsets, "scale": scales,
+            "decode": "value[4k + c] = offset[k][c] + scale[k][c] * q / 65535, q the 16-bit sample of channel c of texture k",
+        });
+    }
+
+    let mut sun_meta = Value::Null;
+    if let Some(sun) = sun.filter(|s| !s.texel_masks.is_empty()) {
+        let words = sun.words_per_vertex as usize;
+        let mut textures = Vec::new();
+        for k in 0..words {
+            let data: Vec<u8> =
+                rows.iter().flat_map(|row| row.map_or([0; 4], |r| sun.texel_masks[r as usize * words + k].to_le_bytes())).collect();
+            let png = encode_png(width, height, png::ColorType::Rgba, png::BitDepth::Eight, &data)?;
+            textures.push(images.len());
+            images.push(EmbeddedImage { name: format!("prtbake_sun_{k}"), png, nearest: true });
+        }
+        sun_meta = json!({ "words_per_texel": words, "textures": textures,
+            "decode": "step 32k + 8j + b is bit b of channel j of texture k (sample with nearest filtering)" });
+    }
+    let meta = json!({
+        "width": width, "height": height, "texel_size": atlas.texel_size, "uv": "TEXCOORD_1", "covered_texels": texels.texels.len(),
+        "coverage_texture": 0, "dilated": 1, "transfer": transfer_meta, "sun": sun_meta,
+    });
+    Ok((images, meta))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dilation_fills_the_ring_around_coverage_from_the_first_covered_neighbour() {
+        // 4 × 3 atlas, texels 5 and 6 covered (row 1, x = 1 and 2).
+        let rows = dilated_rows(4, 3, &[5, 6]);
+        let expect = [Some(0), Some(0), Some(0), Some(1), Some(0), Some(0), Some(1), Some(1), Some(0), Some(0), Some(0), Some(1)];
+        assert_eq!(rows, expect);
+        // 5 × 1 with texel 0 covered: only x = 1 is next to it.
+        assert_eq!(dilated_rows(5, 1, &[0]), [Some(0), Some(0), None, None, None]);
+    }
+}
