@@ -21,7 +21,7 @@ use serde_json::{json, Value};
 use super::export_texels::{atlas_mesh, texel_images};
 use super::values::check_bundle;
 use super::{Bundle, LayerKind};
-use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, MeshError};
+use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, GlbAdditions, MeshError};
 
 /// Name of the format version written into `extras.prtbake.format`.
 pub const GLTF_EXPORT_FORMAT: &str = "prtbake-gltf-1";
@@ -161,7 +161,7 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         "shading": "radiance = albedo * (sum_i L_i t_i + bit * max(n.s, 0) * sun_rgb / pi); L_i = integral of L(w) y_i(w) dw",
         "conventions": bundle.meta.get("conventions").cloned().unwrap_or(Value::Null),
     }});
-    write_glb_with(path, mesh, &attributes, Some(extras), &images)?;
+    write_glb_with(path, mesh, GlbAdditions { attributes: &attributes, extras: Some(extras), images: &images })?;
     Ok(GltfExportReport {
         vertices: vertex_count,
         triangles: mesh.triangle_count(),

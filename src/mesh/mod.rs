@@ -30,7 +30,7 @@ pub use normals::{compute_vertex_normals, repair_normals, FALLBACK_NORMAL};
 pub use types::*;
 pub use write::{
     mtl_path_for, stage_glb, stage_glb_with, stage_obj, write_glb, write_glb_with, write_obj, AttributeValues, CustomAttribute,
-    EmbeddedImage, MTL_HEADER,
+    EmbeddedImage, GlbAdditions, MTL_HEADER,
 };
 
 /// Albedo (grey) of materials that state none (OBJ without `Kd`, glTF without

@@ -218,12 +218,12 @@ fn material_json(material: &Material) -> Value {
 /// windows, and `extras.prtbake_role`. Refuses a mesh that fails [`Mesh::validate`]
 /// or would exceed GLB's 4 GiB limit.
 pub fn write_glb(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
-    write_glb_with(path, mesh, &[], None, &[])
+    write_glb_with(path, mesh, GlbAdditions::default())
 }
 
 /// [`write_glb`] into a command's staged outputs.
 pub fn stage_glb(staged: &mut Staged, path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
-    stage_glb_with(staged, path, mesh, &[], None, &[])
+    stage_glb_with(staged, path, mesh, GlbAdditions::default())
 }
 
 /// A PNG stored in the GLB's binary chunk, with a glTF image and a texture
@@ -306,27 +306,26 @@ impl CustomAttribute {
 /// POSITION accessor that every primitive shares. Refuses (with [`MeshError::InvalidForWrite`]) semantics that do
 /// not start with `_` or repeat, lengths that do not match the vertex count,
 /// and non-finite floats.
-pub fn write_glb_with(
-    path: &Path,
-    mesh: &Mesh,
-    attributes_in: &[CustomAttribute],
-    extras: Option<Value>,
-    images: &[EmbeddedImage],
-) -> Result<(), MeshError> {
+pub fn write_glb_with(path: &Path, mesh: &Mesh, additions: GlbAdditions) -> Result<(), MeshError> {
     let mut staged = Staged::new();
-    stage_glb_with(&mut staged, path, mesh, attributes_in, extras, images)?;
+    stage_glb_with(&mut staged, path, mesh, additions)?;
     commit(staged, path)
 }
 
+/// What [`write_glb_with`] adds to [`write_glb`]'s document.
+#[derive(Clone, Debug, Default)]
+pub struct GlbAdditions<'a> {
+    /// Application-specific vertex attributes.
+    pub attributes: &'a [CustomAttribute],
+    /// The document's `extras`.
+    pub extras: Option<Value>,
+    /// PNGs in the binary chunk, image and texture `i` each.
+    pub images: &'a [EmbeddedImage],
+}
+
 /// [`write_glb_with`] into a command's staged outputs.
-pub fn stage_glb_with(
-    staged: &mut Staged,
-    path: &Path,
-    mesh: &Mesh,
-    attributes_in: &[CustomAttribute],
-    extras: Option<Value>,
-    images: &[EmbeddedImage],
-) -> Result<(), MeshError> {
+pub fn stage_glb_with(staged: &mut Staged, path: &Path, mesh: &Mesh, additions: GlbAdditions) -> Result<(), MeshError> {
+    let GlbAdditions { attributes: attributes_in, extras, images } = additions;
     check_writable(path, mesh)?;
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
     if mesh.triangle_count() == 0 {
