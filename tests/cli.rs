@@ -1002,6 +1002,14 @@ fn a_mesh_with_its_own_texcoord_1_keeps_its_atlas() {
     let sunned = dir.path("sun.prtb");
     run(&["sun", glb.to_str().unwrap(), "--texel-size", "0.1", "--steps", "4", "-o", sunned.to_str().unwrap(), "--quiet"]);
     assert_own_atlas(&sunned);
+    // A per-vertex bundle keeps the file's TEXCOORD_1 (MESH), so texel sun
+    // bits added to it later lie on the file's atlas too.
+    let per_vertex = dir.path("per-vertex.prtb");
+    run(&["bake", glb.to_str().unwrap(), "--clean", "--rays", "8", "-o", per_vertex.to_str().unwrap(), "--quiet"]);
+    assert!(prtbake::bundle::read_bundle(&per_vertex).unwrap().texels.is_none());
+    let later = dir.path("later-sun.prtb");
+    run(&["sun", per_vertex.to_str().unwrap(), "--texel-size", "0.1", "--steps", "4", "-o", later.to_str().unwrap(), "--quiet"]);
+    assert_own_atlas(&later);
     let shown = run(&["inspect", sunned.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&shown.stdout).contains("2 charts of TEXCOORD_1"), "{}", String::from_utf8_lossy(&shown.stdout));
     // --unwrap: xatlas's, another layout.

@@ -18,6 +18,7 @@ pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TSUF, TSUN
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;
+const MESH_HAS_LIGHTMAP_UVS: u32 = 4;
 const STEP_NIGHT: u32 = 1;
 /// Fixed part of one SUND step record: f64 time, f32 × 3 dir, elev, azim, f32 × 3 rgb, u32 flags.
 const SUN_STEP_FIXED: u64 = 8 + 12 + 4 + 4 + 12 + 4;
@@ -75,7 +76,8 @@ pub(crate) fn decode_meta(raw: &[u8]) -> Result<serde_json::Value, BundleError> 
 // ---------------------------------------------------------------- MESH
 
 /// MESH: u32 V, u32 T, u32 flags, positions f32×3×V, normals f32×3×V, [uvs f32×2×V],
-/// [colors f32×3×V], indices u32×3×T, tri_material u16×T (pad 4), tri_group u32×T.
+/// [colors f32×3×V], [lightmap uvs f32×2×V], indices u32×3×T, tri_material u16×T
+/// (pad 4), tri_group u32×T.
 ///
 /// Zero normals are replaced and negative colour channels stored as 0 (see
 /// `values`), so the section always passes the decoder's range checks.
@@ -85,6 +87,7 @@ pub(crate) fn encode_mesh(mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
     values::check_positions(&mesh.positions).map_err(BundleError::invalid_value(MESH))?;
     let normals = values::normals_for_writing(mesh).map_err(BundleError::invalid_value(MESH))?;
     values::check_uvs(&mesh.uvs).map_err(BundleError::invalid_value(MESH))?;
+    values::check_lightmap_uvs(&mesh.lightmap_uvs).map_err(BundleError::invalid_value(MESH))?;
     let colors: Vec<[f32; 3]> = mesh
         .colors
         .iter()
@@ -92,7 +95,10 @@ pub(crate) fn encode_mesh(mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
         .map(|(v, &c)| values::colour_for_writing(v, c))
         .collect::<Result<_, _>>()
         .map_err(BundleError::invalid_value(MESH))?;
-    let flags = if mesh.uvs.is_empty() { 0 } else { MESH_HAS_UVS } | if colors.is_empty() { 0 } else { MESH_HAS_COLORS };
+    let flag = |empty: bool, bit: u32| if empty { 0 } else { bit };
+    let flags = flag(mesh.uvs.is_empty(), MESH_HAS_UVS)
+        | flag(colors.is_empty(), MESH_HAS_COLORS)
+        | flag(mesh.lightmap_uvs.is_empty(), MESH_HAS_LIGHTMAP_UVS);
     let mut out = Vec::new();
     put_u32(&mut out, v);
     put_u32(&mut out, t);
@@ -100,6 +106,7 @@ pub(crate) fn encode_mesh(mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
     mesh.positions.iter().chain(normals.iter()).for_each(|p| p.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
     mesh.uvs.iter().for_each(|uv| uv.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
     colors.iter().for_each(|c| c.iter().for_each(|&x| put_f32(&mut out, x)));
+    mesh.lightmap_uvs.iter().for_each(|uv| uv.to_array().iter().for_each(|&x| put_f32(&mut out, x)));
     mesh.indices.iter().for_each(|&i| put_u32(&mut out, i));
     mesh.tri_material.iter().for_each(|&m| put_u16(&mut out, m));
     pad_to(&mut out, 4);
@@ -117,13 +124,14 @@ pub(crate) fn decode_mesh(raw: &[u8], rules: ReadRules) -> Result<Mesh, BundleEr
     let v = cur.u32("vertex count")? as u64;
     let t = cur.u32("triangle count")? as u64;
     let flags = cur.u32("flags")?;
-    if rules.reject_reserved && flags & !(MESH_HAS_UVS | MESH_HAS_COLORS) != 0 {
+    if rules.reject_reserved && flags & !(MESH_HAS_UVS | MESH_HAS_COLORS | MESH_HAS_LIGHTMAP_UVS) != 0 {
         return Err(cur.error(format!("flags {flags:#x} set reserved bits")));
     }
     let has_uvs = flags & MESH_HAS_UVS != 0;
     let has_colors = flags & MESH_HAS_COLORS != 0;
+    let has_lightmap = flags & MESH_HAS_LIGHTMAP_UVS != 0;
     let expected = checked_len(&[
-        (v, 24 + if has_uvs { 8 } else { 0 } + if has_colors { 12 } else { 0 }),
+        (v, 24 + if has_uvs { 8 } else { 0 } + if has_colors { 12 } else { 0 } + if has_lightmap { 8 } else { 0 }),
         (t, 12 + 4),
         (round_up4(t.saturating_mul(2)), 1),
     ]);
@@ -133,13 +141,14 @@ pub(crate) fn decode_mesh(raw: &[u8], rules: ReadRules) -> Result<Mesh, BundleEr
     let normals = vec3s(cur.f32s(3 * v, "normals")?);
     let uvs = if has_uvs { cur.f32s(2 * v, "uvs")?.chunks_exact(2).map(Vec2::from_slice).collect() } else { Vec::new() };
     let colors = if has_colors { cur.f32s(3 * v, "colors")?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect() } else { Vec::new() };
+    let lightmap_uvs =
+        if has_lightmap { cur.f32s(2 * v, "lightmap uvs")?.chunks_exact(2).map(Vec2::from_slice).collect() } else { Vec::new() };
     let indices = cur.u32s(3 * t, "indices")?;
     let tri_material = cur.u16s(t, "triangle materials")?;
     cur.padding(4, "triangle materials")?;
     let tri_group = cur.u32s(t, "triangle groups")?;
     cur.finish()?;
-    // The bundle keeps the atlas (ATLS), not the file's lightmap coordinates.
-    let mut mesh = Mesh { positions, normals, uvs, colors, indices, tri_material, tri_group, ..Mesh::default() };
+    let mut mesh = Mesh { positions, normals, uvs, lightmap_uvs, colors, indices, tri_material, tri_group, ..Mesh::default() };
     if rules.bring_legacy_values_into_range {
         mesh = values::legacy_mesh_in_range(mesh).map_err(BundleError::bad_value(MESH))?;
     }

@@ -35,8 +35,8 @@ pub(super) fn random_mesh(rng: &mut Rng, vertices: usize, triangles: usize) -> M
         positions: (0..vertices).map(|_| v3(rng) * 10.0).collect(),
         normals: (0..vertices).map(|_| v3(rng).normalize_or(Vec3::Y)).collect(),
         uvs: (0..vertices).map(|_| Vec2::new(rng.unit(), rng.unit())).collect(),
-        // A bundle keeps its atlas (ATLS), not the file's TEXCOORD_1.
-        lightmap_uvs: Vec::new(),
+        // Not drawn from `rng`, so the other values stay those the tests name.
+        lightmap_uvs: (0..vertices).map(|v| Vec2::new((v % 7) as f32 / 7.0, (v % 5) as f32 / 5.0)).collect(),
         colors: (0..vertices).map(|_| [rng.unit(), rng.unit(), rng.unit()]).collect(),
         indices: (0..3 * triangles).map(|_| rng.below(vertices) as u32).collect(),
         tri_material: (0..triangles).map(|_| rng.below(2) as u16).collect(),
@@ -679,7 +679,7 @@ fn forged_counts_are_refused_before_allocation() {
 
     // Mesh indices out of range are caught by Mesh::validate.
     let mut bad_index = mesh.1.clone();
-    let at = 12 + 12 * 4 * 12; // after positions, normals, uvs, colours of 12 vertices
+    let at = 12 + 12 * 4 * 13; // after positions, normals, uvs, colours and lightmap uvs (13 floats) of 12 vertices
     set_u32(&mut bad_index, at, 12);
     assert!(detail(decode_parts(&[meta.clone(), (*b"MESH", bad_index), matl.clone()])).contains("out of range"));
 

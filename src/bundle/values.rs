@@ -89,6 +89,7 @@ pub(crate) fn check_mesh(mesh: &Mesh) -> Result<(), BadValue> {
         direction(n).map_err(at("vertex", v, "normal"))?;
     }
     check_uvs(&mesh.uvs)?;
+    check_lightmap_uvs(&mesh.lightmap_uvs)?;
     for (v, c) in mesh.colors.iter().enumerate() {
         non_negative(c).map_err(at("vertex", v, "colour"))?;
     }
@@ -101,6 +102,10 @@ pub(crate) fn check_positions(positions: &[Vec3]) -> Result<(), BadValue> {
 
 pub(crate) fn check_uvs(uvs: &[Vec2]) -> Result<(), BadValue> {
     uvs.iter().enumerate().try_for_each(|(v, uv)| all_finite(&uv.to_array()).map_err(at("vertex", v, "uv")))
+}
+
+pub(crate) fn check_lightmap_uvs(uvs: &[Vec2]) -> Result<(), BadValue> {
+    uvs.iter().enumerate().try_for_each(|(v, uv)| all_finite(&uv.to_array()).map_err(at("vertex", v, "lightmap uv")))
 }
 
 /// MATL: albedo and transmittance in [0, 1].
