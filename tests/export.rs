@@ -243,7 +243,7 @@ fn a_texel_bundle_exports_its_texels_as_textures_on_its_lightmap_uvs() {
         ["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "8", "--bounces", "1", "--texel-size", "0.25", "--quiet"];
     let o = prtbake(&bake);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = prtbake(&["sun", baked.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--steps", "40", "--quiet"]);
+    let o = prtbake(&["sun", baked.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--steps", "40", "--texel-fractions", "--quiet"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = prtbake(&["export", sunned.to_str().unwrap(), "-o", out.to_str().unwrap(), "--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -255,8 +255,9 @@ fn a_texel_bundle_exports_its_texels_as_textures_on_its_lightmap_uvs() {
     let per_texel = t.transfer.as_ref().unwrap().values_per_vertex() as usize;
     let words = sun.words_per_vertex as usize;
     assert!(!sun.texel_masks.is_empty() && words == 2);
-    // Coverage, ⌈9/4⌉ transfer textures, two sun words.
-    assert_eq!(report["report"]["texel_textures"], 1 + 3 + 2);
+    // Coverage, ⌈9/4⌉ transfer textures, two sun words, ⌈40/8⌉ fraction words.
+    assert!(!sun.texel_fractions.is_empty());
+    assert_eq!(report["report"]["texel_textures"], 1 + 3 + 2 + 5);
     assert_eq!(report["report"]["vertices"], atlas.uv.len());
 
     let bytes = std::fs::read(&out).unwrap();
@@ -317,4 +318,21 @@ fn a_texel_bundle_exports_its_texels_as_textures_on_its_lightmap_uvs() {
             }
         }
     }
+    // Sunlit fractions: step 8k + 2j + h in nibble h of channel j of fraction texture k.
+    let fractions = meta["sun"]["fraction_textures"].as_array().unwrap();
+    assert_eq!(fractions.len(), 5);
+    let mut partial = 0;
+    for (k, texture) in fractions.iter().enumerate() {
+        let (_, _, channels, bytes) = png_samples(&gltf, blob, texture.as_u64().unwrap() as usize);
+        assert_eq!(channels, 4);
+        for (row, &texel) in t.texels.iter().enumerate() {
+            for step in 8 * k..(8 * k + 8).min(sun.step_count()) {
+                let (j, h) = ((step % 8) / 2, step % 2);
+                let nibble = (bytes[texel as usize * 4 + j] >> (4 * h)) & 0xF;
+                assert_eq!(nibble as f32 / 15.0, sun.texel_sun(row, step), "texel {texel}, step {step}");
+                partial += usize::from(nibble != 0 && nibble != 15);
+            }
+        }
+    }
+    assert!(partial > 0, "no texel was partly sunlit: the fractions were not tested");
 }

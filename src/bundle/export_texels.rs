@@ -1,7 +1,8 @@
 //! Texel mode in a GLB export (docs/viewer.md, "Texel bundles"): the mesh
 //! split along the atlas's seams (one vertex per atlas vertex, its atlas
 //! position as `TEXCOORD_1`), the texel transfer as 16-bit RGBA PNGs, the
-//! texel sun bits as 8-bit RGBA PNGs and a coverage mask, all the atlas's
+//! texel sun bits (and sunlit fractions, when stored) as 8-bit RGBA PNGs and
+//! a coverage mask, all the atlas's
 //! size, row `y` of an image being the texels `y · width + x`.
 //!
 //! Why 16-bit PNG with an affine map per channel: glTF core takes PNG and
@@ -145,8 +146,19 @@ pub(super) fn texel_images(
             textures.push(images.len());
             images.push(EmbeddedImage { name: format!("prtbake_sun_{k}"), png, nearest: true });
         }
+        let mut fraction_textures = Vec::new();
+        let fraction_words = if sun.texel_fractions.is_empty() { 0 } else { sun.steps.len().div_ceil(8) };
+        for k in 0..fraction_words {
+            let word = |r: u32| sun.texel_fractions[r as usize * fraction_words + k].to_le_bytes();
+            let data: Vec<u8> = rows.iter().flat_map(|row| row.map_or([0; 4], word)).collect();
+            let png = encode_png(width, height, png::ColorType::Rgba, png::BitDepth::Eight, &data)?;
+            fraction_textures.push(images.len());
+            images.push(EmbeddedImage { name: format!("prtbake_sun_fraction_{k}"), png, nearest: true });
+        }
         sun_meta = json!({ "words_per_texel": words, "textures": textures,
-            "decode": "step 32k + 8j + b is bit b of channel j of texture k (sample with nearest filtering)" });
+            "decode": "step 32k + 8j + b is bit b of channel j of texture k (sample with nearest filtering)",
+            "fraction_textures": fraction_textures,
+            "fraction_decode": "the sunlit share of step 8k + 2j + h is nibble h (low first) of channel j of fraction texture k, over 15; use it instead of the bit where present" });
     }
     let meta = json!({
         "width": width, "height": height, "texel_size": atlas.texel_size, "uv": "TEXCOORD_1", "covered_texels": texels.texels.len(),
