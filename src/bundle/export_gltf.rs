@@ -20,7 +20,7 @@ use serde_json::{json, Value};
 
 use super::export_texels::{atlas_mesh, texel_images};
 use super::values::check_bundle;
-use super::{Bundle, LayerKind};
+use super::{Bundle, LayerKind, Transfer};
 use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, GlbAdditions, MeshError};
 
 /// Name of the format version written into `extras.prtbake.format`.
@@ -61,6 +61,14 @@ pub fn transfer_attributes(values: &[f32], per_vertex: usize, vertex_count: usiz
         .collect()
 }
 
+/// The values of `layer` (`None`: the total); `None` when it is not stored.
+fn layer_values(transfer: &Transfer, layer: Option<LayerKind>) -> Option<Vec<f32>> {
+    match layer {
+        None | Some(LayerKind::Total) => Some(transfer.total()),
+        Some(kind) => transfer.layer(kind).map(|l| l.data.clone()),
+    }
+}
+
 /// Writes `bundle` as GLB at `path` with `_PRT_…` attributes.
 ///
 /// `layer`: which transfer layer to write; `None` writes the total (the `Total`
@@ -80,22 +88,18 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         Some(t) => t.atlas.source_vertex.iter().map(|&v| v as usize).collect(),
         None => (0..vertex_count).collect(),
     };
+    let requested = match layer {
+        Some(LayerKind::Bounce(b)) => format!("bounce {b}"),
+        _ => "total".to_string(),
+    };
     let mut attributes = Vec::new();
     let mut layer_name = "none".to_string();
     let mut transfer_meta = Value::Null;
     if let Some(t) = &bundle.transfer {
         let per_vertex = t.values_per_vertex() as usize;
-        let values = match layer {
-            None | Some(LayerKind::Total) => t.total(),
-            Some(kind) => t
-                .layer(kind)
-                .map(|l| l.data.clone())
-                .ok_or_else(|| invalid(format!("the bundle stores no {kind} layer (bake with --store-bounces)")))?,
-        };
-        layer_name = match layer {
-            Some(LayerKind::Bounce(b)) => format!("bounce {b}"),
-            _ => "total".into(),
-        };
+        let values =
+            layer_values(t, layer).ok_or_else(|| invalid(format!("the bundle stores no {requested} layer (bake with --store-bounces)")))?;
+        layer_name = requested.clone();
         if let Some(j) = values.iter().position(|v| !v.is_finite()) {
             let vertex = j / per_vertex.max(1);
             return Err(invalid(format!("transfer {layer_name} value {j} (vertex {vertex}) is {}: the bounces sum past f32", values[j])));
@@ -136,19 +140,12 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
     let mut images = Vec::new();
     let mut texel_meta = Value::Null;
     if let Some(t) = &bundle.texels {
-        let values = match (&t.transfer, layer) {
-            (None, _) => None,
-            (Some(x), None | Some(LayerKind::Total)) => Some(x.total()),
-            (Some(x), Some(kind)) => {
-                Some(x.layer(kind).map(|l| l.data.clone()).ok_or_else(|| invalid(format!("the texels store no {kind} layer")))?)
-            }
+        let values = match &t.transfer {
+            None => None,
+            Some(x) => Some(layer_values(x, layer).ok_or_else(|| invalid(format!("the texels store no {requested} layer")))?),
         };
         let per_texel = t.transfer.as_ref().map_or(0, |x| x.values_per_vertex() as usize);
-        let texel_layer = match layer {
-            Some(LayerKind::Bounce(b)) => format!("bounce {b}"),
-            _ => "total".to_string(),
-        };
-        let transfer = values.as_deref().map(|v| (v, per_texel, texel_layer.as_str()));
+        let transfer = values.as_deref().map(|v| (v, per_texel, requested.as_str()));
         let (written, meta) = texel_images(t, transfer, bundle.sun.as_ref()).map_err(|e| invalid(format!("texel images: {e}")))?;
         images = written;
         texel_meta = meta;

@@ -22,20 +22,15 @@ use crate::mesh::{EmbeddedImage, Mesh};
 /// vertex it comes from, `lightmap_uvs` the atlas position over the atlas
 /// size (in [0, 1], v down as glTF's), triangles in the mesh's order.
 pub(super) fn atlas_mesh(mesh: &Mesh, atlas: &Atlas) -> Mesh {
-    let from = |v: &u32| *v as usize;
     let size = Vec2::new(atlas.width as f32, atlas.height as f32);
-    let copy = |values: &[Vec2]| if values.is_empty() { Vec::new() } else { atlas.source_vertex.iter().map(|v| values[from(v)]).collect() };
     Mesh {
-        positions: atlas.source_vertex.iter().map(|v| mesh.positions[from(v)]).collect(),
-        normals: atlas.source_vertex.iter().map(|v| mesh.normals[from(v)]).collect(),
-        uvs: copy(&mesh.uvs),
         lightmap_uvs: atlas.uv.iter().map(|&uv| uv / size).collect(),
-        colors: if mesh.colors.is_empty() { Vec::new() } else { atlas.source_vertex.iter().map(|v| mesh.colors[from(v)]).collect() },
         indices: atlas.indices.clone(),
         tri_material: mesh.tri_material.clone(),
         tri_group: mesh.tri_group.clone(),
         materials: mesh.materials.clone(),
         groups: mesh.groups.clone(),
+        ..mesh.gather_vertices(&atlas.source_vertex)
     }
 }
 

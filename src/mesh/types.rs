@@ -136,18 +136,34 @@ impl Mesh {
                 indices.push(new_index[v as usize]);
             }
         }
-        let gather = |values: &[Vec3]| old_of_new.iter().map(|&v| values[v as usize]).collect::<Vec<_>>();
+        let vertices = self.gather_vertices(&old_of_new);
         Mesh {
-            positions: gather(&self.positions),
-            normals: gather(&self.normals),
-            uvs: if self.uvs.is_empty() { Vec::new() } else { old_of_new.iter().map(|&v| self.uvs[v as usize]).collect() },
-            lightmap_uvs: old_of_new.iter().filter(|_| !self.lightmap_uvs.is_empty()).map(|&v| self.lightmap_uvs[v as usize]).collect(),
-            colors: if self.colors.is_empty() { Vec::new() } else { old_of_new.iter().map(|&v| self.colors[v as usize]).collect() },
             indices,
             tri_material: order.iter().map(|&t| self.tri_material[t as usize]).collect(),
             tri_group: order.iter().map(|&t| self.tri_group[t as usize]).collect(),
             materials: self.materials,
             groups: self.groups,
+            ..vertices
+        }
+    }
+    /// The per-vertex attributes of `sources` (vertex i of the result copies
+    /// vertex `sources[i]`; absent attributes stay absent); no triangles,
+    /// materials or groups.
+    pub fn gather_vertices(&self, sources: &[u32]) -> Mesh {
+        fn gather<T: Copy>(values: &[T], sources: &[u32]) -> Vec<T> {
+            if values.is_empty() {
+                Vec::new()
+            } else {
+                sources.iter().map(|&v| values[v as usize]).collect()
+            }
+        }
+        Mesh {
+            positions: gather(&self.positions, sources),
+            normals: gather(&self.normals, sources),
+            uvs: gather(&self.uvs, sources),
+            lightmap_uvs: gather(&self.lightmap_uvs, sources),
+            colors: gather(&self.colors, sources),
+            ..Mesh::default()
         }
     }
     /// Checks the invariants above; returns a description of the first one broken.

@@ -161,15 +161,21 @@ struct GlbBin {
 impl GlbBin {
     /// Appends one tightly packed view (4-byte aligned) and an accessor over it.
     fn push(&mut self, data: &[u8], target: u32, mut accessor: Value) -> usize {
-        while self.bytes.len() % 4 != 0 {
-            self.bytes.push(0);
-        }
-        let view = self.views.len();
-        self.views.push(json!({"buffer": 0, "byteOffset": self.bytes.len(), "byteLength": data.len(), "target": target}));
-        self.bytes.extend_from_slice(data);
+        let view = self.push_view(data);
+        self.views[view]["target"] = json!(target);
         accessor["bufferView"] = json!(view);
         self.accessors.push(accessor);
         self.accessors.len() - 1
+    }
+
+    /// Appends one view (4-byte aligned) of `data`; returns its index.
+    fn push_view(&mut self, data: &[u8]) -> usize {
+        while self.bytes.len() % 4 != 0 {
+            self.bytes.push(0);
+        }
+        self.views.push(json!({"buffer": 0, "byteOffset": self.bytes.len(), "byteLength": data.len()}));
+        self.bytes.extend_from_slice(data);
+        self.views.len() - 1
     }
 
     fn push_vec3s(&mut self, values: impl Iterator<Item = [f32; 3]>, with_bounds: bool) -> usize {
@@ -397,15 +403,8 @@ pub fn stage_glb_with(staged: &mut Staged, path: &Path, mesh: &Mesh, additions: 
         meshes.push(json!({"name": mesh.groups[group], "primitives": primitives}));
     }
 
-    let mut image_json = Vec::new();
-    for image in images {
-        while bin.bytes.len() % 4 != 0 {
-            bin.bytes.push(0);
-        }
-        bin.views.push(json!({"buffer": 0, "byteOffset": bin.bytes.len(), "byteLength": image.png.len()}));
-        bin.bytes.extend_from_slice(&image.png);
-        image_json.push(json!({"bufferView": bin.views.len() - 1, "mimeType": "image/png", "name": image.name}));
-    }
+    let image_json: Vec<Value> =
+        images.iter().map(|image| json!({"bufferView": bin.push_view(&image.png), "mimeType": "image/png", "name": image.name})).collect();
 
     let nodes: Vec<Value> = meshes.iter().enumerate().map(|(i, m)| json!({"mesh": i, "name": m["name"]})).collect();
     let mut document = json!({
