@@ -341,6 +341,11 @@ struct CleanArgs {
     /// each line apart, so the light outside does not bleed into the room.
     #[arg(long)]
     cut_intersections: bool,
+    /// With --cut-intersections: cut every crossing, also those whose cut
+    /// leaves triangles under 1° (by default those pairs of surfaces are left
+    /// uncut and listed in the report).
+    #[arg(long, requires = "cut_intersections")]
+    cut_every_crossing: bool,
     /// Keep one triangle per winding of a doubled sheet (two-sided surfaces).
     #[arg(long)]
     keep_two_sided: bool,
@@ -902,6 +907,7 @@ fn clean_config(a: CleanArgs) -> anyhow::Result<cli::clean_cmd::CleanConfig> {
     params.max_edge = a.max_edge.or(params.max_edge);
     params.keep_two_sided = a.keep_two_sided;
     params.cut_intersections = a.cut_intersections;
+    params.cut_every_crossing = a.cut_every_crossing;
     params.validate()?;
     Ok(cli::clean_cmd::CleanConfig {
         input: a.input,

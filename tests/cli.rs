@@ -389,7 +389,8 @@ fn bake_and_sun_refine_deterministically_and_refuse_what_they_cannot_do() {
 /// triangles it cut (summary and JSON), `bake --clean --cut-intersections`
 /// bakes the same cleaned mesh as `clean --cut-intersections` to GLB then
 /// `bake`, an OBJ output warns that loading it welds the cut's sides back,
-/// and the flag means nothing without `--clean`.
+/// and the flag means nothing without `--clean`. Crossings whose cut leaves
+/// needles stay uncut and are listed, unless `--cut-every-crossing`.
 #[test]
 fn clean_and_bake_cut_intersections() {
     let dir = Scratch::new("cut-intersections");
@@ -423,6 +424,28 @@ fn clean_and_bake_cut_intersections() {
     assert_eq!(direct.mesh.positions, via_file.mesh.positions);
     assert_eq!(direct.mesh.indices, via_file.mesh.indices);
     let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("x.prtb").to_str().unwrap(), "--cut-intersections"]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+
+    // Twenty thin triangles through one point: the cut's needles there
+    // cannot be repaired, so those crossings stay uncut and are named;
+    // --cut-every-crossing cuts them and leaves the needles.
+    let thin = dir.path("thin.obj");
+    prtbake::mesh::write_obj(&thin, &prtbake::clean::fixtures::thin_crossing(20)).unwrap();
+    let thin_out = dir.path("thin-out.glb");
+    let clean_thin = |extra: &[&str]| {
+        let mut args = vec!["clean", thin.to_str().unwrap(), "-o", thin_out.to_str().unwrap(), "--cut-intersections", "--json"];
+        args.extend(extra);
+        serde_json::from_str::<serde_json::Value>(&run(&args).0).unwrap()
+    };
+    let careful = clean_thin(&[]);
+    let left =
+        |r: &serde_json::Value| r["cut_surface_pairs_left_uncut"].as_u64().unwrap() + r["cut_triangle_pairs_left_uncut"].as_u64().unwrap();
+    assert!(left(&careful) > 0 && careful["cut_left_uncut"][0]["materials"].is_array(), "{careful}");
+    assert!(careful["cut_min_angle_deg"].as_f64().unwrap() >= 1.0 && careful["cut_needles_left"] == 0, "{careful}");
+    let every = clean_thin(&["--cut-every-crossing"]);
+    assert_eq!(left(&every), 0, "{every}");
+    assert!(every["cut_min_angle_deg"].as_f64().unwrap() < 1.0 && every["cut_needles_left"].as_u64().unwrap() > 0, "{every}");
+    let o = prtbake(&["clean", thin.to_str().unwrap(), "-o", dir.path("y.glb").to_str().unwrap(), "--cut-every-crossing"]);
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 

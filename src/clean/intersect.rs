@@ -60,6 +60,10 @@
 //!    point on such an edge, and one too short for a point the weld would
 //!    keep is collapsed (the dining room's cut left 430 such edges; none now).
 //!
+//! Every triangle it changes records the pairs of surfaces whose crossing
+//! changed it, or changed its region ([`CutMemo::cut_by`]); the clean skips
+//! those pairs ([`CutMemo::skip`]) when it cannot repair the needles they made.
+//!
 //! Limits: a segment is straight in each triangle, so curved intersections
 //! are cut as polylines at the tessellation's resolution. A region's outline,
 //! where it meets triangles outside the region, is kept whole, so a triangle
@@ -71,8 +75,8 @@
 
 use super::hub_pairs;
 use super::planar::{self, PlanarRegion};
-use super::spatial::{cluster_points_dense, Aabb, AabbTree};
-use super::work::{sorted_edges, EdgeUse, Work};
+use super::spatial::{cluster_points_dense, find, union, Aabb, AabbTree};
+use super::work::{edge_runs, sorted_edges, EdgeUse, Work};
 use glam::{DVec2, DVec3, Vec3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 
@@ -81,6 +85,9 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 pub(crate) struct CutOutcome {
     /// Pairs of triangles found crossing.
     pub pairs: usize,
+    /// Crossing pairs left uncut because their surfaces are in
+    /// [`CutMemo::skip`], counted per pair of the two surfaces' materials.
+    pub skipped: BTreeMap<(u16, u16), usize>,
     /// Pieces of intersection lines inserted (after merging, before refinement).
     pub pieces: usize,
     /// Triangles replaced by the re-triangulation of their region.
@@ -162,6 +169,7 @@ enum EndRef {
 /// A crossing pair's segment, before its ends are points.
 struct Raw {
     tris: [u32; 2],
+    crossing: Crossing,
     ends: [DVec3; 2],
     /// Per triangle: `None` when the segment does not cut it (along a rim
     /// or a non-manifold edge), `Some(true)` across it, `Some(false)` along one
@@ -172,26 +180,87 @@ struct Raw {
 /// One triangle's constraint: two point ids and whether it crosses the triangle (not along an edge).
 type Constraint = ([u32; 2], bool);
 
-/// The triangles the cut has tested against each other, as their corner
-/// positions, and whether it has cut, across the rounds of one clean. The
-/// clean cuts once (the first round; [`CutMemo::has_cut`]), so the set only
-/// matters to a caller that cuts again: a pair of tested triangles is not
-/// tested again (nothing about it changed), a triangle that another step
-/// changed or moved is new and tested against all.
-#[derive(Default)]
-pub(crate) struct CutMemo(HashSet<[[u32; 3]; 3]>, bool);
+/// Two surfaces, lower first. A surface is an edge-connected patch of one
+/// material and group ([`surfaces`]), named by its first triangle when the
+/// cut ran; the same input always gives the same names.
+pub(crate) type SurfacePair = (u32, u32);
 
-impl CutMemo {
-    /// True once a round has cut something.
-    pub(crate) fn has_cut(&self) -> bool {
-        self.1
+/// A crossing: its two triangles (as their `tri_origin`, lower first) and their surfaces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub(crate) struct Crossing {
+    pub surfaces: SurfacePair,
+    pub triangles: (u32, u32),
+}
+
+/// The crossings the cut leaves uncut: those of pairs of triangles, and all
+/// those between pairs of surfaces.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Skips {
+    pub triangles: HashSet<(u32, u32)>,
+    pub surfaces: HashSet<SurfacePair>,
+}
+
+impl Skips {
+    pub(crate) fn contains(&self, c: &Crossing) -> bool {
+        self.surfaces.contains(&c.surfaces) || self.triangles.contains(&c.triangles)
     }
 }
 
+/// What one clean's cut knows across its rounds and retries.
+///
+/// `tested`: the triangles the cut has tested against each other, as their
+/// corner positions, and `cut`: whether it has cut. The clean cuts once (the
+/// first round; [`CutMemo::has_cut`]), so the set only matters to a caller
+/// that cuts again: a pair of tested triangles is not tested again (nothing
+/// about it changed), a triangle that another step changed or moved is new
+/// and tested against all.
+#[derive(Default)]
+pub(crate) struct CutMemo {
+    tested: HashSet<[[u32; 3]; 3]>,
+    cut: bool,
+    /// Crossings left uncut (the caller's choice).
+    pub skip: Skips,
+    /// Who cut what, sorted: (triangle, as its `tri_origin`; a crossing that
+    /// changed it; `true` when the crossing touched this triangle itself,
+    /// `false` when it touched another of its region).
+    pub cut_by: Vec<(u32, Crossing, bool)>,
+}
+
 impl CutMemo {
+    /// A memo that leaves the crossings of `skip` uncut.
+    pub(crate) fn skipping(skip: Skips) -> Self {
+        CutMemo { skip, ..CutMemo::default() }
+    }
+
+    /// True once a round has cut something.
+    pub(crate) fn has_cut(&self) -> bool {
+        self.cut
+    }
+
+    /// The crossings recorded for triangle `origin`, directly or through its region.
+    pub(crate) fn causes(&self, origin: u32, direct: bool) -> impl Iterator<Item = Crossing> + '_ {
+        let from = self.cut_by.partition_point(|e| e.0 < origin);
+        self.cut_by[from..].iter().take_while(move |e| e.0 == origin).filter(move |e| e.2 == direct).map(|e| e.1)
+    }
+
     fn key(work: &Work, t: usize) -> [[u32; 3]; 3] {
         super::work::corner_key(work.tri_positions(t))
     }
+}
+
+/// Each triangle's surface: the smallest triangle id of its patch, joined
+/// across edges of exactly two triangles with the same material and group.
+fn surfaces(work: &Work, edges: &[EdgeUse]) -> Vec<u32> {
+    let mut parent: Vec<u32> = (0..work.tris.len() as u32).collect();
+    for run in edge_runs(edges) {
+        if let [e, f] = run {
+            let (a, b) = (e.tri as usize, f.tri as usize);
+            if work.tri_material[a] == work.tri_material[b] && work.tri_group[a] == work.tri_group[b] {
+                union(&mut parent, e.tri, f.tri);
+            }
+        }
+    }
+    (0..parent.len() as u32).map(|t| find(&mut parent, t)).collect()
 }
 
 /// Cuts every live triangle along the segments where other triangles cross
@@ -206,9 +275,10 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
     };
     let boxes: Vec<Aabb> =
         (0..n).map(|t| if usable(t) { Aabb::of_points(&work.tri_positions(t), tol.contact as f32) } else { Aabb::EMPTY }).collect();
-    let settled: Vec<bool> = (0..n).map(|t| boxes[t] != Aabb::EMPTY && memo.0.contains(&CutMemo::key(work, t))).collect();
+    let settled: Vec<bool> = (0..n).map(|t| boxes[t] != Aabb::EMPTY && memo.tested.contains(&CutMemo::key(work, t))).collect();
     let candidates = candidate_pairs(&points, &corners, &boxes, &settled, tol.contact);
     let edge_users = EdgeUsers(sorted_edges(work));
+    let surface = surfaces(work, &edge_users.0);
     let mut out = CutOutcome { min_angle: f64::INFINITY, replaced_min_angle: f64::INFINITY, ..CutOutcome::default() };
 
     // 1-2. Segments of the crossing pairs, ends as positions.
@@ -223,6 +293,13 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
         else {
             continue;
         };
+        let (oa, ob) = (work.tri_origin[a], work.tri_origin[b]);
+        let crossing = Crossing { surfaces: (surface[a].min(surface[b]), surface[a].max(surface[b])), triangles: (oa.min(ob), oa.max(ob)) };
+        if memo.skip.contains(&crossing) {
+            let (ma, mb) = (work.tri_material[a], work.tri_material[b]);
+            *out.skipped.entry((ma.min(mb), ma.max(mb))).or_default() += 1;
+            continue;
+        }
         // Along an edge: a seam, unless the edge is a rim, non-manifold or a seam already.
         let cut_of = |t: usize| match along_edge(corners[t], ends, tol.contact) {
             None => Some(true),
@@ -235,7 +312,7 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
         if cuts == [None, None] {
             continue;
         }
-        raw.push(Raw { tris: [a as u32, b as u32], ends, cuts });
+        raw.push(Raw { tris: [a as u32, b as u32], crossing, ends, cuts });
     }
 
     // 3. Point ids: a corner of the pair within the tolerance, else a new point (clustered).
@@ -271,6 +348,9 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
     // Constraints per triangle, and the points each edge takes.
     let mut constraints: BTreeMap<u32, Vec<Constraint>> = BTreeMap::new();
     let mut edge_points: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+    // The surface pairs whose crossing changed each triangle, and each edge's points.
+    let mut causes: Vec<(u32, Crossing)> = Vec::new();
+    let mut edge_causes: HashMap<(u32, u32), Vec<Crossing>> = HashMap::new();
     let mut seams: Vec<(u32, u32)> = Vec::new();
     let mut touched: HashSet<u32> = HashSet::new();
     for (r, ends) in raw.iter().zip(&ends_of) {
@@ -289,6 +369,7 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
                 if let Loc::Edge(k) = *loc {
                     let key = edge_key(points[t as usize][k], points[t as usize][(k + 1) % 3]);
                     edge_points.entry(key).or_default().push(p);
+                    edge_causes.entry(key).or_default().push(r.crossing);
                 }
             }
             if !across && locs.iter().all(|l| matches!(l, Loc::Corner(_))) {
@@ -297,6 +378,7 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
             }
             if across {
                 touched.insert(t);
+                causes.push((t, r.crossing));
                 crossing = true;
             }
             constraints.entry(t).or_default().push((ends, across));
@@ -307,15 +389,19 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
         list.sort_unstable();
         list.dedup();
         touched.extend(edge_users.of(a, b).iter().map(|e| e.tri));
+        for e in edge_users.of(a, b) {
+            causes.extend(edge_causes[&(a, b)].iter().map(|&c| (e.tri, c)));
+        }
     }
     if touched.is_empty() {
         out.seams = seams;
-        memo.0 = (0..n).filter(|&t| work.tri_alive[t]).map(|t| CutMemo::key(work, t)).collect();
+        memo.tested = (0..n).filter(|&t| work.tri_alive[t]).map(|t| CutMemo::key(work, t)).collect();
         return out;
     }
 
     // 4. Regions and their pieces.
     let regions = group_regions(work, &points, &corners, &edge_users, &touched, tol.plane);
+    record_causes(work, &regions, causes, &mut memo.cut_by);
     let mut plans: Vec<Plan> =
         regions.into_iter().map(|r| plan_region(work, &points, &corners, &edge_users, &edge_points, &constraints, r, tol)).collect();
     split_at_crossings(work, &mut plans, tol.contact);
@@ -338,8 +424,8 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
     out.seams.sort_unstable();
     out.seams.dedup();
     work.compact_triangles();
-    memo.0 = (0..work.tris.len()).map(|t| CutMemo::key(work, t)).collect();
-    memo.1 = true;
+    memo.tested = (0..work.tris.len()).map(|t| CutMemo::key(work, t)).collect();
+    memo.cut = true;
     out
 }
 
@@ -498,6 +584,30 @@ fn group_regions(
         regions.push(Region { tris, vertex_of });
     }
     regions
+}
+
+/// Adds to `cut_by` (kept sorted) the crossings that changed each
+/// triangle (`causes`, by work triangle): directly, and through the other
+/// triangles of its region, which is re-triangulated as one.
+fn record_causes(work: &Work, regions: &[Region], mut causes: Vec<(u32, Crossing)>, cut_by: &mut Vec<(u32, Crossing, bool)>) {
+    causes.sort_unstable();
+    causes.dedup();
+    let of = |t: u32| {
+        let from = causes.partition_point(|c| c.0 < t);
+        causes[from..].iter().take_while(move |c| c.0 == t).map(|c| c.1)
+    };
+    for region in regions {
+        let mut shared: Vec<Crossing> = region.tris.iter().flat_map(|&t| of(t)).collect();
+        shared.sort_unstable();
+        shared.dedup();
+        for &t in &region.tris {
+            let origin = work.tri_origin[t as usize];
+            cut_by.extend(of(t).map(|c| (origin, c, true)));
+            cut_by.extend(shared.iter().map(|&c| (origin, c, false)));
+        }
+    }
+    cut_by.sort_unstable();
+    cut_by.dedup();
 }
 
 /// One region's plan: its points and the pieces to insert.

@@ -29,6 +29,15 @@
 //! 7. split edges longer than `max_edge`, flip slivers ([`refine`]);
 //! 8. weld once more, drop unused vertices, keep the order of the rest.
 //!
+//! The cut's triangles under 1° are repaired after it ([`needles`]). Where
+//! the repair cannot raise them (a chair's tube crossing another at a
+//! grazing angle, a cup's foot sunk 0.75 mm into a table), the clean runs
+//! again, up to [`MAX_CUT_RETRIES`] times, leaving the crossings of those
+//! pairs of surfaces (edge-connected patches of one material) uncut: a
+//! millimetre of overlap leaks no light a vertex can see, and a needle
+//! draws a streak. The report lists them per pair of materials;
+//! `cut_every_crossing` cuts them anyway.
+//!
 //! A step can enable another that ran before it (a zip makes two patches overlap,
 //! a weld lets an edge flip), so the whole pipeline repeats until a round repairs
 //! nothing, at most [`MAX_ROUNDS`] times: cleaning a cleaned mesh then changes
@@ -83,10 +92,10 @@ mod weld;
 mod work;
 mod zip;
 
-pub use report::{CleanReport, DefectKind, DefectReport, OverlapReport, UnorientableComponent};
+pub use report::{CleanReport, DefectKind, DefectReport, OverlapReport, UncutCrossings, UnorientableComponent};
 pub use split::{split_edges, EdgeSplit};
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
 use crate::mesh::Mesh;
@@ -148,6 +157,11 @@ pub struct CleanParams {
     /// [`intersect`]): a wall running past another, a floor running under and
     /// past a wall stop leaking the light outside into the room.
     pub cut_intersections: bool,
+    /// With `cut_intersections`: cut every crossing, also those whose cut
+    /// leaves triangles under 1° that the needle repair cannot raise (default
+    /// false: the clean runs again leaving those pairs of surfaces uncut, and
+    /// reports them).
+    pub cut_every_crossing: bool,
 }
 
 impl Default for CleanParams {
@@ -164,6 +178,7 @@ impl Default for CleanParams {
             zip: true,
             keep_two_sided: false,
             cut_intersections: false,
+            cut_every_crossing: false,
         }
     }
 }
@@ -254,16 +269,49 @@ pub fn clean_mesh_timed(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, Clea
     if let Some(max_edge) = params.max_edge {
         refine::check_split_size(mesh, max_edge)?;
     }
+    // Crossings whose cut leaves triangles under the needle angle that the
+    // repair cannot raise are left uncut: the clean runs again without them.
+    let mut skip = intersect::Skips::default();
+    let mut all_times = StepTimes::default();
+    let mut retries = 0;
+    loop {
+        let mut memo = intersect::CutMemo::skipping(skip.clone());
+        let (round, mut report, times) = clean_rounds(mesh, params, &mut memo);
+        all_times.absorb(&times);
+        let made = params.cut_intersections.then(|| cut_made(mesh, &round, &memo, retries));
+        let more = made.as_ref().map_or(intersect::Skips::default(), |m| m.causes.clone());
+        let nothing_more = more.triangles.is_subset(&skip.triangles) && more.surfaces.is_subset(&skip.surfaces);
+        if nothing_more || retries == MAX_CUT_RETRIES || params.cut_every_crossing {
+            report.cut_surface_pairs_left_uncut = skip.surfaces.len();
+            report.cut_triangle_pairs_left_uncut = skip.triangles.len();
+            report.cut_retries = retries;
+            if let Some(made) = made.filter(|m| m.min_angle.is_finite()) {
+                report.cut_min_angle_deg = Some(made.min_angle.to_degrees() as f32);
+                report.cut_needles_left = made.needles;
+            }
+            // Canonical order: what `bake --clean` bakes is what a cleaned file loads as.
+            let mut clock = Instant::now();
+            let mesh = round.mesh.into_canonical_order();
+            all_times.lap("weld again and report", &mut clock);
+            return Ok((mesh, report, all_times));
+        }
+        skip.triangles.extend(more.triangles);
+        skip.surfaces.extend(more.surfaces);
+        retries += 1;
+    }
+}
+
+/// Runs rounds of the pipeline until one repairs nothing (or [`MAX_ROUNDS`]).
+fn clean_rounds(mesh: &Mesh, params: &CleanParams, memo: &mut intersect::CutMemo) -> (Round, CleanReport, StepTimes) {
     let identity: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
     let mut flipped = refine::FlippedEdges::default();
-    let mut memo = intersect::CutMemo::default();
-    let mut round = clean_once(mesh, params, &identity, &mut flipped, &mut memo);
+    let mut round = clean_once(mesh, params, &identity, &mut flipped, memo);
     let mut report = round.report.clone();
     let mut times = round.times.clone();
     report.rounds = 1;
     // Repeat until a round repairs nothing, so that cleaning a cleaned mesh is a no-op.
     while round.report.repairs() > 0 && report.rounds < MAX_ROUNDS {
-        round = clean_once(&round.mesh, params, &round.origin, &mut flipped, &mut memo);
+        round = clean_once(&round.mesh, params, &round.origin, &mut flipped, memo);
         report.absorb(&round.report, round.removed_area);
         times.absorb(&round.times);
         report.rounds += 1;
@@ -271,12 +319,75 @@ pub fn clean_mesh_timed(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, Clea
     report.converged = round.report.repairs() == 0;
     report.retriggered = round.report.repair_counts().iter().filter(|&&(_, n)| n > 0).map(|&(name, n)| (name.to_string(), n)).collect();
     report.ready_to_bake = report.converged || report.last_round_share() <= report::READY_SHARE;
-    // Canonical order: what `bake --clean` bakes is what a cleaned file loads as.
-    let mut clock = Instant::now();
-    let mesh = round.mesh.into_canonical_order();
-    times.lap("weld again and report", &mut clock);
-    Ok((mesh, report, times))
+    (round, report, times)
 }
+
+/// The triangles of a clean's final mesh that its cut made: changed from
+/// the input, on a triangle a crossing changed or with a corner that is no
+/// input position (the needle repair after the cut splits and flips into
+/// the triangles around the cut ones).
+struct CutMade {
+    /// Their smallest angle (radians; infinite when there are none).
+    min_angle: f64,
+    /// How many are needles: under 1°, and thinner than the input triangle
+    /// they came from (a cut through a triangle that was already a needle
+    /// makes needles no repair can avoid; the cut made it no worse).
+    needles: usize,
+    /// The crossings to leave uncut next time, wider with each retry: the
+    /// pairs of triangles whose crossing touched a needle's triangle (or,
+    /// where none did, the triangles around its corners; a needle that
+    /// outlives that lies where the neighbours' crossings meet it); then
+    /// every crossing of their pairs of surfaces; then every crossing of the
+    /// surfaces that cut their regions.
+    causes: intersect::Skips,
+}
+
+fn cut_made(input: &Mesh, round: &Round, memo: &intersect::CutMemo, retry: usize) -> CutMade {
+    let bits = |p: glam::Vec3| p.to_array().map(f32::to_bits);
+    let input_keys: HashSet<[[u32; 3]; 3]> = (0..input.triangle_count()).map(|t| corner_key(input.triangle_positions(t))).collect();
+    let input_points: HashSet<[u32; 3]> = input.positions.iter().map(|&p| bits(p)).collect();
+    let mesh = &round.mesh;
+    // The triangles at each position, for needles no crossing touched.
+    let mut around: HashMap<[u32; 3], Vec<u32>> = HashMap::new();
+    for t in 0..mesh.triangle_count() {
+        mesh.triangle_positions(t).iter().for_each(|&p| around.entry(bits(p)).or_default().push(t as u32));
+    }
+    let needle = NEEDLE_ANGLE_DEG.to_radians();
+    let mut made = CutMade { min_angle: f64::INFINITY, needles: 0, causes: intersect::Skips::default() };
+    for t in 0..mesh.triangle_count() {
+        let corners = mesh.triangle_positions(t);
+        let crossed = memo.causes(round.origin[t], false).next().is_some();
+        let moved = corners.iter().any(|&p| !input_points.contains(&bits(p)));
+        if !(crossed || moved) || input_keys.contains(&corner_key(corners)) {
+            continue;
+        }
+        let angle = work::min_angle(corners.map(|p| p.as_dvec3()));
+        made.min_angle = made.min_angle.min(angle);
+        // A needle is thinner than 1° and than the input triangle it came from.
+        let parent = work::min_angle(input.triangle_positions(round.origin[t] as usize).map(|p| p.as_dvec3()));
+        if angle >= needle.min(parent) {
+            continue;
+        }
+        made.needles += 1;
+        let origins: Vec<u32> = match crossed {
+            true => vec![round.origin[t]],
+            false => corners.iter().flat_map(|&p| &around[&bits(p)]).map(|&u| round.origin[u as usize]).collect(),
+        };
+        let next = &mut made.causes;
+        for origin in origins {
+            let direct = memo.causes(origin, true);
+            match retry {
+                0 => next.triangles.extend(direct.map(|c| c.triangles)),
+                1 => next.surfaces.extend(direct.map(|c| c.surfaces)),
+                _ => next.surfaces.extend(memo.causes(origin, false).map(|c| c.surfaces)),
+            }
+        }
+    }
+    made
+}
+
+/// Times the clean runs again leaving uncut the crossings whose cut left needles.
+const MAX_CUT_RETRIES: usize = 3;
 
 /// Upper bound on clean-up rounds. Measured: the Ferrari (359k triangles) converges
 /// in 3 rounds, the grey-white room (143k, many coplanar overlaps) in 7.
@@ -423,6 +534,9 @@ fn clean_once(
             intersect::CutTolerances { plane: plane_tol as f64, contact: contact_tol, min_length: zip_tol as f64, min_angle: sliver_rad };
         let c = intersect::cut_intersections(&mut work, &tolerances, memo);
         r.crossing_pairs = c.pairs;
+        let name = |m: u16| mesh.materials.get(m as usize).map_or_else(|| format!("material {m}"), |m| m.name.clone());
+        r.cut_left_uncut =
+            c.skipped.iter().map(|(&(a, b), &n)| report::UncutCrossings { materials: [name(a), name(b)], triangle_pairs: n }).collect();
         r.intersections_cut = c.pieces;
         r.triangles_cut = c.triangles_cut;
         r.cut_crossings_unshared = c.unshared_splits;

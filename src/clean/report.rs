@@ -27,6 +27,14 @@ pub struct UnorientableComponent {
     pub location: [f32; 3],
 }
 
+/// Crossings between two materials that the cut left uncut.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct UncutCrossings {
+    pub materials: [String; 2],
+    /// Pairs of crossing triangles.
+    pub triangle_pairs: usize,
+}
+
 /// What a remaining defect is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -108,19 +116,30 @@ pub struct CleanReport {
     pub cut_lines_separated: usize,
     /// Pieces too short for that: shared edges the cut left (normally 0).
     pub cut_shared_edges_left: usize,
+    /// Crossings left uncut: cutting them left triangles under 1° that the
+    /// repair below could not raise, so the clean ran again without them
+    /// (`cut_retries` times). Counted as the pairs of surfaces (edge-connected
+    /// patches of one material) left whole, the pairs of triangles left
+    /// besides, and per pair of materials all pairs of triangles left uncut.
+    pub cut_surface_pairs_left_uncut: usize,
+    pub cut_triangle_pairs_left_uncut: usize,
+    pub cut_left_uncut: Vec<UncutCrossings>,
+    pub cut_retries: usize,
     /// Triangles removed with an edge two surfaces shared that was too short
     /// to take a point (its two ends became one point of the line).
     pub cut_edges_collapsed: usize,
     /// Triangles the cut made under 1° that were repaired after it (a short
     /// side collapsed, a cap snapped, points inserted with flips around
-    /// them, a crease flipped), and those left (see `clean::needles`).
+    /// them, a crease flipped; see `clean::needles`), and those left in the
+    /// output (with `cut_every_crossing`; otherwise their crossings are left uncut).
     pub cut_needles_repaired: usize,
     pub cut_needles_left: usize,
     /// Collapses (sides and caps), and points added (inserted or splitting an edge), by that repair.
     pub cut_needle_collapses: usize,
     pub cut_needle_points: usize,
-    /// Smallest angle (degrees) of the triangles the cut made, and of the
-    /// triangles they replaced, over all rounds (`None` when nothing was cut).
+    /// Smallest angle (degrees) of the output's triangles that the cut made
+    /// (changed from the input, where a crossing changed it), and of the
+    /// triangles they replaced (`None` when nothing was cut).
     pub cut_min_angle_deg: Option<f32>,
     pub cut_replaced_min_angle_deg: Option<f32>,
     /// Slivers before refinement minus slivers after.
@@ -318,6 +337,25 @@ impl CleanReport {
                 "cut quality            {} points added, {} lines separated ({} shared edges left, {} triangles collapsed with a too short one); smallest angle {made:.3}° (replaced triangles: {replaced:.3}°)",
                 self.cut_points_added, self.cut_lines_separated, self.cut_shared_edges_left, self.cut_edges_collapsed
             );
+            if self.cut_surface_pairs_left_uncut + self.cut_triangle_pairs_left_uncut > 0 {
+                let pairs: Vec<String> = self
+                    .cut_left_uncut
+                    .iter()
+                    .map(|u| {
+                        let pairs = if u.triangle_pairs == 1 { "pair" } else { "pairs" };
+                        format!("{} × {} ({} triangle {pairs})", u.materials[0], u.materials[1], u.triangle_pairs)
+                    })
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "cut left uncut         {} pairs of surfaces and {} more pairs of triangles, found in {} {} (cutting them left triangles under 1°): {}",
+                    self.cut_surface_pairs_left_uncut,
+                    self.cut_triangle_pairs_left_uncut,
+                    self.cut_retries,
+                    if self.cut_retries == 1 { "retry" } else { "retries" },
+                    pairs.join(", ")
+                );
+            }
             let _ = writeln!(
                 s,
                 "cut needles            {} under 1° repaired ({} sides collapsed, {} points inserted), {} left",

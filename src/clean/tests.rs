@@ -678,7 +678,8 @@ fn the_cut_grows_with_its_pieces_on_thin_crossings_and_fins() {
     // already share; what is left comes from pieces of many sheets meeting
     // within the tolerance at the common point.
     for (n, triangles, non_manifold) in [(10, 589, 0), (20, 2_854, 12), (30, 7_019, 21)] {
-        let (out, r) = clean_mesh(&fixtures::thin_crossing(n), &cut_params()).unwrap();
+        let every = CleanParams { cut_every_crossing: true, ..cut_params() };
+        let (out, r) = clean_mesh(&fixtures::thin_crossing(n), &every).unwrap();
         eprintln!("{n} thin: {} triangles\n{}", out.triangle_count(), r.summary());
         let pairs = n * (n - 1) / 2;
         assert_eq!((r.crossing_pairs, r.intersections_cut, r.triangles_cut), (pairs, 4 * pairs, n), "{n} thin:\n{}", r.summary());
@@ -729,15 +730,20 @@ fn smallest_angle_deg(mesh: &Mesh) -> f64 {
 /// 1°, so are the output's (the dining room's floor went to 1.3e-4° before
 /// the cut's needles were repaired), and the rooms and quads get no
 /// non-manifold edge (ten triangles crossing at one point share their lines).
+/// Where the repair cannot raise what the cut made (twenty thin triangles
+/// through one point: their pieces meet within the tolerance there), those
+/// pairs of surfaces are left uncut and named; cutting them anyway leaves
+/// non-manifold edges (the growth test below).
 #[test]
 fn the_cut_leaves_no_triangle_under_one_degree() {
     let cases = [
-        ("room", crate::verify::shapes::room_with_walls_running_past()),
-        ("crossing quads", fixtures::crossing_quads()),
-        ("wall inside floor triangle", fixtures::wall_inside_floor_triangle()),
-        ("10 thin", fixtures::thin_crossing(10)),
+        ("room", crate::verify::shapes::room_with_walls_running_past(), 0),
+        ("crossing quads", fixtures::crossing_quads(), 0),
+        ("wall inside floor triangle", fixtures::wall_inside_floor_triangle(), 0),
+        ("10 thin", fixtures::thin_crossing(10), 0),
+        ("20 thin", fixtures::thin_crossing(20), 169),
     ];
-    for (name, mesh) in cases {
+    for (name, mesh, left_uncut) in cases {
         let input = smallest_angle_deg(&mesh);
         let (out, r) = clean_mesh(&mesh, &cut_params()).unwrap();
         let output = smallest_angle_deg(&out);
@@ -747,9 +753,16 @@ fn the_cut_leaves_no_triangle_under_one_degree() {
         );
         assert!(r.triangles_cut > 0, "{name}");
         assert!(output >= input.min(1.0), "{name}: {input}° -> {output}°\n{}", r.summary());
-        assert_eq!(r.cut_needles_left, 0, "{name}");
-        if name != "10 thin" {
-            assert_eq!(r.non_manifold_edges, 0, "{name}");
+        assert!(r.cut_min_angle_deg.unwrap() >= 1.0, "{name}\n{}", r.summary());
+        assert_eq!((r.cut_needles_left, r.non_manifold_edges), (0, 0), "{name}");
+        // Each thin triangle is a surface of its own: surface pairs are triangle pairs.
+        let skipped = r.cut_surface_pairs_left_uncut + r.cut_triangle_pairs_left_uncut;
+        assert_eq!(skipped, left_uncut, "{name}\n{}", r.summary());
+        let uncut: usize = r.cut_left_uncut.iter().map(|u| u.triangle_pairs).sum();
+        assert_eq!(uncut, left_uncut, "{name}");
+        if name == "20 thin" {
+            assert_eq!(r.crossing_pairs + uncut, 20 * 19 / 2);
+            assert!(r.summary().contains("paint × paint (169 triangle pairs)"), "{}", r.summary());
         }
     }
 }
