@@ -342,8 +342,8 @@ struct CleanArgs {
     #[arg(long)]
     cut_intersections: bool,
     /// With --cut-intersections: cut every crossing, also those whose cut
-    /// leaves triangles under 1° (by default those pairs of surfaces are left
-    /// uncut and listed in the report).
+    /// leaves triangles under 1° that cannot be repaired (by default those
+    /// crossings are left uncut and listed in the report).
     #[arg(long, requires = "cut_intersections")]
     cut_every_crossing: bool,
     /// Keep one triangle per winding of a doubled sheet (two-sided surfaces).

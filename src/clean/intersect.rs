@@ -60,9 +60,10 @@
 //!    point on such an edge, and one too short for a point the weld would
 //!    keep is collapsed (the dining room's cut left 430 such edges; none now).
 //!
-//! Every triangle it changes records the pairs of surfaces whose crossing
-//! changed it, or changed its region ([`CutMemo::cut_by`]); the clean skips
-//! those pairs ([`CutMemo::skip`]) when it cannot repair the needles they made.
+//! Every triangle it changes records the crossings (pairs of triangles, and
+//! their surfaces) that changed it or its region ([`CutMemo::cut_by`]); the
+//! clean leaves crossings uncut ([`CutMemo::skip`]) when it cannot repair
+//! the needles they made.
 //!
 //! Limits: a segment is straight in each triangle, so curved intersections
 //! are cut as polylines at the tessellation's resolution. A region's outline,
@@ -85,8 +86,8 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 pub(crate) struct CutOutcome {
     /// Pairs of triangles found crossing.
     pub pairs: usize,
-    /// Crossing pairs left uncut because their surfaces are in
-    /// [`CutMemo::skip`], counted per pair of the two surfaces' materials.
+    /// Crossing pairs left uncut because they are in [`CutMemo::skip`],
+    /// counted per pair of the two triangles' materials.
     pub skipped: BTreeMap<(u16, u16), usize>,
     /// Pieces of intersection lines inserted (after merging, before refinement).
     pub pieces: usize,
@@ -348,7 +349,7 @@ pub(crate) fn cut_intersections(work: &mut Work, tol: &CutTolerances, memo: &mut
     // Constraints per triangle, and the points each edge takes.
     let mut constraints: BTreeMap<u32, Vec<Constraint>> = BTreeMap::new();
     let mut edge_points: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
-    // The surface pairs whose crossing changed each triangle, and each edge's points.
+    // The crossings that changed each triangle, and those that put each edge's points.
     let mut causes: Vec<(u32, Crossing)> = Vec::new();
     let mut edge_causes: HashMap<(u32, u32), Vec<Crossing>> = HashMap::new();
     let mut seams: Vec<(u32, u32)> = Vec::new();

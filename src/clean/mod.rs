@@ -32,11 +32,11 @@
 //! The cut's triangles under 1° are repaired after it ([`needles`]). Where
 //! the repair cannot raise them (a chair's tube crossing another at a
 //! grazing angle, a cup's foot sunk 0.75 mm into a table), the clean runs
-//! again, up to [`MAX_CUT_RETRIES`] times, leaving the crossings of those
-//! pairs of surfaces (edge-connected patches of one material) uncut: a
-//! millimetre of overlap leaks no light a vertex can see, and a needle
-//! draws a streak. The report lists them per pair of materials;
-//! `cut_every_crossing` cuts them anyway.
+//! again, up to [`MAX_CUT_RETRIES`] times, leaving their crossings uncut
+//! (the pairs of triangles first, then all crossings of their surfaces,
+//! edge-connected patches of one material): a millimetre of overlap leaks
+//! no light a vertex can see, and a needle draws a streak. The report lists
+//! them per pair of materials; `cut_every_crossing` cuts them anyway.
 //!
 //! A step can enable another that ran before it (a zip makes two patches overlap,
 //! a weld lets an edge flip), so the whole pipeline repeats until a round repairs
@@ -272,13 +272,14 @@ pub fn clean_mesh_timed(mesh: &Mesh, params: &CleanParams) -> Result<(Mesh, Clea
     // Crossings whose cut leaves triangles under the needle angle that the
     // repair cannot raise are left uncut: the clean runs again without them.
     let mut skip = intersect::Skips::default();
+    let input_corners = params.cut_intersections.then(|| InputCorners::of(mesh));
     let mut all_times = StepTimes::default();
     let mut retries = 0;
     loop {
         let mut memo = intersect::CutMemo::skipping(skip.clone());
         let (round, mut report, times) = clean_rounds(mesh, params, &mut memo);
         all_times.absorb(&times);
-        let made = params.cut_intersections.then(|| cut_made(mesh, &round, &memo, retries));
+        let made = input_corners.as_ref().map(|corners| cut_made(mesh, corners, &round, &memo, retries));
         let more = made.as_ref().map_or(intersect::Skips::default(), |m| m.causes.clone());
         let nothing_more = more.triangles.is_subset(&skip.triangles) && more.surfaces.is_subset(&skip.surfaces);
         if nothing_more || retries == MAX_CUT_RETRIES || params.cut_every_crossing {
@@ -342,10 +343,28 @@ struct CutMade {
     causes: intersect::Skips,
 }
 
-fn cut_made(input: &Mesh, round: &Round, memo: &intersect::CutMemo, retry: usize) -> CutMade {
-    let bits = |p: glam::Vec3| p.to_array().map(f32::to_bits);
-    let input_keys: HashSet<[[u32; 3]; 3]> = (0..input.triangle_count()).map(|t| corner_key(input.triangle_positions(t))).collect();
-    let input_points: HashSet<[u32; 3]> = input.positions.iter().map(|&p| bits(p)).collect();
+/// The input's triangles (by corner positions) and positions (by bits):
+/// what the cut's check compares the output with, the same every retry.
+struct InputCorners {
+    triangles: HashSet<[[u32; 3]; 3]>,
+    points: HashSet<[u32; 3]>,
+}
+
+impl InputCorners {
+    fn of(input: &Mesh) -> Self {
+        InputCorners {
+            triangles: (0..input.triangle_count()).map(|t| corner_key(input.triangle_positions(t))).collect(),
+            points: input.positions.iter().map(|&p| bits(p)).collect(),
+        }
+    }
+}
+
+/// A position's bits: the key of an exact position.
+fn bits(p: glam::Vec3) -> [u32; 3] {
+    p.to_array().map(f32::to_bits)
+}
+
+fn cut_made(input: &Mesh, input_corners: &InputCorners, round: &Round, memo: &intersect::CutMemo, retry: usize) -> CutMade {
     let mesh = &round.mesh;
     // The triangles at each position, for needles no crossing touched.
     let mut around: HashMap<[u32; 3], Vec<u32>> = HashMap::new();
@@ -357,8 +376,8 @@ fn cut_made(input: &Mesh, round: &Round, memo: &intersect::CutMemo, retry: usize
     for t in 0..mesh.triangle_count() {
         let corners = mesh.triangle_positions(t);
         let crossed = memo.causes(round.origin[t], false).next().is_some();
-        let moved = corners.iter().any(|&p| !input_points.contains(&bits(p)));
-        if !(crossed || moved) || input_keys.contains(&corner_key(corners)) {
+        let moved = corners.iter().any(|&p| !input_corners.points.contains(&bits(p)));
+        if !(crossed || moved) || input_corners.triangles.contains(&corner_key(corners)) {
             continue;
         }
         let angle = work::min_angle(corners.map(|p| p.as_dvec3()));

@@ -130,16 +130,19 @@ pub struct CleanReport {
     pub cut_edges_collapsed: usize,
     /// Triangles the cut made under 1° that were repaired after it (a short
     /// side collapsed, a cap snapped, points inserted with flips around
-    /// them, a crease flipped; see `clean::needles`), and those left in the
-    /// output (with `cut_every_crossing`; otherwise their crossings are left uncut).
+    /// them, a crease flipped; see `clean::needles`), and the needles left
+    /// in the output: triangles the cut made under 1° and thinner than the
+    /// input triangle they came from (after the retries' cap, or with
+    /// `cut_every_crossing`; otherwise their crossings are left uncut).
     pub cut_needles_repaired: usize,
     pub cut_needles_left: usize,
     /// Collapses (sides and caps), and points added (inserted or splitting an edge), by that repair.
     pub cut_needle_collapses: usize,
     pub cut_needle_points: usize,
     /// Smallest angle (degrees) of the output's triangles that the cut made
-    /// (changed from the input, where a crossing changed it), and of the
-    /// triangles they replaced (`None` when nothing was cut).
+    /// (changed from the input, where a crossing changed it or with a corner
+    /// at a new point), and of the triangles they replaced (`None` when
+    /// nothing was cut).
     pub cut_min_angle_deg: Option<f32>,
     pub cut_replaced_min_angle_deg: Option<f32>,
     /// Slivers before refinement minus slivers after.
