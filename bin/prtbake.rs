@@ -441,6 +441,9 @@ struct SunArgs {
     /// Trace without the shadow cache (for measurement; the masks are the same).
     #[arg(long)]
     no_shadow_cache: bool,
+    /// Trace one ray at a time instead of in packets of nearby points (for measurement; the masks are the same).
+    #[arg(long)]
+    no_packets: bool,
     #[command(flatten)]
     refine: RefineArgs,
     /// Texel mode: also a sun bit per texel of a lightmap atlas at this size in world units
@@ -978,6 +981,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
             LoopOrderArg::PointOuter => prtbake::bake::LoopOrder::PointOuter,
         },
         shadow_cache: !a.no_shadow_cache,
+        packets: !a.no_packets,
         quiet: a.quiet || a.json,
     };
     params.check()?;

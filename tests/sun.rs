@@ -104,7 +104,8 @@ fn plane_and_sphere_bits_match_the_analytic_shadow() {
     assert!(banded * 20 < checked, "{banded} in the band, {checked} checked");
 }
 
-/// Same masks for 1 and 2 threads, both loop orders, with and without the shadow cache.
+/// Same masks for 1 and 2 threads, both loop orders, with and without the
+/// shadow cache, with and without packets.
 #[test]
 fn masks_do_not_depend_on_threads_or_loop_order() {
     let mesh = plane_and_sphere();
@@ -116,19 +117,22 @@ fn masks_do_not_depend_on_threads_or_loop_order() {
             Some(Vec3::new(a.cos(), 0.3 + 0.02 * k as f32, a.sin()))
         })
         .collect();
-    let bake = |threads: usize, loop_order, shadow_cache| {
+    let bake = |threads: usize, loop_order, shadow_cache, packets| {
         rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| {
-            let params = SunParams { loop_order, shadow_cache, ..SunParams::default() };
+            let params = SunParams { loop_order, shadow_cache, packets, ..SunParams::default() };
             bake_sun_masks(&mesh, &scene, &surfaces, &suns, &params).unwrap()
         })
     };
-    let one = bake(1, LoopOrder::StepOuter, true);
-    let two = bake(2, LoopOrder::StepOuter, true);
-    let point_outer = bake(2, LoopOrder::PointOuter, true);
-    let uncached = bake(2, LoopOrder::StepOuter, false);
+    let one = bake(1, LoopOrder::StepOuter, true, true);
+    let two = bake(2, LoopOrder::StepOuter, true, true);
+    let point_outer = bake(2, LoopOrder::PointOuter, true, true);
+    let uncached = bake(2, LoopOrder::StepOuter, false, false);
+    let lone_rays = bake(2, LoopOrder::StepOuter, true, false);
     assert_eq!(one.masks, two.masks);
     assert_eq!(one.masks, point_outer.masks);
     assert_eq!(one.masks, uncached.masks);
+    assert_eq!(one.masks, lone_rays.masks);
+    assert_eq!(one.stats.rays, lone_rays.stats.rays);
     assert_eq!(one.stats.rays, point_outer.stats.rays);
     assert_eq!(one.stats.lit_vertices, two.stats.lit_vertices);
 }

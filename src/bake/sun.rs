@@ -84,6 +84,11 @@ pub struct SunParams {
     /// open mode; the masks are the same either way; not stored).
     #[serde(skip)]
     pub shadow_cache: bool,
+    /// Step-outer, open mode: trace each step's rays in packets of nearby
+    /// points ([`Scene::occluded_parallel`], which keeps the shadow cache;
+    /// the masks are the same either way; not stored).
+    #[serde(skip)]
+    pub packets: bool,
     /// No progress line on stderr (never stored).
     #[serde(skip)]
     pub quiet: bool,
@@ -99,6 +104,7 @@ impl Default for SunParams {
             keep_outside_sides: false,
             loop_order: LoopOrder::StepOuter,
             shadow_cache: true,
+            packets: true,
             quiet: true,
         }
     }
@@ -402,6 +408,7 @@ impl<'a> SunPlan<'a> {
         // Vote: each receiver sums its samples' weights in adjacency order.
         let receivers = Receivers::vertices(mesh);
         let adjacency = Adjacency::build(&receivers, &self.layout.triangles);
+        let weights = self.sample_weights();
         let vertex_count = receivers.count();
         let mut masks = vec![0u32; vertex_count * words];
         let mut split = vec![0u32; vertex_count * words];
@@ -415,7 +422,7 @@ impl<'a> SunPlan<'a> {
                 let mut without = 0u64;
                 for (local, (vertex_words, split_words)) in out.chunks_exact_mut(words).zip(split_out.chunks_exact_mut(words)).enumerate() {
                     let v = first + local;
-                    let total = self.vote(v, &adjacency, sample_bits, &mut lit_weight);
+                    let total = self.vote(v, &adjacency, &weights, sample_bits, &mut lit_weight);
                     if total <= 0.0 {
                         without += 1;
                         continue;
@@ -460,20 +467,31 @@ impl<'a> SunPlan<'a> {
         sample_barycentrics(self.mesh, self.params, &self.layout, item, s)
     }
 
+    /// Each sample's weights toward its triangle's three corners, in sample order.
+    fn sample_weights(&self) -> Vec<[f32; 3]> {
+        let layout = &self.layout;
+        (0..layout.triangles.len())
+            .into_par_iter()
+            .flat_map_iter(|item| {
+                let (count, area) = (layout.counts[item], triangle_area(self.mesh, layout.triangles[item]));
+                (0..count).map(move |s| point_weights(self.barycentrics(item, s), area, count))
+            })
+            .collect()
+    }
+
     /// Sums, for vertex `v`, the weight of its samples that see the sun at
     /// each step into `lit_weight` (overwritten); returns the total weight.
     /// The weights are the transfer's (hat value times the area a sample
     /// stands for), so the vote estimates whether the sunlit part of the
     /// hat-weighted one-ring is a majority, whatever the sample counts.
-    fn vote(&self, v: usize, adjacency: &Adjacency, sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
+    fn vote(&self, v: usize, adjacency: &Adjacency, weights: &[[f32; 3]], sample_bits: &[u32], lit_weight: &mut [f32]) -> f32 {
         lit_weight.fill(0.0);
         let mut total = 0.0f32;
         for &(item, corner) in adjacency.of(v) {
             let item = item as usize;
             let first = self.layout.first_sample[item] as usize;
-            let (count, area) = (self.layout.counts[item], triangle_area(self.mesh, self.layout.triangles[item]));
-            for s in 0..count {
-                let w = point_weights(self.barycentrics(item, s), area, count)[corner as usize];
+            for s in 0..self.layout.counts[item] {
+                let w = weights[first + s as usize][corner as usize];
                 total += w;
                 let bits = &sample_bits[(first + s as usize) * self.words..][..self.words];
                 for (word_index, &word) in bits.iter().enumerate() {
@@ -532,14 +550,13 @@ impl Tracer<'_> {
         let mut hint = u32::MAX;
         match self.test.params.loop_order {
             LoopOrder::StepOuter => {
+                let mut scratch = SunScratch::new(points.len());
+                let mut lit = vec![false; points.len()];
                 for (k, sun) in self.suns.iter().enumerate() {
                     let Some(s) = *sun else { continue };
-                    for (p, point) in points.iter().enumerate() {
-                        let (lit, traced) = self.test.sees_sun(point, s, &mut hint, &mut sides[p]);
-                        rays += traced as u64;
-                        if lit {
-                            out[p * words + k / 32] |= 1 << (k % 32);
-                        }
+                    rays += self.test.sees_sun_each(&points, s, &mut sides, &mut scratch, &mut lit);
+                    for (p, _) in lit.iter().enumerate().filter(|(_, &l)| l) {
+                        out[p * words + k / 32] |= 1 << (k % 32);
                     }
                 }
             }
@@ -569,7 +586,82 @@ pub(crate) struct SunTest<'a> {
     pub(crate) params: &'a SunParams,
 }
 
+/// The shadow cache and buffers of [`SunTest::sees_sun_each`], kept from
+/// step to step over one set of points.
+pub(crate) struct SunScratch {
+    /// Per point, the leaf triangle that last blocked its ray (`u32::MAX` = none).
+    point_hints: Vec<u32>,
+    /// The leaf that blocked the previous ray (one ray at a time), or the
+    /// last blocker found (packets: the hint of points that have none).
+    lone_hint: u32,
+    facing: Vec<u32>,
+    origins: Vec<Vec3>,
+    hints: Vec<u32>,
+    blocked: Vec<bool>,
+}
+
+impl SunScratch {
+    pub(crate) fn new(points: usize) -> SunScratch {
+        SunScratch {
+            point_hints: vec![u32::MAX; points],
+            lone_hint: u32::MAX,
+            facing: Vec::new(),
+            origins: Vec::new(),
+            hints: Vec::new(),
+            blocked: Vec::new(),
+        }
+    }
+}
+
 impl SunTest<'_> {
+    /// [`SunTest::sees_sun`] of every point toward unit `s`, into `lit`
+    /// (same length); returns the rays traced. `sides` holds each point's
+    /// verdicts (window mode). Open mode with packets on traces the facing
+    /// points' rays as packets of consecutive points (a task's points lie
+    /// close together, [`Scene::occluded_parallel`]); each ray's hint is
+    /// the triangle that blocked its point at an earlier step, else the
+    /// last blocker found in the task. The answers are the same as one ray
+    /// at a time.
+    pub(crate) fn sees_sun_each(
+        &self,
+        points: &[Point],
+        s: Vec3,
+        sides: &mut [[Option<bool>; 2]],
+        scratch: &mut SunScratch,
+        lit: &mut [bool],
+    ) -> u64 {
+        assert!(points.len() == lit.len() && points.len() == scratch.point_hints.len(), "one answer and one hint per point");
+        if self.params.mode != Mode::Open || !self.params.packets || !self.params.shadow_cache {
+            let mut rays = 0u64;
+            for (p, point) in points.iter().enumerate() {
+                let (sees, traced) = self.sees_sun(point, s, &mut scratch.lone_hint, &mut sides[p]);
+                lit[p] = sees;
+                rays += u64::from(traced);
+            }
+            return rays;
+        }
+        let SunScratch { point_hints, facing, origins, hints, blocked, lone_hint } = scratch;
+        facing.clear();
+        origins.clear();
+        hints.clear();
+        lit.fill(false);
+        for (p, point) in points.iter().enumerate().filter(|(_, point)| point.normal.dot(s) > 0.0) {
+            facing.push(p as u32);
+            origins.push(self.scene.offset_origin(point.position, point.face_normal, s));
+            hints.push(if point_hints[p] == u32::MAX { *lone_hint } else { point_hints[p] });
+        }
+        blocked.resize(origins.len(), false);
+        self.scene.occluded_parallel(origins, s, f32::INFINITY, hints, blocked);
+        for ((&p, &b), &h) in facing.iter().zip(blocked.iter()).zip(hints.iter()) {
+            lit[p as usize] = !b;
+            point_hints[p as usize] = h;
+            if h != u32::MAX {
+                *lone_hint = h;
+            }
+        }
+        facing.len() as u64
+    }
+
     /// Whether `point` sees the sun toward unit `s`, and the rays traced.
     /// `sides` holds the point's verdicts on its sides (window mode).
     #[inline]

@@ -21,7 +21,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::progress::Progress;
-use super::sun::{checked_suns, Point, SunParams, SunTest};
+use super::sun::{checked_suns, Point, SunParams, SunScratch, SunTest};
 use super::transfer::texels::TexelPoints;
 use super::{BakeError, DirectionPattern, Surfaces};
 use crate::atlas::coverage::Coverage;
@@ -143,17 +143,15 @@ pub fn bake_texel_sun_masks(
             owner.iter().zip(&weight).for_each(|(&o, &w)| total[o as usize] += w);
             let mut sides = vec![[None; 2]; task_points.len()];
             let mut lit = vec![0.0f32; texels.len()];
-            let mut hint = u32::MAX;
             let mut rays = 0u64;
+            let mut scratch = SunScratch::new(task_points.len());
+            let mut sees = vec![false; task_points.len()];
             for (k, sun) in suns.iter().enumerate() {
                 let Some(s) = *sun else { continue };
                 lit.fill(0.0);
-                for (p, point) in task_points.iter().enumerate() {
-                    let (sees, traced) = test.sees_sun(point, s, &mut hint, &mut sides[p]);
-                    rays += traced as u64;
-                    if sees {
-                        lit[owner[p] as usize] += weight[p];
-                    }
+                rays += test.sees_sun_each(&task_points, s, &mut sides, &mut scratch, &mut sees);
+                for (p, _) in sees.iter().enumerate().filter(|(_, &l)| l) {
+                    lit[owner[p] as usize] += weight[p];
                 }
                 for (local, (&l, &t)) in lit.iter().zip(&total).enumerate() {
                     if t > 0.0 && 2.0 * l > t {

@@ -23,7 +23,7 @@ pub struct TransferKey {
 /// What a sun bake's masks and bundle depend on besides the mesh.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SunKey {
-    /// `loop_order`, `shadow_cache` and `quiet` never change the masks (not stored).
+    /// `loop_order`, `shadow_cache`, `packets` and `quiet` never change the masks (not stored).
     pub params: SunParams,
     pub window_patterns: Vec<String>,
     pub steps: u32,

@@ -88,6 +88,7 @@ impl Scene {
         // at the largest coordinate (64 ulps), so 1e-3 m and 1e4 m scenes behave alike.
         let ulp_floor = max_coordinate * f32::EPSILON * 64.0;
         let origin_offset = (diagonal * 1e-6).max(ulp_floor);
+        let boxes_nest = bvh8::boxes_nest(&nodes);
         let mut scene = Scene {
             nodes,
             traversal: if bvh8::avx2_available() { Traversal::Avx2 } else { Traversal::Portable },
@@ -95,6 +96,7 @@ impl Scene {
             leaf_triangles,
             leaf_to_mesh,
             fans,
+            boxes_nest,
             face_normals,
             diagonal,
             max_coordinate,

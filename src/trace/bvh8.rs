@@ -53,7 +53,7 @@ pub fn leaf_range(child: u32) -> (u32, u32) {
 }
 
 #[inline(always)]
-fn is_leaf(child: u32) -> bool {
+pub(super) fn is_leaf(child: u32) -> bool {
     child & LEAF_BIT != 0
 }
 
@@ -139,6 +139,24 @@ impl Bvh8 {
     }
 }
 
+/// True when every inner child's boxes lie inside the box its parent holds
+/// for it: what lets a packet walk test a leaf's box alone for the lone
+/// walk's answer ([`super::packets`]). Binary nodes' boxes are unions of
+/// their children's, so a collapsed tree always nests; the build checks it.
+pub fn boxes_nest(nodes: &[Node8]) -> bool {
+    nodes.iter().all(|node| {
+        (0..WIDTH).filter(|&slot| node.children[slot] != EMPTY && !is_leaf(node.children[slot])).all(|slot| {
+            let child = &nodes[node.children[slot] as usize];
+            (0..WIDTH).filter(|&k| child.children[k] != EMPTY).all(|k| {
+                (0..3).all(|axis| {
+                    node.bounds[2 * axis][slot] <= child.bounds[2 * axis][k]
+                        && child.bounds[2 * axis + 1][k] <= node.bounds[2 * axis + 1][slot]
+                })
+            })
+        })
+    })
+}
+
 /// A ray prepared for box tests.
 #[derive(Clone, Copy, Debug)]
 pub struct RayBoxes {
@@ -163,7 +181,7 @@ impl RayBoxes {
 /// Float rounding in the slab test can put a box's exit a little before a
 /// triangle hit the triangle test accepts (Ize, "Robust BVH ray traversal",
 /// 2013): stretching the exit distance by 1 + 2γ₃ makes the test conservative.
-const EXIT_STRETCH: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
+pub(super) const EXIT_STRETCH: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON / 2.0) / (1.0 - 3.0 * f32::EPSILON / 2.0);
 
 /// Tests one node's eight boxes: returns the bit mask of children hit within
 /// `[t_min, t_max]` and writes each child's entry distance to `entry`.
@@ -342,7 +360,7 @@ impl Walk {
         } else {
             let node = &nodes[self.next as usize];
             #[cfg(test)]
-            super::queries::work::add(1);
+            super::queries::work::add_node();
             let entry = &mut self.entry;
             let mut mask = T::test(node, ray, t_min, self.t_max, entry);
             if mask != 0 {

@@ -2,14 +2,16 @@
 //! build collapsed into 8-wide nodes, leaf triangles in struct-of-arrays
 //! blocks, fans around points of high valence) and its queries — closest
 //! hit with barycentrics, facing and a deterministic tie-break, occlusion,
-//! one ray or a batch. It knows triangles and rays, nothing of light: the
-//! estimators in `bake`, `panel` and `sun` ask it where rays go.
+//! one ray or a batch, and occlusion of parallel rays in packets (the
+//! sun's). It knows triangles and rays, nothing of light: the estimators in
+//! `bake`, `panel` and `sun` ask it where rays go.
 
 pub mod build;
 pub mod bvh8;
 pub mod fans;
 pub mod hugepages;
 pub mod leaf_blocks;
+pub mod packets;
 pub mod queries;
 pub mod sah;
 pub mod scene;

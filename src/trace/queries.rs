@@ -412,14 +412,27 @@ pub(crate) mod work {
     use std::cell::Cell;
 
     thread_local!(static DONE: Cell<u64> = const { Cell::new(0) });
+    thread_local!(static NODES: Cell<u64> = const { Cell::new(0) });
 
     #[inline(always)]
     pub(crate) fn add(n: u64) {
         DONE.with(|done| done.set(done.get() + n));
     }
 
+    /// One box node tested (counted in the work too).
+    #[inline(always)]
+    pub(crate) fn add_node() {
+        add(1);
+        NODES.with(|nodes| nodes.set(nodes.get() + 1));
+    }
+
     /// The work done since the last call, on this thread.
     pub(crate) fn take() -> u64 {
         DONE.with(|done| done.replace(0))
+    }
+
+    /// The box nodes tested since the last call, on this thread.
+    pub(crate) fn take_nodes() -> u64 {
+        NODES.with(|nodes| nodes.replace(0))
     }
 }

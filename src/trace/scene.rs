@@ -134,6 +134,9 @@ pub struct Scene {
     pub(super) leaf_to_mesh: Vec<u32>,
     /// The triangles around points of very high valence, traced apart ([`super::fans`]).
     pub(super) fans: Option<Fans>,
+    /// Every node's child boxes lie inside its own ([`bvh8::boxes_nest`]):
+    /// parallel rays may then walk as packets ([`super::packets`]).
+    pub(super) boxes_nest: bool,
     /// Unit geometric normals per mesh triangle (zero for degenerate ones).
     pub(super) face_normals: Vec<Vec3>,
     /// Bounding-box diagonal of the mesh: every epsilon is relative to it.
