@@ -207,7 +207,7 @@ mod tests {
     /// lit when most of it is (its points' vote), checked where the lit
     /// share is clearly above or below one half; its stored lit share is
     /// the analytic one within what 16 points resolve. The same bits on
-    /// one thread and on two.
+    /// one thread and on two, and in packets or one ray at a time.
     #[test]
     fn texel_sun_bits_match_an_analytic_shadow_edges_included() {
         let h = 0.3f32;
@@ -218,12 +218,14 @@ mod tests {
         let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
         let suns = [Some(Vec3::new(0.35, 1.0, -0.2).normalize()), Some(Vec3::new(-0.6, 0.8, 0.1).normalize()), None];
         let params = SunParams { mode: Mode::Open, seed: 3, ..SunParams::default() };
-        let run = |threads: usize| {
+        let run = |threads: usize, packets: bool| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let params = SunParams { packets, ..params };
             pool.install(|| bake_texel_sun_masks(&mesh, &scene, &surfaces, &atlas, 16, DirectionPattern::Sobol, &suns, &params).unwrap())
         };
-        let (one, two) = (run(1), run(2));
+        let (one, two, lone_rays) = (run(1, true), run(2, true), run(2, false));
         assert_eq!(one, TexelSunMasks { stats: TexelSunStats { seconds: one.stats.seconds, ..two.stats.clone() }, ..two.clone() });
+        assert_eq!(one, TexelSunMasks { stats: TexelSunStats { seconds: one.stats.seconds, ..lone_rays.stats.clone() }, ..lone_rays });
         let coverage = Coverage::of(&atlas);
         assert_eq!(coverage.texels, one.texels);
         // The world position of an atlas point of floor triangle t.
