@@ -23,6 +23,7 @@ use super::interior::Interior;
 use super::layout::{PanelLayout, NO_TRIANGLE};
 use crate::brdf::Brdf;
 use crate::sampling::{hash_seed, sample_2d, tangent_frame, DirectionPattern};
+use crate::trace::RayQuery;
 
 /// The most samples a texel can take (one Sobol stream: 2^16 points).
 pub const MAX_SAMPLES: u32 = crate::sampling::MAX_RAYS_PER_POINT;
@@ -171,14 +172,30 @@ impl<'a> PanelGather<'a> {
         let sun = self.env.sun.as_ref();
         let sun_radiance = sun.map(|s| s.radiance());
         let sun_pdf = sun.map_or(0.0, |s| (1.0 / s.solid_angle()) as f32);
-        for k in range {
-            let u = match self.options.pattern {
-                DirectionPattern::Sobol => sobol_burley::sample_4d(k, 0, seed),
-                DirectionPattern::Random => {
-                    let (a, b) = (sample_2d(DirectionPattern::Random, k, 0, seed), sample_2d(DirectionPattern::Random, k, 1, seed));
-                    [a.0, a.1, b.0, b.1]
-                }
-            };
+        let draw = |k: u32| match self.options.pattern {
+            DirectionPattern::Sobol => sobol_burley::sample_4d(k, 0, seed),
+            DirectionPattern::Random => {
+                let (a, b) = (sample_2d(DirectionPattern::Random, k, 0, seed), sample_2d(DirectionPattern::Random, k, 1, seed));
+                [a.0, a.1, b.0, b.1]
+            }
+        };
+        // The BRDF's directions of every sample first, their first rays
+        // traced as one batch (the scene's batch mode: interleaved where
+        // the tree waits on memory), the same hits as one at a time.
+        let brdf_samples: Vec<_> = range
+            .clone()
+            .map(|k| {
+                let u = draw(k);
+                self.brdf.sample(wo_local, [u[0], u[1]])
+            })
+            .collect();
+        let first_rays: Vec<RayQuery> =
+            brdf_samples.iter().flatten().map(|sample| self.interior.first_ray(p, face, to_world(sample.wi))).collect();
+        let mut first_hits = vec![None; first_rays.len()];
+        self.interior.scene.closest_hits(&first_rays, &mut first_hits);
+        let mut first = first_rays.iter().zip(first_hits);
+        for (k, brdf_sample) in range.zip(brdf_samples) {
+            let u = draw(k);
             let mut value = [0.0f32; 3];
             let mut through_window = [0.0f32; 3];
             let mut from_sky = [0.0f32; 3];
@@ -194,11 +211,12 @@ impl<'a> PanelGather<'a> {
                 }
             };
             // Strategy 1: a direction from the BRDF.
-            if let Some(sample) = self.brdf.sample(wo_local, [u[0], u[1]]) {
-                let wi = to_world(sample.wi);
+            if let Some(sample) = brdf_sample {
+                let (ray, hit) = first.next().expect("one first ray per BRDF sample");
+                let wi = ray.direction;
                 let f = self.brdf.eval(sample.wi, wo_local);
                 let weight = f.map(|f| f * sample.wi.z / sample.pdf);
-                let arrival = self.interior.trace(self.env, p, face, wi);
+                let arrival = self.interior.trace_from(self.env, ray, hit);
                 sums.rays += 1;
                 add(weight, arrival.radiance, arrival.through_window, arrival.sky_transmittance > 0.0);
                 if let (Some(sun), Some(l_sun)) = (sun, sun_radiance) {

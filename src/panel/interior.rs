@@ -15,7 +15,7 @@ use glam::Vec3;
 use super::environment::{Environment, Sun};
 use crate::bake::Surfaces;
 use crate::mesh::Mesh;
-use crate::trace::Scene;
+use crate::trace::{Hit, RayQuery, Scene};
 
 /// Panes of glass a ray may pass through before it counts as blocked
 /// (windscreen + a side window + a far window is three).
@@ -66,10 +66,23 @@ impl Interior<'_> {
     /// Follows a ray from `origin` (on a surface of geometric normal
     /// `face_normal`) along unit `dir` through up to [`MAX_GLASS_LAYERS`] windows.
     pub fn trace(&self, env: &Environment, origin: Vec3, face_normal: Vec3, dir: Vec3) -> Arrival {
-        let mut from = self.scene.offset_origin(origin, face_normal, dir);
+        let first = self.first_ray(origin, face_normal, dir);
+        self.trace_from(env, &first, self.scene.closest_hit(first.origin, dir, first.t_max))
+    }
+
+    /// The first ray of [`Interior::trace`]: from `origin` pushed off its surface, along unit `dir`.
+    pub fn first_ray(&self, origin: Vec3, face_normal: Vec3, dir: Vec3) -> RayQuery {
+        RayQuery { origin: self.scene.offset_origin(origin, face_normal, dir), direction: dir, t_max: f32::INFINITY }
+    }
+
+    /// [`Interior::trace`] once its first ray (`first`, from [`Interior::first_ray`])
+    /// has been traced, in a batch or alone, to `first_hit`.
+    pub fn trace_from(&self, env: &Environment, first: &RayQuery, first_hit: Option<Hit>) -> Arrival {
+        let (mut from, dir) = (first.origin, first.direction);
+        let mut next_hit = first_hit;
         let mut transmittance = 1.0f32;
         for layer in 0..=MAX_GLASS_LAYERS {
-            let Some(hit) = self.scene.closest_hit(from, dir, f32::INFINITY) else {
+            let Some(hit) = next_hit else {
                 let radiance = env.radiance(dir).map(|c| c * transmittance);
                 return Arrival { radiance, sky_transmittance: transmittance, through_window: layer > 0 };
             };
@@ -82,6 +95,7 @@ impl Interior<'_> {
                         break;
                     }
                     from = self.scene.offset_origin(point, normal, dir);
+                    next_hit = self.scene.closest_hit(from, dir, f32::INFINITY);
                 }
                 Some(_) => break,
                 None if hit.back_face && !self.two_sided => {
