@@ -182,20 +182,14 @@ impl<'a> PanelGather<'a> {
         // The BRDF's directions of every sample first, their first rays
         // traced as one batch (the scene's batch mode: interleaved where
         // the tree waits on memory), the same hits as one at a time.
-        let brdf_samples: Vec<_> = range
-            .clone()
-            .map(|k| {
-                let u = draw(k);
-                self.brdf.sample(wo_local, [u[0], u[1]])
-            })
-            .collect();
+        let draws: Vec<[f32; 4]> = range.map(draw).collect();
+        let brdf_samples: Vec<_> = draws.iter().map(|u| self.brdf.sample(wo_local, [u[0], u[1]])).collect();
         let first_rays: Vec<RayQuery> =
             brdf_samples.iter().flatten().map(|sample| self.interior.first_ray(p, face, to_world(sample.wi))).collect();
         let mut first_hits = vec![None; first_rays.len()];
         self.interior.scene.closest_hits(&first_rays, &mut first_hits);
         let mut first = first_rays.iter().zip(first_hits);
-        for (k, brdf_sample) in range.zip(brdf_samples) {
-            let u = draw(k);
+        for (u, brdf_sample) in draws.into_iter().zip(brdf_samples) {
             let mut value = [0.0f32; 3];
             let mut through_window = [0.0f32; 3];
             let mut from_sky = [0.0f32; 3];

@@ -157,32 +157,14 @@ impl LeafTest for AvxLeaf {
         // inside `block`.
         unsafe {
             let p = block.as_ptr();
-            let row = |r: usize| _mm256_loadu_ps(p.add(r * n));
+            let triangles = std::array::from_fn(|r| _mm256_loadu_ps(p.add(r * n)));
             let splat = _mm256_set1_ps;
-            let (ox, oy, oz) = (splat(ray.origin.x), splat(ray.origin.y), splat(ray.origin.z));
-            let (dx, dy, dz) = (splat(ray.direction.x), splat(ray.direction.y), splat(ray.direction.z));
-            let (cx, cy, cz) = (_mm256_sub_ps(row(0), ox), _mm256_sub_ps(row(1), oy), _mm256_sub_ps(row(2), oz));
-            let cross = |a: __m256, b: __m256, c: __m256, d: __m256| _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d));
-            let (rx, ry, rz) = (cross(dy, cz, dz, cy), cross(dz, cx, dx, cz), cross(dx, cy, dy, cx));
-            let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
-                _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz))
-            };
-            let (ngx, ngy, ngz) = (row(9), row(10), row(11));
-            let den = dot(ngx, ngy, ngz, dx, dy, dz);
-            let inv = _mm256_div_ps(splat(1.0), den);
-            let u = _mm256_mul_ps(dot(rx, ry, rz, row(6), row(7), row(8)), inv);
-            let v = _mm256_mul_ps(dot(rx, ry, rz, row(3), row(4), row(5)), inv);
-            let w = _mm256_sub_ps(_mm256_sub_ps(splat(1.0), u), v);
-            let t = _mm256_mul_ps(dot(ngx, ngy, ngz, cx, cy, cz), inv);
-            let outside = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
-            // Predicates as Rust's operators: `!=` is true for NaN, the rest false.
-            let valid = _mm256_and_ps(
-                _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv, _mm256_setzero_ps()), _mm256_cmp_ps::<_CMP_GE_OQ>(t, splat(ray.tmin))),
-                _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t, splat(t_max)), _mm256_cmp_ps::<_CMP_LT_OQ>(t, splat(f32::INFINITY))),
-            );
+            let origin = [splat(ray.origin.x), splat(ray.origin.y), splat(ray.origin.z)];
+            let direction = [splat(ray.direction.x), splat(ray.direction.y), splat(ray.direction.z)];
+            let (mask, den, t) = moller_trumbore_lanes(&triangles, origin, direction, ray.tmin, t_max);
             let lanes = (1u32 << n) - 1;
             let mut hits = LeafHits {
-                mask: _mm256_movemask_ps(valid) as u32 & !outside & lanes,
+                mask: mask & lanes,
                 back: _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(den, _mm256_setzero_ps())) as u32 & lanes,
                 t: [0.0; MAX_LANES as usize],
             };
@@ -190,6 +172,48 @@ impl LeafTest for AvxLeaf {
             hits
         }
     }
+}
+
+/// Möller–Trumbore on eight lanes, each one triangle against one ray
+/// (eight triangles against a ray, or a triangle against eight rays):
+/// obvhs's operations in its order without fused multiply-add, so each
+/// lane gives `RtTriangle::intersect`'s bits. `triangles` holds the rows
+/// v0, e1, e2, ng (x, y, z each). Returns the mask of lanes hit within
+/// `[t_min, t_max]` at a finite distance, and each lane's determinant
+/// (negative: the back face) and distance. Only called from AVX2 code.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) unsafe fn moller_trumbore_lanes(
+    triangles: &[std::arch::x86_64::__m256; ROWS],
+    origin: [std::arch::x86_64::__m256; 3],
+    direction: [std::arch::x86_64::__m256; 3],
+    t_min: f32,
+    t_max: f32,
+) -> (u32, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    let row = |r: usize| triangles[r];
+    let splat = _mm256_set1_ps;
+    let ([ox, oy, oz], [dx, dy, dz]) = (origin, direction);
+    let (cx, cy, cz) = (_mm256_sub_ps(row(0), ox), _mm256_sub_ps(row(1), oy), _mm256_sub_ps(row(2), oz));
+    let cross = |a: __m256, b: __m256, c: __m256, d: __m256| _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d));
+    let (rx, ry, rz) = (cross(dy, cz, dz, cy), cross(dz, cx, dx, cz), cross(dx, cy, dy, cx));
+    let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz))
+    };
+    let (ngx, ngy, ngz) = (row(9), row(10), row(11));
+    let den = dot(ngx, ngy, ngz, dx, dy, dz);
+    let inv = _mm256_div_ps(splat(1.0), den);
+    let u = _mm256_mul_ps(dot(rx, ry, rz, row(6), row(7), row(8)), inv);
+    let v = _mm256_mul_ps(dot(rx, ry, rz, row(3), row(4), row(5)), inv);
+    let w = _mm256_sub_ps(_mm256_sub_ps(splat(1.0), u), v);
+    let t = _mm256_mul_ps(dot(ngx, ngy, ngz, cx, cy, cz), inv);
+    let outside = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
+    // Predicates as Rust's operators: `!=` is true for NaN, the rest false.
+    let valid = _mm256_and_ps(
+        _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv, _mm256_setzero_ps()), _mm256_cmp_ps::<_CMP_GE_OQ>(t, splat(t_min))),
+        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t, splat(t_max)), _mm256_cmp_ps::<_CMP_LT_OQ>(t, splat(f32::INFINITY))),
+    );
+    (_mm256_movemask_ps(valid) as u32 & !outside, den, t)
 }
 
 #[cfg(test)]

@@ -189,41 +189,21 @@ impl BeamTest for Avx2Beam {
     fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray, t_max: f32) -> u32 {
         use std::arch::x86_64::*;
         // SAFETY: as `test`; every load reads one aligned row of `origins`.
-        // The operations are `AvxLeaf`'s, in its order, with rays in the
-        // lanes instead of triangles: each lane gives `RtTriangle::intersect`'s bits.
-        let mut mask = 0;
-        for half in 0..PACKET / 8 {
-            unsafe {
-                let splat = _mm256_set1_ps;
-                let row = |axis: usize| _mm256_load_ps(origins.rows[axis].as_ptr().add(8 * half));
-                let (d, v0, e1, e2, ng) = (template.direction, triangle.v0, triangle.e1, triangle.e2, triangle.ng);
-                let (dx, dy, dz) = (splat(d.x), splat(d.y), splat(d.z));
-                let (cx, cy, cz) =
-                    (_mm256_sub_ps(splat(v0.x), row(0)), _mm256_sub_ps(splat(v0.y), row(1)), _mm256_sub_ps(splat(v0.z), row(2)));
-                let cross = |a: __m256, b: __m256, c: __m256, d: __m256| _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, d));
-                let (rx, ry, rz) = (cross(dy, cz, dz, cy), cross(dz, cx, dx, cz), cross(dx, cy, dy, cx));
-                let dot = |ax: __m256, ay: __m256, az: __m256, bx: __m256, by: __m256, bz: __m256| {
-                    _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz))
-                };
-                let (ngx, ngy, ngz) = (splat(ng.x), splat(ng.y), splat(ng.z));
-                let den = dot(ngx, ngy, ngz, dx, dy, dz);
-                let inv = _mm256_div_ps(splat(1.0), den);
-                let u = _mm256_mul_ps(dot(rx, ry, rz, splat(e2.x), splat(e2.y), splat(e2.z)), inv);
-                let v = _mm256_mul_ps(dot(rx, ry, rz, splat(e1.x), splat(e1.y), splat(e1.z)), inv);
-                let w = _mm256_sub_ps(_mm256_sub_ps(splat(1.0), u), v);
-                let t = _mm256_mul_ps(dot(ngx, ngy, ngz, cx, cy, cz), inv);
-                let outside = _mm256_movemask_ps(_mm256_or_ps(_mm256_or_ps(u, v), w)) as u32;
-                let valid = _mm256_and_ps(
-                    _mm256_and_ps(
-                        _mm256_cmp_ps::<_CMP_NEQ_UQ>(inv, _mm256_setzero_ps()),
-                        _mm256_cmp_ps::<_CMP_GE_OQ>(t, splat(template.tmin)),
-                    ),
-                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t, splat(t_max)), _mm256_cmp_ps::<_CMP_LT_OQ>(t, splat(f32::INFINITY))),
-                );
-                mask |= (_mm256_movemask_ps(valid) as u32 & !outside) << (8 * half);
+        // The leaf test's arithmetic with rays in the lanes instead of
+        // triangles: each lane gives `RtTriangle::intersect`'s bits.
+        unsafe {
+            let splat = _mm256_set1_ps;
+            let (v0, e1, e2, ng, d) = (triangle.v0, triangle.e1, triangle.e2, triangle.ng, template.direction);
+            let rows = [v0.x, v0.y, v0.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z, ng.x, ng.y, ng.z].map(|x| splat(x));
+            let direction = [splat(d.x), splat(d.y), splat(d.z)];
+            let mut mask = 0;
+            for half in 0..PACKET / 8 {
+                let origin = std::array::from_fn(|axis| _mm256_load_ps(origins.rows[axis].as_ptr().add(8 * half)));
+                let (hits, _, _) = super::leaf_blocks::moller_trumbore_lanes(&rows, origin, direction, template.tmin, t_max);
+                mask |= hits << (8 * half);
             }
+            mask
         }
-        mask
     }
 
     #[inline(always)]
