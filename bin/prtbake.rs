@@ -450,7 +450,7 @@ struct SunArgs {
     /// (e.g. 0.02), for a mesh or a per-vertex bundle (whose sky light stays per vertex): a
     /// mesh file's own atlas (glTF TEXCOORD_1) when it has one, else one unwrapped by xatlas
     /// (a bundle keeps no TEXCOORD_1); a texel bundle's own atlas is always used.
-    #[arg(long, value_name = "L", conflicts_with_all = ["refine", "shard"])]
+    #[arg(long, value_name = "L", conflicts_with = "refine")]
     texel_size: Option<f32>,
     /// With --texel-size: unwrap a new atlas (xatlas) even where the mesh has its own (TEXCOORD_1).
     #[arg(long, requires = "texel_size")]

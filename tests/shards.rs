@@ -203,6 +203,90 @@ fn sharded_sun_merges_into_the_single_process_bundle() {
     assert!(e.contains("sun-2-1.prtp: is one of 2 shards, not of 3"), "{e}");
 }
 
+/// Texel mode's sun through shards, for each way a texel sun bake starts:
+/// a mesh given a new atlas (with the texels' lit shares), a per-vertex
+/// bundle given one, and a texel bundle with its own. The single process
+/// writes the same bundle at 1 and 2 threads, and 1, 2 and 3 shards (run
+/// in shuffled order at 1 or 2 threads) merge into it byte for byte; a part
+/// of other texel settings is named.
+#[test]
+fn sharded_texel_sun_merges_into_the_single_process_bundle() {
+    let dir = Scratch::new("shards-texel-sun");
+    let mesh = write_cabin(&dir);
+    let vertex_bundle = dir.path("vertices.prtb");
+    run(&["bake", s(&mesh), "-o", s(&vertex_bundle), "--window", "glass", "--rays", "4", "--bounces", "1", "--quiet"]);
+    let texel_bundle = dir.path("texels.prtb");
+    run(&[
+        "bake",
+        s(&mesh),
+        "-o",
+        s(&texel_bundle),
+        "--window",
+        "glass",
+        "--rays",
+        "4",
+        "--bounces",
+        "1",
+        "--texel-size",
+        "0.08",
+        "--quiet",
+    ]);
+    let common = ["--window", "glass", "--steps", "12", "--seed", "3", "--quiet"];
+    let cases: [(&str, &Path, &[&str]); 3] = [
+        ("mesh", &mesh, &["--texel-size", "0.06", "--texel-fractions"]),
+        ("vertex-bundle", &vertex_bundle, &["--texel-size", "0.06"]),
+        ("texel-bundle", &texel_bundle, &["--texel-fractions"]),
+    ];
+    for (name, input, texel_args) in cases {
+        let sun = |out: &Path, extra: &[&str]| {
+            let mut a = vec!["sun", s(input), "-o", s(out)];
+            a.extend(common);
+            a.extend(texel_args);
+            a.extend(extra);
+            run(&a)
+        };
+        let single = dir.path(&format!("{name}.prtb"));
+        sun(&single, &["--threads", "2"]);
+        let expected = std::fs::read(&single).unwrap();
+        let one_thread = dir.path(&format!("{name}-1.prtb"));
+        sun(&one_thread, &["--threads", "1"]);
+        assert!(std::fs::read(&one_thread).unwrap() == expected, "{name}: the bundle differs between 1 and 2 threads");
+        let inspect = run(&["inspect", s(&single), "--json"]);
+        assert!(inspect.contains("\"TSUN\""), "{name}: no texel sun section in {inspect}");
+        for n in [1u32, 2, 3] {
+            let part = |k: u32| dir.path(&format!("{name}-{n}-{k}.prtp"));
+            for k in shuffled(n, 11) {
+                let (shard, threads) = (format!("{k}/{n}"), (1 + k % 2).to_string());
+                let stdout = sun(&part(k), &["--shard", &shard, "--threads", &threads]);
+                assert!(stdout.contains("; texels "), "{name}: shard {shard} traced no texels: {stdout}");
+            }
+            let merged = dir.path(&format!("{name}-{n}.prtb"));
+            let parts: Vec<PathBuf> = shuffled(n, 12).into_iter().map(part).collect();
+            let mut a = vec!["merge", "-o", s(&merged)];
+            a.extend(parts.iter().map(|p| s(p)));
+            run(&a);
+            assert!(
+                std::fs::read(&merged).unwrap() == expected,
+                "{name}, {n} shards: the merged bundle differs from the single-process one"
+            );
+        }
+    }
+    // Other points per texel, or no texels at all, in one part: named.
+    let foreign = dir.path("foreign.prtp");
+    let mut a =
+        vec!["sun", s(&mesh), "-o", s(&foreign), "--shard", "1/2", "--texel-size", "0.06", "--texel-fractions", "--texel-points", "8"];
+    a.extend(common);
+    run(&a);
+    let e = refused(&merge(&[&dir.path("mesh-2-0.prtp"), &foreign], &dir.path("x.prtb")));
+    assert!(e.contains("foreign.prtp: texel mode 0.06 m texels, 8 points each here, 0.06 m texels, 4 points each in"), "{e}");
+    let mut a = vec!["sun", s(&mesh), "-o", s(&foreign), "--shard", "1/2"];
+    a.extend(common);
+    run(&a);
+    let e = refused(&merge(&[&dir.path("mesh-2-0.prtp"), &foreign], &dir.path("x.prtb")));
+    assert!(e.contains("foreign.prtp: texel mode off here"), "{e}");
+    assert!(!dir.path("x.prtb").exists());
+}
+
 /// A re-run shard writes the same bytes; a merge refuses a missing, a
 /// repeated and a foreign part, naming it, and writes nothing.
 #[test]

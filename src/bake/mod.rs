@@ -21,7 +21,7 @@ mod window_light;
 pub use crate::sampling::DirectionPattern;
 pub use sun::{bake_sun_masks, LoopOrder, SunMasks, SunParams, SunStats};
 pub use surfaces::Surfaces;
-pub use texel_sun::{bake_texel_sun_masks, TexelSunMasks, TexelSunStats};
+pub use texel_sun::{bake_texel_sun_masks, TexelSunMasks, TexelSunPlan, TexelSunRange, TexelSunStats};
 pub use transfer::{bake_transfer, bake_transfer_receivers, NothingToBake};
 
 use crate::sh;

@@ -15,6 +15,7 @@
 //! As the vertices' bits, a texel's bits depend on its points alone and its
 //! vote sums in point order: the bits do not depend on the thread count.
 
+use std::ops::Range;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -99,86 +100,158 @@ pub fn bake_texel_sun_masks(
     params: &SunParams,
 ) -> Result<TexelSunMasks, BakeError> {
     let started = Instant::now();
-    params.check()?;
-    let suns = checked_suns(suns)?;
-    if atlas.triangle_count() != mesh.triangle_count() {
-        return Err(BakeError::Params(format!("the atlas has {} triangles, the mesh {}", atlas.triangle_count(), mesh.triangle_count())));
+    let plan = TexelSunPlan::new(mesh, atlas, points_per_texel, pattern, suns, params)?;
+    let traced = plan.trace(mesh, scene, surfaces, 0..plan.texel_count());
+    Ok(plan.finish(traced.masks, traced.fractions, traced.points, traced.rays, started.elapsed().as_secs_f64()))
+}
+
+/// Lit texels at each of `steps` steps, from texel-major masks.
+pub fn lit_counts(masks: &[u32], steps: usize) -> Vec<u64> {
+    let words = steps.div_ceil(32);
+    (0..steps).map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64).collect()
+}
+
+/// A texel sun bake made ready: the covered texels and their points, the
+/// same in every process that makes it from the same mesh, atlas and seed,
+/// so shards can each trace a range of texels ([`TexelSunPlan::trace`]).
+pub struct TexelSunPlan {
+    coverage: Coverage,
+    points: TexelPoints,
+    points_per_texel: u32,
+    suns: Vec<Option<Vec3>>,
+    params: SunParams,
+}
+
+/// A range of texels traced: their rows of [`TexelSunMasks::masks`] and
+/// [`TexelSunMasks::fractions`], the points traced and the rays.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TexelSunRange {
+    pub masks: Vec<u32>,
+    pub fractions: Vec<u32>,
+    pub points: u64,
+    pub rays: u64,
+}
+
+impl TexelSunPlan {
+    pub fn new(
+        mesh: &Mesh,
+        atlas: &Atlas,
+        points_per_texel: u32,
+        pattern: DirectionPattern,
+        suns: &[Option<Vec3>],
+        params: &SunParams,
+    ) -> Result<TexelSunPlan, BakeError> {
+        params.check()?;
+        let suns = checked_suns(suns)?;
+        if atlas.triangle_count() != mesh.triangle_count() {
+            return Err(BakeError::Params(format!(
+                "the atlas has {} triangles, the mesh {}",
+                atlas.triangle_count(),
+                mesh.triangle_count()
+            )));
+        }
+        if points_per_texel == 0 {
+            return Err(BakeError::Params("points per texel must be at least 1".into()));
+        }
+        let coverage = Coverage::of(atlas);
+        let points = TexelPoints::new(atlas, &coverage, points_per_texel, pattern, params.seed);
+        Ok(TexelSunPlan { coverage, points, points_per_texel, suns, params: *params })
     }
-    if points_per_texel == 0 {
-        return Err(BakeError::Params("points per texel must be at least 1".into()));
+
+    /// The covered texels (`y * width + x`, ascending).
+    pub fn texels(&self) -> &[u32] {
+        &self.coverage.texels
     }
-    let coverage = Coverage::of(atlas);
-    let points = TexelPoints::new(atlas, &coverage, points_per_texel, pattern, params.seed);
-    let words = suns.len().div_ceil(32);
-    let texel_count = coverage.len();
-    let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
-    let test = SunTest { scene, surfaces, params };
-    let progress = Progress::start("sun, texels".into(), points.len() as u64 * day_steps, params.quiet);
-    let mut masks = vec![0u32; texel_count * words];
-    let fwords = fraction_words(suns.len());
-    let mut fractions = vec![0u32; texel_count * fwords];
-    let (rays, traced_points): (u64, u64) = masks
-        .par_chunks_mut(TEXELS_PER_TASK * words)
-        .zip(fractions.par_chunks_mut(TEXELS_PER_TASK * fwords))
-        .enumerate()
-        .map(|(task, (out, fraction_out))| {
-            let first = task * TEXELS_PER_TASK;
-            let texels = first..(first + TEXELS_PER_TASK).min(texel_count);
-            let range = points.start[texels.start] as usize..points.start[texels.end] as usize;
-            // The task's points, with the texel each belongs to; window triangles' left out.
-            let mut task_points = Vec::with_capacity(range.len());
-            let mut owner = Vec::with_capacity(range.len());
-            let mut weight = Vec::with_capacity(range.len());
-            for texel in texels.clone() {
-                for p in &points.points[points.start[texel] as usize..points.start[texel + 1] as usize] {
-                    if surfaces.window_transmittance[p.triangle as usize].is_some() {
-                        continue;
-                    }
-                    task_points.push(Point::on_triangle(mesh, scene, p.triangle as usize, p.bary));
-                    owner.push((texel - first) as u32);
-                    weight.push(p.weight);
-                }
-            }
-            let mut total = vec![0.0f32; texels.len()];
-            owner.iter().zip(&weight).for_each(|(&o, &w)| total[o as usize] += w);
-            let mut sides = vec![[None; 2]; task_points.len()];
-            let mut lit = vec![0.0f32; texels.len()];
-            let mut rays = 0u64;
-            let mut scratch = SunScratch::new(task_points.len());
-            let mut sees = vec![false; task_points.len()];
-            for (k, sun) in suns.iter().enumerate() {
-                let Some(s) = *sun else { continue };
-                lit.fill(0.0);
-                rays += test.sees_sun_each(&task_points, s, &mut sides, &mut scratch, &mut sees);
-                for (p, _) in sees.iter().enumerate().filter(|(_, &l)| l) {
-                    lit[owner[p] as usize] += weight[p];
-                }
-                for (local, (&l, &t)) in lit.iter().zip(&total).enumerate() {
-                    if t > 0.0 && 2.0 * l > t {
-                        out[local * words + k / 32] |= 1 << (k % 32);
-                    }
-                    if t > 0.0 {
-                        let v = ((l / t).clamp(0.0, 1.0) * FRACTION_MAX as f32).round() as u32;
-                        fraction_out[local * fwords + k / 8] |= v << (4 * (k % 8));
+
+    pub fn texel_count(&self) -> usize {
+        self.coverage.len()
+    }
+
+    /// Mask words per texel (`ceil(steps / 32)`) and fraction words per texel.
+    pub fn words(&self) -> (usize, usize) {
+        (self.suns.len().div_ceil(32), fraction_words(self.suns.len()))
+    }
+
+    /// What tracing each texel costs: its points times the day's steps.
+    pub fn costs(&self) -> Vec<u64> {
+        let day_steps = self.suns.iter().filter(|s| s.is_some()).count() as u64;
+        self.points.start.windows(2).map(|w| (w[1] - w[0]) as u64 * day_steps).collect()
+    }
+
+    /// The bits and fractions of covered texels `range`. A texel's bits
+    /// depend on its own points alone, so any split of the texels into
+    /// ranges gives the same rows.
+    pub fn trace(&self, mesh: &Mesh, scene: &Scene, surfaces: &Surfaces, range: Range<usize>) -> TexelSunRange {
+        let (words, fwords) = self.words();
+        let (suns, points) = (&self.suns, &self.points);
+        let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
+        let test = SunTest { scene, surfaces, params: &self.params };
+        let point_count = (points.start[range.end] - points.start[range.start]) as u64;
+        let progress = Progress::start("sun, texels".into(), point_count * day_steps, self.params.quiet);
+        let mut masks = vec![0u32; range.len() * words];
+        let mut fractions = vec![0u32; range.len() * fwords];
+        let (rays, traced_points): (u64, u64) = masks
+            .par_chunks_mut(TEXELS_PER_TASK * words)
+            .zip(fractions.par_chunks_mut(TEXELS_PER_TASK * fwords))
+            .enumerate()
+            .map(|(task, (out, fraction_out))| {
+                let first = range.start + task * TEXELS_PER_TASK;
+                let texels = first..(first + TEXELS_PER_TASK).min(range.end);
+                let span = points.start[texels.start] as usize..points.start[texels.end] as usize;
+                // The task's points, with the texel each belongs to; window triangles' left out.
+                let mut task_points = Vec::with_capacity(span.len());
+                let mut owner = Vec::with_capacity(span.len());
+                let mut weight = Vec::with_capacity(span.len());
+                for texel in texels.clone() {
+                    for p in &points.points[points.start[texel] as usize..points.start[texel + 1] as usize] {
+                        if surfaces.window_transmittance[p.triangle as usize].is_some() {
+                            continue;
+                        }
+                        task_points.push(Point::on_triangle(mesh, scene, p.triangle as usize, p.bary));
+                        owner.push((texel - first) as u32);
+                        weight.push(p.weight);
                     }
                 }
-            }
-            progress.add(task_points.len() as u64 * day_steps);
-            (rays, task_points.len() as u64)
-        })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    drop(progress);
-    let lit_texels =
-        (0..suns.len()).map(|k| masks.chunks_exact(words).filter(|w| (w[k / 32] >> (k % 32)) & 1 == 1).count() as u64).collect();
-    let stats = TexelSunStats {
-        texels: texel_count as u64,
-        points: traced_points,
-        points_per_texel,
-        lit_texels,
-        rays,
-        seconds: started.elapsed().as_secs_f64(),
-    };
-    Ok(TexelSunMasks { texels: coverage.texels, words_per_texel: words as u32, masks, fractions, stats })
+                let mut total = vec![0.0f32; texels.len()];
+                owner.iter().zip(&weight).for_each(|(&o, &w)| total[o as usize] += w);
+                let mut sides = vec![[None; 2]; task_points.len()];
+                let mut lit = vec![0.0f32; texels.len()];
+                let mut rays = 0u64;
+                let mut scratch = SunScratch::new(task_points.len());
+                let mut sees = vec![false; task_points.len()];
+                for (k, sun) in suns.iter().enumerate() {
+                    let Some(s) = *sun else { continue };
+                    lit.fill(0.0);
+                    rays += test.sees_sun_each(&task_points, s, &mut sides, &mut scratch, &mut sees);
+                    for (p, _) in sees.iter().enumerate().filter(|(_, &l)| l) {
+                        lit[owner[p] as usize] += weight[p];
+                    }
+                    for (local, (&l, &t)) in lit.iter().zip(&total).enumerate() {
+                        if t > 0.0 && 2.0 * l > t {
+                            out[local * words + k / 32] |= 1 << (k % 32);
+                        }
+                        if t > 0.0 {
+                            let v = ((l / t).clamp(0.0, 1.0) * FRACTION_MAX as f32).round() as u32;
+                            fraction_out[local * fwords + k / 8] |= v << (4 * (k % 8));
+                        }
+                    }
+                }
+                progress.add(task_points.len() as u64 * day_steps);
+                (rays, task_points.len() as u64)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        drop(progress);
+        TexelSunRange { masks, fractions, points: traced_points, rays }
+    }
+
+    /// The masks of every covered texel (ranges joined in order) with their statistics.
+    pub fn finish(&self, masks: Vec<u32>, fractions: Vec<u32>, points: u64, rays: u64, seconds: f64) -> TexelSunMasks {
+        let words = self.words().0;
+        let lit_texels = lit_counts(&masks, self.suns.len());
+        let stats =
+            TexelSunStats { texels: self.texel_count() as u64, points, points_per_texel: self.points_per_texel, lit_texels, rays, seconds };
+        TexelSunMasks { texels: self.coverage.texels.clone(), words_per_texel: words as u32, masks, fractions, stats }
+    }
 }
 
 #[cfg(test)]

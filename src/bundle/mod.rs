@@ -181,9 +181,11 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
 /// copying every other section's raw payload verbatim (MESH, MATL, XFER and
 /// sections this reader does not know), so the transfer stays bit-identical
 /// whatever its quantization. (From a 1.0 original, MESH and MATL are written
-/// as decoded, in range; the result is a file of the current minor.) Sections keep their order; META is replaced in
-/// place, SUNM and SUND (and TSUN, the texels' masks, when the series has
-/// them; an earlier TSUN is dropped otherwise) are replaced or appended.
+/// as decoded, in range; the result is a file of the current minor.) The
+/// sections come in [`encode_bundle`]'s order: META replaced in place, the
+/// other sections before the sun in their order, then SUNM and SUND, then
+/// ATLS and TXFR, then TSUN and TSUF (the texels' masks and fractions, when
+/// the series has them; earlier ones are dropped otherwise).
 ///
 /// `original` is fully decoded first (every check of [`decode_bundle`]); the
 /// sun series must match its mesh's vertex count.
@@ -231,11 +233,17 @@ pub fn encode_with_sun_on(
     // A 1.0 file's mesh and materials may hold values its writer did not bring
     // into range (the decoder did): those two are stored as decoded.
     let legacy_values = container.minor < values::RANGES_CHECKED_SINCE_MINOR;
+    // Sections in encode_bundle's order whichever way the bundle was made,
+    // so a sharded sun bake's merge (which adds the sun to shard 0's frame)
+    // writes the bytes of a single process: the sun after the vertices'
+    // sections, then the atlas, its transfer and its sun.
     let mut parts = Vec::with_capacity(container.sections.len() + 2);
+    let mut texel_sections = Vec::new();
     for info in &container.sections {
         match info.tag {
             META => parts.push((META, sections::encode_meta(meta)?)),
             SUNM | SUND | TSUN | TSUF => {}
+            ATLS | TXFR => texel_sections.push((info.tag, container.payload(info)?.into_owned())),
             MESH if legacy_values => parts.push((MESH, sections::encode_mesh(&decoded.mesh)?)),
             MATL if legacy_values => parts.push((MATL, sections::encode_materials(&decoded.mesh.materials, &decoded.mesh.groups)?)),
             tag => parts.push((tag, container.payload(info)?.into_owned())),
@@ -246,6 +254,7 @@ pub fn encode_with_sun_on(
     if let Some((raw, _)) = added_atlas {
         parts.push((ATLS, raw));
     }
+    parts.extend(texel_sections);
     if let Some((masks, fractions)) = texel_sun {
         parts.push((TSUN, masks));
         if let Some(fractions) = fractions {

@@ -185,6 +185,19 @@ fn merge_sun(config: &MergeConfig, parts: &[(PathBuf, SunPart)]) -> anyhow::Resu
     sun_meta.insert("stats".into(), sun_stats_meta(&masks.stats));
     series.words_per_vertex = masks.words_per_vertex;
     series.masks = masks.masks;
+    if let Some(texels) = merged.texels {
+        let covered = b.texels.as_ref().map_or(0, |t| t.texels.len());
+        let texel_meta = sun_meta.get_mut("texels").and_then(|t| t.as_object_mut());
+        let (Some(texel_meta), true) = (texel_meta, covered * merged.key.steps.div_ceil(32) as usize == texels.masks.len()) else {
+            return Err(frame_error("its bundle frame has no atlas or texel sun metadata for the parts' texels".into()).into());
+        };
+        let lit_texels = crate::bake::texel_sun::lit_counts(&texels.masks, merged.key.steps as usize);
+        texel_meta.insert("points".into(), json!(texels.points));
+        texel_meta.insert("rays".into(), json!(texels.rays));
+        texel_meta.insert("lit_texels".into(), json!(lit_texels));
+        series.texel_masks = texels.masks;
+        series.texel_fractions = texels.fractions;
+    }
     let encoded = bundle::encode_with_sun(&merged.frame, &meta, &series).with_context(|| format!("cannot encode {}", output.display()))?;
     crate::files::write_atomic(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
     let s = &masks.stats;

@@ -12,12 +12,15 @@ use anyhow::Context;
 use serde_json::json;
 
 use super::bake_cmd::{check_windows, load_for_bake, BakeConfig};
-use super::sun_cmd::{day_steps, encode_sun_output, load_sun_input, sun_meta, sun_surfaces, SunConfig};
+use super::sun_cmd::{
+    check_texel_request, day_steps, encode_sun_output, load_sun_input, new_atlas_source_name, sun_atlas, sun_meta, sun_surfaces,
+    texel_points, texel_sun_meta, texel_sun_plan, SunConfig,
+};
 use super::Output;
-use crate::bake::SunStats;
+use crate::bake::{SunStats, TexelSunStats};
 use crate::bundle::bundle_meta;
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
-use crate::shards::{self, FileKind, Shard, ShardRun, Stage, SunKey, TransferKey};
+use crate::shards::{self, FileKind, Shard, ShardRun, Stage, SunKey, TexelSunKey, TransferKey};
 use crate::sky;
 use crate::trace::{BuildQuality, Scene};
 
@@ -138,42 +141,60 @@ fn placeholder_stats(steps: &[SunStep]) -> SunStats {
     SunStats { steps: steps.len() as u64, ..SunStats::default() }
 }
 
-/// Traces one shard's sun samples into a part and prints what it wrote.
+/// Traces one shard's sun samples (and in texel mode its range of texels)
+/// into a part and prints what it wrote.
 pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
-    let input = load_sun_input(config, PART_FORMAT, false)?;
-    if input.atlas.is_some() {
-        anyhow::bail!(
-            "{}: the bundle holds texels (texel mode): shards trace the vertices' sun samples only; run sun on it in one process",
-            config.input.display()
-        );
-    }
+    let mut input = load_sun_input(config, PART_FORMAT, false)?;
+    check_texel_request(config, &input)?;
     let config = &super::sun_cmd::with_bundle_windows(config, &input)?;
+    let points_per_texel = texel_points(config, &input);
     let started = std::time::Instant::now();
-    let (part, steps) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+    let (part, steps, atlas) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let steps = day_steps(config, &input)?;
+        let suns = sky::day_directions(&steps);
         let surfaces = sun_surfaces(config, &input.mesh)?;
         let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
+        let atlas = sun_atlas(config, &input)?.map(|(atlas, _)| atlas);
+        let texel_plan = atlas.as_ref().map(|a| texel_sun_plan(config, &input, a, points_per_texel, &suns)).transpose()?;
         let mut meta = sun_meta(config, &input.frame, &placeholder_stats(&steps), input.was_bundle());
         if let Some(m) = meta.as_object_mut() {
             m.remove("stats");
         }
-        let key = SunKey::of_day(config.params, config.window_patterns.clone(), &steps, &meta);
-        let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &sky::day_directions(&steps), &key, config.params.quiet, shard)?;
-        Ok((part, steps))
+        let mut key = SunKey::of_day(config.params, config.window_patterns.clone(), &steps, &meta);
+        key.texels = atlas.as_ref().zip(texel_plan.as_ref()).map(|(atlas, plan)| TexelSunKey {
+            texel_size: atlas.texel_size,
+            points_per_texel,
+            fractions: config.texel_fractions,
+            covered_texels: plan.texel_count() as u32,
+            atlas_crc: shards::atlas_crc(atlas),
+        });
+        let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &suns, &key, texel_plan.as_ref(), shard)?;
+        let atlas = atlas.zip(texel_plan.map(|plan| plan.texels().to_vec()));
+        Ok((part, steps, atlas))
     })??;
     let mut part = part;
     if shard.index == 0 {
         // The merge fills in the masks and the stats; everything else is the bundle a whole bake writes.
         let words = part.words;
+        let texel_words = |per_texel: usize| atlas.as_ref().map_or(0, |(_, texels)| texels.len() * per_texel);
         let series = SunSeries {
             sky_order: config.sky_order as u32,
-            steps,
             words_per_vertex: words,
             masks: vec![0; input.mesh.vertex_count() * words as usize],
-            texel_masks: Vec::new(),
-            texel_fractions: Vec::new(),
+            texel_masks: vec![0; texel_words(words as usize)],
+            texel_fractions: vec![
+                0;
+                if config.texel_fractions { texel_words(crate::bake::texel_sun::fraction_words(steps.len())) } else { 0 }
+            ],
+            steps,
         };
-        let meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());
+        let mut meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());
+        if let Some((atlas, texels)) = atlas {
+            let new_source = input.atlas.is_none().then(|| new_atlas_source_name(config, &input));
+            let stats = TexelSunStats { texels: texels.len() as u64, points_per_texel, ..TexelSunStats::default() };
+            meta["texels"] = texel_sun_meta(&atlas, &stats, config.texel_fractions, new_source);
+            input.atlas = Some((atlas, texels));
+        }
         part.frame = encode_sun_output(&input, meta, &series, &config.output)?;
     }
     crate::files::write_atomic_with(&config.output, |w| part.write_to(w).map(drop))
@@ -190,11 +211,22 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             "item_count": part.item_count,
             "points": [part.points.start, part.points.end],
             "rays": part.rays,
+            "texels": part.texels.as_ref().map(|t| json!({
+                "range": [t.texels.start, t.texels.end],
+                "covered": t.texel_count,
+                "points": t.points,
+                "rays": t.rays,
+            })),
             "seconds": seconds,
         }));
     }
+    let texels = part
+        .texels
+        .as_ref()
+        .map(|t| format!("; texels {}..{} of {}, {} points, {} rays", t.texels.start, t.texels.end, t.texel_count, t.points, t.rays))
+        .unwrap_or_default();
     println!(
-        "sun shard {shard}: items {}..{} of {}, {} points, {} rays in {seconds:.2}s; wrote {} ({bytes} bytes)",
+        "sun shard {shard}: items {}..{} of {}, {} points, {} rays{texels} in {seconds:.2}s; wrote {} ({bytes} bytes)",
         part.items.start,
         part.items.end,
         part.item_count,

@@ -203,7 +203,7 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
 /// The points per texel of a texel sun bake: `--texel-points`, else the
 /// texel bundle's transfer bake's (its points, so the same seed votes on
 /// the same points), else the default.
-fn texel_points(config: &SunConfig, input: &SunInput) -> u32 {
+pub fn texel_points(config: &SunConfig, input: &SunInput) -> u32 {
     let recorded = input.original.as_ref().and_then(|(_, meta)| meta.pointer("/texels/points_per_texel")?.as_u64());
     config.texel_points.or(recorded.and_then(|p| u32::try_from(p).ok())).unwrap_or(bake::texels::POINTS_PER_TEXEL)
 }
@@ -331,6 +331,94 @@ pub fn encode_sun_output(input: &SunInput, sun_meta: serde_json::Value, series: 
     encoded.with_context(|| format!("cannot encode {}", output.display()))
 }
 
+/// Checks the texel flags against the input: fractions need texels, and a
+/// texel bundle's atlas is the one its sun bits must match.
+pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Result<()> {
+    if config.texel_fractions && config.texel_size.is_none() && input.atlas.is_none() {
+        anyhow::bail!("--texel-fractions: the sun is baked per vertex here; give --texel-size L, or a bundle with an atlas");
+    }
+    if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
+        anyhow::bail!(
+            "{}: --texel-size {size}, but the bundle has its atlas ({} m texels), whose texels the sun bits must match; leave --texel-size out",
+            config.input.display(),
+            atlas.texel_size
+        );
+    }
+    Ok(())
+}
+
+/// The atlas of a texel sun bake, with the seconds unwrapping took: a texel
+/// bundle's own (0 s), else a new one at `--texel-size`; none per vertex.
+pub fn sun_atlas(config: &SunConfig, input: &SunInput) -> anyhow::Result<Option<(crate::atlas::Atlas, f64)>> {
+    let started = Instant::now();
+    Ok(match (&input.atlas, config.texel_size) {
+        (Some((atlas, _)), _) => Some((atlas.clone(), 0.0)),
+        (None, Some(size)) => {
+            let atlas =
+                crate::atlas::Atlas::for_mesh(&input.mesh, size, config.unwrap).with_context(|| config.input.display().to_string())?;
+            Some((atlas, started.elapsed().as_secs_f64()))
+        }
+        (None, None) => None,
+    })
+}
+
+/// Whose a new atlas is: the mesh's own lightmap UVs or xatlas's unwrap.
+pub fn new_atlas_source_name(config: &SunConfig, input: &SunInput) -> &'static str {
+    if input.mesh.lightmap_uvs.is_empty() || config.unwrap {
+        "xatlas"
+    } else {
+        "TEXCOORD_1"
+    }
+}
+
+/// The texels and points of a texel sun bake over `atlas`; a texel
+/// bundle's list of covered texels must be the atlas's.
+pub fn texel_sun_plan(
+    config: &SunConfig,
+    input: &SunInput,
+    atlas: &crate::atlas::Atlas,
+    points_per_texel: u32,
+    suns: &[Option<Vec3>],
+) -> anyhow::Result<bake::TexelSunPlan> {
+    let pattern = bake::DirectionPattern::Sobol;
+    let plan = bake::TexelSunPlan::new(&input.mesh, atlas, points_per_texel, pattern, suns, &config.params)
+        .with_context(|| config.input.display().to_string())?;
+    if let Some((_, covered)) = &input.atlas {
+        anyhow::ensure!(
+            covered == plan.texels(),
+            "{}: the atlas lists {} covered texels, but its triangles overlap {}: a damaged atlas",
+            config.input.display(),
+            covered.len(),
+            plan.texel_count()
+        );
+    }
+    Ok(plan)
+}
+
+/// META `sun.texels` of a texel sun bake (no timings); `new_atlas_source`
+/// names where an atlas made for this bake came from.
+pub fn texel_sun_meta(
+    atlas: &crate::atlas::Atlas,
+    stats: &bake::TexelSunStats,
+    fractions: bool,
+    new_atlas_source: Option<&str>,
+) -> serde_json::Value {
+    let mut meta = json!({
+        "texel_size": atlas.texel_size,
+        "points_per_texel": stats.points_per_texel,
+        "fractions": fractions,
+        "covered": stats.texels,
+        "points": stats.points,
+        "rays": stats.rays,
+        "lit_texels": stats.lit_texels,
+        "bit_rule": "lit iff a strict majority of the texel's points (its footprint on its triangles, each weighted by the area it stands for; window triangles' left out) see the sun, each tested as a vertex's sample",
+    });
+    if let Some(source) = new_atlas_source {
+        meta["atlas"] = json!(source);
+    }
+    meta
+}
+
 /// Loads the input, computes the day, bakes the masks and writes the bundle.
 pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     // In place only without `--refine`: refining replaces the bundle's mesh
@@ -349,19 +437,10 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             );
         }
     }
-    if config.texel_fractions && config.texel_size.is_none() && input.atlas.is_none() {
-        anyhow::bail!("--texel-fractions: the sun is baked per vertex here; give --texel-size L, or a bundle with an atlas");
-    }
     if config.refine.is_some() && config.texel_size.is_some() {
         anyhow::bail!("--texel-size with --refine: texels already resolve the sun where vertices cannot; refine or bake texels");
     }
-    if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
-        anyhow::bail!(
-            "{}: --texel-size {size}, but the bundle has its atlas ({} m texels), whose texels the sun bits must match; leave --texel-size out",
-            config.input.display(),
-            atlas.texel_size
-        );
-    }
+    check_texel_request(config, &input)?;
     let recipe = match (&config.refine, &input.original) {
         (Some(_), Some((_, meta))) if input.had_transfer => {
             Some(crate::bundle::recipe::TransferRecipe::from_meta(&config.input, meta, config.params.quiet)?)
@@ -386,37 +465,14 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             }
             let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
             let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
-            let atlas_start = Instant::now();
-            let atlas = match (&input.atlas, config.texel_size) {
-                (Some((atlas, _)), _) => Some(atlas.clone()),
-                (None, Some(size)) => Some(crate::atlas::Atlas::for_mesh(&input.mesh, size, config.unwrap).with_context(in_input)?),
-                (None, None) => None,
-            };
-            let atlas_seconds = if input.atlas.is_some() { 0.0 } else { atlas_start.elapsed().as_secs_f64() };
-            let texel_masks = match atlas {
+            let texel_masks = match sun_atlas(config, &input)? {
                 None => None,
-                Some(atlas) => {
-                    let pattern = bake::DirectionPattern::Sobol;
-                    let texel_masks = bake::bake_texel_sun_masks(
-                        &input.mesh,
-                        &scene,
-                        &surfaces,
-                        &atlas,
-                        points_per_texel,
-                        pattern,
-                        &suns,
-                        &config.params,
-                    )
-                    .with_context(in_input)?;
-                    if let Some((_, covered)) = &input.atlas {
-                        anyhow::ensure!(
-                            *covered == texel_masks.texels,
-                            "{}: the atlas lists {} covered texels, but its triangles overlap {}: a damaged atlas",
-                            config.input.display(),
-                            covered.len(),
-                            texel_masks.texels.len()
-                        );
-                    }
+                Some((atlas, atlas_seconds)) => {
+                    let started = Instant::now();
+                    let plan = texel_sun_plan(config, &input, &atlas, points_per_texel, &suns)?;
+                    let traced = plan.trace(&input.mesh, &scene, &surfaces, 0..plan.texel_count());
+                    let seconds = started.elapsed().as_secs_f64();
+                    let texel_masks = plan.finish(traced.masks, traced.fractions, traced.points, traced.rays, seconds);
                     Some((texel_masks, atlas, atlas_seconds))
                 }
             };
@@ -426,7 +482,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     let mut new_atlas_source = None;
     if let Some((masks, atlas, _)) = &texel_masks {
         if input.atlas.is_none() {
-            new_atlas_source = Some(if input.mesh.lightmap_uvs.is_empty() || config.unwrap { "xatlas" } else { "TEXCOORD_1" });
+            new_atlas_source = Some(new_atlas_source_name(config, &input));
             input.atlas = Some((atlas.clone(), masks.texels.clone()));
         }
     }
@@ -447,19 +503,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     };
     let mut sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
     if let (Some((t, _)), Some((atlas, _))) = (&texel_masks, &input.atlas) {
-        sun_meta["texels"] = json!({
-            "texel_size": atlas.texel_size,
-            "points_per_texel": t.stats.points_per_texel,
-            "fractions": config.texel_fractions,
-            "covered": t.stats.texels,
-            "points": t.stats.points,
-            "rays": t.stats.rays,
-            "lit_texels": t.stats.lit_texels,
-            "bit_rule": "lit iff a strict majority of the texel's points (its footprint on its triangles, each weighted by the area it stands for; window triangles' left out) see the sun, each tested as a vertex's sample",
-        });
-        if let Some(source) = new_atlas_source {
-            sun_meta["texels"]["atlas"] = json!(source);
-        }
+        sun_meta["texels"] = texel_sun_meta(atlas, &t.stats, config.texel_fractions, new_atlas_source);
     }
     if let Some(r) = &refine {
         sun_meta["refine"] = r.meta();

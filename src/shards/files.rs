@@ -523,6 +523,26 @@ pub struct SunPart {
     /// Shard 0: the output bundle as the single process writes it, with its
     /// masks zero and its statistics to be filled in (empty otherwise).
     pub frame: Vec<u8>,
+    /// Texel mode: this shard's range of covered texels, their bits final.
+    pub texels: Option<TexelSunPart>,
+}
+
+/// A shard's covered texels of a texel sun bake: a texel's bits depend on
+/// its own points alone, so a part holds its texels' rows as the whole
+/// bake writes them, and the merge joins them in texel order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelSunPart {
+    pub texels: Range<u32>,
+    pub texel_count: u32,
+    /// Mask words and fraction words per texel (fraction words 0 when the
+    /// bundle stores no fractions).
+    pub words: u32,
+    pub fraction_words: u32,
+    /// Points traced (window triangles' left out) and rays.
+    pub points: u64,
+    pub rays: u64,
+    pub masks: Vec<u32>,
+    pub fractions: Vec<u32>,
 }
 
 impl SunPart {
@@ -539,6 +559,19 @@ impl SunPart {
         w.u64(self.rays)?;
         w.u32s(&self.bits)?;
         w.blob(&self.frame)?;
+        match &self.texels {
+            None => w.u32(0)?,
+            Some(t) => {
+                w.u32(1)?;
+                for v in [t.texels.start, t.texels.end, t.texel_count, t.words, t.fraction_words] {
+                    w.u32(v)?;
+                }
+                w.u64(t.points)?;
+                w.u64(t.rays)?;
+                w.u32s(&t.masks)?;
+                w.u32s(&t.fractions)?;
+            }
+        }
         w.finish()
     }
 
@@ -569,8 +602,32 @@ impl SunPart {
         let rays = r.u64("rays")?;
         let bits = r.u32s((points.end - points.start).saturating_mul(words as u64), "sample bits")?;
         let frame = r.blob("bundle frame")?.to_vec();
+        let texels = match r.u32("texel flag")? {
+            0 => None,
+            1 => {
+                let texels = read_range32(&mut r, "texel range", u32::MAX)?;
+                let texel_count = r.u32("texel count")?;
+                if texels.end > texel_count {
+                    return Err(format!("texel range {texels:?} is past the {texel_count} covered texels"));
+                }
+                let texel_words = r.u32("mask words per texel")?;
+                if texel_words != words {
+                    return Err(format!("{texel_words} mask words per texel, but {words} per sample"));
+                }
+                let fraction_words = r.u32("fraction words per texel")?;
+                if fraction_words > words * 4 {
+                    return Err(format!("{fraction_words} fraction words per texel for {words} mask words"));
+                }
+                let (points, rays) = (r.u64("texel points")?, r.u64("texel rays")?);
+                let n = (texels.end - texels.start) as u64;
+                let masks = r.u32s(n * words as u64, "texel bits")?;
+                let fractions = r.u32s(n * fraction_words as u64, "texel fractions")?;
+                Some(TexelSunPart { texels, texel_count, words, fraction_words, points, rays, masks, fractions })
+            }
+            f => return Err(format!("texel flag is {f}, not 0 or 1")),
+        };
         r.finish()?;
-        Ok(SunPart { identity, shard, items, item_count, points, point_count, words, rays, bits, frame })
+        Ok(SunPart { identity, shard, items, item_count, points, point_count, words, rays, bits, frame, texels })
     }
 }
 
@@ -664,6 +721,16 @@ mod tests {
             rays: 40,
             bits: vec![1, 2, 3, 4, 5, 6],
             frame: vec![9; 7],
+            texels: Some(TexelSunPart {
+                texels: 2..4,
+                texel_count: 5,
+                words: 2,
+                fraction_words: 8,
+                points: 7,
+                rays: 30,
+                masks: vec![3, 0, 1, 2],
+                fractions: (0..16).collect(),
+            }),
         };
         let mut hit_bytes = Vec::new();
         hits.write_to(&mut hit_bytes).unwrap();

@@ -30,6 +30,40 @@ pub struct SunKey {
     /// CRC-32 of the day (every step's time, direction, sun colour and sky)
     /// and of the sun metadata (site, date, north, turbidity, …).
     pub day_crc: u32,
+    /// Texel mode: the atlas and points the texels' bits come from.
+    pub texels: Option<TexelSunKey>,
+}
+
+/// What every part's texel sun bits depend on besides the day.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelSunKey {
+    pub texel_size: f32,
+    pub points_per_texel: u32,
+    /// Whether the bundle stores each texel's lit share (`--texel-fractions`).
+    pub fractions: bool,
+    pub covered_texels: u32,
+    /// [`atlas_crc`] of the atlas.
+    pub atlas_crc: u32,
+}
+
+/// CRC-32 of an atlas: its size, texel size, UVs, vertex sources, indices
+/// and charts, so shards that unwrapped apart agree only on the same atlas.
+pub fn atlas_crc(atlas: &crate::atlas::Atlas) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    for v in [atlas.width, atlas.height, atlas.texel_size.to_bits(), atlas.chart_count] {
+        h.update(&v.to_le_bytes());
+    }
+    for uv in &atlas.uv {
+        h.update(&uv.x.to_le_bytes());
+        h.update(&uv.y.to_le_bytes());
+    }
+    for list in [&atlas.source_vertex, &atlas.indices, &atlas.triangle_chart] {
+        h.update(&(list.len() as u64).to_le_bytes());
+        for v in list.iter() {
+            h.update(&v.to_le_bytes());
+        }
+    }
+    h.finalize()
 }
 
 /// CRC-32 of the day (each step's time, sun, colour, sky) and of the sun
@@ -256,7 +290,7 @@ impl SunKey {
     /// The key of a sun bake of `steps` (the whole day, nights included)
     /// whose bundle metadata without its stats is `meta_without_stats`.
     pub fn of_day(params: SunParams, window_patterns: Vec<String>, steps: &[SunStep], meta_without_stats: &serde_json::Value) -> SunKey {
-        SunKey { params, window_patterns, steps: steps.len() as u32, day_crc: day_crc(steps, meta_without_stats) }
+        SunKey { params, window_patterns, steps: steps.len() as u32, day_crc: day_crc(steps, meta_without_stats), texels: None }
     }
 
     /// The canonical block (docs/scale.md "Sun parameter block").
@@ -269,6 +303,16 @@ impl SunKey {
         out.extend_from_slice(&self.steps.to_le_bytes());
         out.extend_from_slice(&self.day_crc.to_le_bytes());
         put_patterns(&mut out, &self.window_patterns);
+        match &self.texels {
+            None => out.extend_from_slice(&0u32.to_le_bytes()),
+            Some(t) => {
+                out.extend_from_slice(&t.points_per_texel.to_le_bytes());
+                out.extend_from_slice(&t.texel_size.to_le_bytes());
+                out.extend_from_slice(&t.covered_texels.to_le_bytes());
+                out.extend_from_slice(&t.atlas_crc.to_le_bytes());
+                out.extend_from_slice(&[t.fractions as u8, 0, 0, 0]);
+            }
+        }
         out
     }
 
@@ -293,7 +337,24 @@ impl SunKey {
                 return Err(format!("{steps} steps, outside 1..={}", crate::bake::sun::MAX_SUN_STEPS));
             }
             let day_crc = r.u32("day CRC")?;
-            Ok(SunKey { params, window_patterns: read_patterns(r)?, steps, day_crc })
+            let window_patterns = read_patterns(r)?;
+            let points_per_texel = r.u32("points per texel")?;
+            let texels = if points_per_texel == 0 {
+                None
+            } else {
+                let texel_size = r.f32("texel size")?;
+                if !(texel_size.is_finite() && texel_size > 0.0) {
+                    return Err(format!("texel size {texel_size} is not a positive length"));
+                }
+                let covered_texels = r.u32("covered texels")?;
+                let atlas_crc = r.u32("atlas CRC")?;
+                let fractions = flag(r.u8("fractions")?, "fractions")?;
+                if r.take(3, "reserved")? != [0, 0, 0] {
+                    return Err("reserved bytes are not zero".into());
+                }
+                Some(TexelSunKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc })
+            };
+            Ok(SunKey { params, window_patterns, steps, day_crc, texels })
         })
     }
 
@@ -308,6 +369,13 @@ impl SunKey {
             ("window patterns", format!("{:?}", self.window_patterns)),
             ("steps", self.steps.to_string()),
             ("day and sky (site, date, time line, north, turbidity, sky order)", format!("CRC-32 {:08x}", self.day_crc)),
+            (
+                "texel mode",
+                self.texels.as_ref().map_or("off".into(), |t| format!("{} m texels, {} points each", t.texel_size, t.points_per_texel)),
+            ),
+            ("texel fractions", self.texels.as_ref().is_some_and(|t| t.fractions).to_string()),
+            ("covered texels", self.texels.as_ref().map_or(0, |t| t.covered_texels).to_string()),
+            ("atlas", self.texels.as_ref().map_or("none".into(), |t| format!("CRC-32 {:08x}", t.atlas_crc))),
         ]
     }
 }
@@ -336,9 +404,28 @@ mod tests {
         let other = TransferKey { params: BakeParams { rays: 32, ..key.params }, ..key.clone() };
         assert_eq!(first_difference(&other.fields(), &key.fields()).unwrap(), "rays 32 here, 64 in");
 
-        let sun =
-            SunKey { params: SunParams { seed: 9, ..SunParams::default() }, window_patterns: vec![], steps: 92, day_crc: 0xdead_beef };
+        let sun = SunKey {
+            params: SunParams { seed: 9, ..SunParams::default() },
+            window_patterns: vec![],
+            steps: 92,
+            day_crc: 0xdead_beef,
+            texels: None,
+        };
         assert_eq!(SunKey::decode(&sun.encode()).unwrap(), sun);
+        let texels = TexelSunKey { texel_size: 0.05, points_per_texel: 4, fractions: true, covered_texels: 1234, atlas_crc: 0xfeed };
+        let with_texels = SunKey { texels: Some(texels.clone()), ..sun.clone() };
+        let block = with_texels.encode();
+        assert_eq!(block.len() % 4, 0);
+        assert_eq!(SunKey::decode(&block).unwrap(), with_texels);
+        for len in 0..block.len() {
+            assert!(SunKey::decode(&block[..len]).is_err(), "a block cut to {len} bytes decoded");
+        }
+        let other_atlas = SunKey { texels: Some(TexelSunKey { atlas_crc: 0xbeef, ..texels }), ..sun.clone() };
+        assert_eq!(
+            first_difference(&other_atlas.fields(), &with_texels.fields()).unwrap(),
+            "atlas CRC-32 0000beef here, CRC-32 0000feed in"
+        );
+        assert_eq!(first_difference(&sun.fields(), &with_texels.fields()).unwrap(), "texel mode off here, 0.05 m texels, 4 points each in");
     }
 
     #[test]

@@ -417,6 +417,17 @@ pub struct MergedSun {
     pub bits: Vec<u32>,
     pub rays: u64,
     pub frame: Vec<u8>,
+    /// Texel mode: every covered texel's rows, joined in texel order.
+    pub texels: Option<MergedTexelSun>,
+}
+
+/// The texel rows of every sun part, joined.
+pub struct MergedTexelSun {
+    pub masks: Vec<u32>,
+    /// Empty when the bundle stores no fractions.
+    pub fractions: Vec<u32>,
+    pub points: u64,
+    pub rays: u64,
 }
 
 /// Checks and concatenates the parts of a sharded sun bake.
@@ -459,26 +470,82 @@ pub fn merge_sun_parts(parts: &[(PathBuf, SunPart)]) -> Result<MergedSun, ShardE
     for &i in &order {
         bits.extend_from_slice(&parts[i].1.bits);
     }
-    Ok(MergedSun { key, identity: first.identity.clone(), bits, rays: parts.iter().map(|(_, p)| p.rays).sum(), frame: first.frame.clone() })
+    let texels = merge_texel_rows(parts, &order, &key, last_word_mask)?;
+    Ok(MergedSun {
+        identity: first.identity.clone(),
+        bits,
+        rays: parts.iter().map(|(_, p)| p.rays).sum(),
+        frame: first.frame.clone(),
+        texels,
+        key,
+    })
+}
+
+/// Joins the parts' texel rows in shard order, after checking that each
+/// part has them as the key says, and that their ranges tile the covered
+/// texels without gap or overlap.
+fn merge_texel_rows(
+    parts: &[(PathBuf, SunPart)],
+    order: &[usize],
+    key: &SunKey,
+    last_word_mask: u32,
+) -> Result<Option<MergedTexelSun>, ShardError> {
+    let Some(texel_key) = &key.texels else {
+        return match parts.iter().find(|(_, p)| p.texels.is_some()) {
+            Some((path, _)) => Err(ShardError::mismatch(path, "holds texel rows, but its key has no texel mode")),
+            None => Ok(None),
+        };
+    };
+    let (words, fraction_words) = (key.steps.div_ceil(32), if texel_key.fractions { key.steps.div_ceil(8) } else { 0 });
+    let mut merged = MergedTexelSun { masks: Vec::new(), fractions: Vec::new(), points: 0, rays: 0 };
+    let mut next = 0u32;
+    for &i in order {
+        let (path, part) = &parts[i];
+        let t = part.texels.as_ref().ok_or_else(|| ShardError::mismatch(path, "holds no texel rows, but its key is texel mode's"))?;
+        if t.texel_count != texel_key.covered_texels || t.words != words || t.fraction_words != fraction_words {
+            return Err(ShardError::mismatch(
+                path,
+                format!(
+                    "holds {} covered texels of {} mask and {} fraction words, not the key's {} of {words} and {fraction_words}",
+                    t.texel_count, t.words, t.fraction_words, texel_key.covered_texels
+                ),
+            ));
+        }
+        if t.texels.start != next {
+            return Err(ShardError::mismatch(path, format!("holds texels {:?}, but the shards before it end at texel {next}", t.texels)));
+        }
+        if t.masks.chunks_exact(words as usize).any(|texel| texel[texel.len() - 1] & !last_word_mask != 0) {
+            return Err(ShardError::mismatch(path, format!("has texel bits set past the last of its {} steps", key.steps)));
+        }
+        next = t.texels.end;
+        merged.masks.extend_from_slice(&t.masks);
+        merged.fractions.extend_from_slice(&t.fractions);
+        merged.points += t.points;
+        merged.rays += t.rays;
+    }
+    if next != texel_key.covered_texels {
+        let (path, _) = &parts[order[order.len() - 1]];
+        return Err(ShardError::mismatch(path, format!("is the last shard, but its texels end at {next} of {}", texel_key.covered_texels)));
+    }
+    Ok(Some(merged))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// A three-vertex mesh's identity under `key`, in `shards` shards.
+    fn identity_of(key: &SunKey, shards: u32) -> crate::shards::Identity {
+        let mesh = crate::shards::MeshId { crc: 1, vertices: 3, triangles: 1 };
+        crate::shards::Identity { mesh, plan_vertices: 3, plan_triangles: 1, shards, key: key.encode() }
+    }
+
     /// Sun bits past the last step would make the vote count a step that
     /// does not exist: a part with one is refused, not merged.
     #[test]
     fn sun_bits_past_the_last_step_are_refused() {
-        use crate::shards::{Identity, MeshId};
-        let key = SunKey { params: crate::bake::SunParams::default(), window_patterns: Vec::new(), steps: 5, day_crc: 7 };
-        let identity = Identity {
-            mesh: MeshId { crc: 1, vertices: 3, triangles: 1 },
-            plan_vertices: 3,
-            plan_triangles: 1,
-            shards: 1,
-            key: key.encode(),
-        };
+        let key = SunKey { params: crate::bake::SunParams::default(), window_patterns: Vec::new(), steps: 5, day_crc: 7, texels: None };
+        let identity = identity_of(&key, 1);
         let part = |bits: Vec<u32>| SunPart {
             identity: identity.clone(),
             shard: 0,
@@ -490,10 +557,70 @@ mod tests {
             rays: 10,
             bits,
             frame: vec![1],
+            texels: None,
         };
         assert!(merge_sun_parts(&[(PathBuf::from("ok.prtp"), part(vec![0b11111, 0b1]))]).is_ok());
         let e = merge_sun_parts(&[(PathBuf::from("bad.prtp"), part(vec![0b1, 0b100000]))]).err().unwrap().to_string();
         assert!(e.contains("bad.prtp: has bits set past the last of its 5 steps"), "{e}");
+    }
+
+    /// Texel rows must tile the covered texels in shard order: a gap, an
+    /// overlap, a short last shard, a bit past the last step or a part
+    /// without texels under a texel key is refused, naming the part.
+    #[test]
+    fn texel_rows_that_do_not_tile_the_covered_texels_are_refused() {
+        use crate::shards::{TexelSunKey, TexelSunPart};
+        let texel_key = TexelSunKey { texel_size: 0.1, points_per_texel: 4, fractions: false, covered_texels: 5, atlas_crc: 9 };
+        let key = SunKey {
+            params: crate::bake::SunParams::default(),
+            window_patterns: Vec::new(),
+            steps: 5,
+            day_crc: 7,
+            texels: Some(texel_key),
+        };
+        let identity = identity_of(&key, 2);
+        let part = |shard: u32, texels: Option<std::ops::Range<u32>>| {
+            let path = PathBuf::from(format!("part-{shard}.prtp"));
+            let texels = texels.map(|range| TexelSunPart {
+                masks: vec![0b1_0101; range.len()],
+                texels: range,
+                texel_count: 5,
+                words: 1,
+                fraction_words: 0,
+                points: 8,
+                rays: 30,
+                fractions: Vec::new(),
+            });
+            let part = SunPart {
+                identity: identity.clone(),
+                shard,
+                items: shard..shard + 1,
+                item_count: 2,
+                points: shard as u64..shard as u64 + 1,
+                point_count: 2,
+                words: 1,
+                rays: 10,
+                bits: vec![0b1],
+                frame: if shard == 0 { vec![1] } else { Vec::new() },
+                texels,
+            };
+            (path, part)
+        };
+        let merged = merge_sun_parts(&[part(1, Some(2..5)), part(0, Some(0..2))]).unwrap().texels.unwrap();
+        assert_eq!((merged.masks.len(), merged.points, merged.rays), (5, 16, 60));
+        let refused = |parts: &[(PathBuf, SunPart)]| merge_sun_parts(parts).err().unwrap().to_string();
+        let e = refused(&[part(0, Some(0..2)), part(1, Some(3..5))]);
+        assert!(e.contains("part-1.prtp: holds texels 3..5, but the shards before it end at texel 2"), "{e}");
+        let e = refused(&[part(0, Some(0..3)), part(1, Some(2..5))]);
+        assert!(e.contains("part-1.prtp: holds texels 2..5, but the shards before it end at texel 3"), "{e}");
+        let e = refused(&[part(0, Some(0..2)), part(1, Some(2..4))]);
+        assert!(e.contains("part-1.prtp: is the last shard, but its texels end at 4 of 5"), "{e}");
+        let e = refused(&[part(0, Some(0..2)), part(1, None)]);
+        assert!(e.contains("part-1.prtp: holds no texel rows"), "{e}");
+        let mut late = part(1, Some(2..5));
+        late.1.texels.as_mut().unwrap().masks[1] = 0b10_0000;
+        let e = refused(&[part(0, Some(0..2)), late]);
+        assert!(e.contains("part-1.prtp: has texel bits set past the last of its 5 steps"), "{e}");
     }
 
     #[test]

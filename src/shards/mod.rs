@@ -38,8 +38,8 @@ use std::path::PathBuf;
 use crate::mesh::Mesh;
 
 pub use codec::FileKind;
-pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TransferPart};
-pub use key::{SunKey, TransferKey};
+pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TexelSunPart, TransferPart};
+pub use key::{atlas_crc, SunKey, TexelSunKey, TransferKey};
 pub use merge::{merge_sun_parts, merge_transfer, MergedSun, TransferMerge};
 pub use round::{bake_sun_shard, bake_transfer_shard, PilotInput, RoundInput, RoundOutput, Stage};
 pub use run::ShardRun;

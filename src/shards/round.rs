@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TransferPart, VertexRows};
+use super::files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TexelSunPart, TransferPart, VertexRows};
 use super::key::{SunKey, TransferKey};
 use super::merge::identity_difference;
 use super::{split_by_cost, MeshId, Shard, ShardError};
@@ -15,7 +15,7 @@ use crate::bake::noise::{Moments, VertexDc};
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
 use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};
-use crate::bake::{BakeError, Surfaces};
+use crate::bake::{BakeError, Surfaces, TexelSunPlan};
 use crate::mesh::Mesh;
 use crate::trace::Scene;
 
@@ -283,26 +283,48 @@ fn check_inputs(
 }
 
 /// Traces shard `shard`'s samples toward every day step of `suns` (see
-/// [`crate::bake::bake_sun_masks`]); the caller adds the frame to shard 0's part.
+/// [`crate::bake::bake_sun_masks`]) and, in texel mode, its share of the
+/// covered texels; the caller adds the frame to shard 0's part. The key's
+/// `quiet` says whether progress is shown.
 pub fn bake_sun_shard(
     mesh: &Mesh,
     scene: &Scene,
     surfaces: &Surfaces,
     suns: &[Option<Vec3>],
     key: &SunKey,
-    quiet: bool,
+    texels: Option<&TexelSunPlan>,
     shard: Shard,
 ) -> Result<SunPart, ShardError> {
     if key.steps as usize != suns.len() {
         return Err(BakeError::Params(format!("{} sun steps, but the key says {}", suns.len(), key.steps)).into());
     }
-    let params = crate::bake::SunParams { quiet, ..key.params };
-    let plan = SunPlan::new(mesh, surfaces, suns, &params)?;
+    if key.texels.as_ref().map(|t| t.covered_texels as usize) != texels.map(TexelSunPlan::texel_count) {
+        return Err(BakeError::Params("the texel plan is not the one the key describes".into()).into());
+    }
+    let plan = SunPlan::new(mesh, surfaces, suns, &key.params)?;
     let day_steps = suns.iter().filter(|s| s.is_some()).count().max(1) as u64;
     let costs: Vec<u64> = plan.points_per_item().iter().map(|&p| p as u64 * day_steps).collect();
     let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
     let first_point = |item: usize| plan.layout.first_sample.get(item).map_or(plan.layout.sample_count(), |&f| f as u64);
     let (bits, rays) = plan.trace_items(scene, surfaces, range.clone());
+    // The texels are balanced apart: their points per texel, times the day's steps.
+    let texels = texels.map(|texel_plan| {
+        let costs = texel_plan.costs();
+        let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+        let traced = texel_plan.trace(mesh, scene, surfaces, range.clone());
+        let fractions = key.texels.as_ref().is_some_and(|t| t.fractions);
+        let (words, fraction_words) = texel_plan.words();
+        TexelSunPart {
+            texels: range.start as u32..range.end as u32,
+            texel_count: costs.len() as u32,
+            words: words as u32,
+            fraction_words: if fractions { fraction_words as u32 } else { 0 },
+            points: traced.points,
+            rays: traced.rays,
+            masks: traced.masks,
+            fractions: if fractions { traced.fractions } else { Vec::new() },
+        }
+    });
     Ok(SunPart {
         identity: Identity {
             mesh: MeshId::of(mesh),
@@ -320,5 +342,6 @@ pub fn bake_sun_shard(
         rays,
         bits,
         frame: Vec::new(),
+        texels,
     })
 }
