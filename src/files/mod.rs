@@ -9,12 +9,15 @@
 //!   names what is written, read-only files only with `--force`;
 //! - [`atomic`]: outputs are written to short temporary names beside their
 //!   targets and renamed together at the end; an interrupt (SIGINT, SIGTERM,
-//!   SIGHUP) removes the temporaries, so a run leaves all its outputs or none.
+//!   SIGHUP) removes the temporaries, so a run leaves all its outputs or none;
+//! - [`exr_bytes`]: linear RGB images as EXR bytes, the same on every run.
 
 pub mod atomic;
+pub mod exr_bytes;
 pub mod outputs;
 pub mod read;
 
 pub use atomic::{install_interrupt_cleanup, write_atomic, write_atomic_with, Staged};
+pub use exr_bytes::rgb_exr_bytes;
 pub use outputs::{check_outputs, Output, OutputError};
 pub use read::{read_limited, Limit};

@@ -8,15 +8,8 @@ use super::readability::{contrast_ratio, luminance, Display};
 
 /// EXR bytes of the reflected radiance (`width × height`, row 0 at the top; zero off the panel).
 pub fn radiance_exr(results: &[Option<TexelResult>], width: u32, height: u32) -> Result<Vec<u8>, exr::error::Error> {
-    use exr::prelude::*;
-    let (w, h) = (width as usize, height as usize);
-    let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {
-        let rgb = results[pos.y() * w + pos.x()].map_or([0.0; 3], |t| t.radiance);
-        (rgb[0], rgb[1], rgb[2])
-    });
-    let mut bytes = Vec::new();
-    Image::from_channels((w, h), channels).write().to_buffered(std::io::Cursor::new(&mut bytes))?;
-    Ok(bytes)
+    let w = width as usize;
+    crate::files::rgb_exr_bytes(w, height as usize, |x, y| results[y * w + x].map_or([0.0; 3], |t| t.radiance))
 }
 
 /// Contrast ratios shown by the colour bar (log scale) and labelled.

@@ -172,18 +172,8 @@ impl LinearImage {
 
     /// OpenEXR bytes (RGB f32, no compression loss).
     pub fn encode_exr(&self) -> Result<Vec<u8>, String> {
-        use exr::prelude::*;
         let w = self.width as usize;
-        let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {
-            let p = self.rgb[pos.y() * w + pos.x()];
-            (p[0], p[1], p[2])
-        });
-        let mut bytes = Vec::new();
-        Image::from_channels((w, self.height as usize), channels)
-            .write()
-            .to_buffered(std::io::Cursor::new(&mut bytes))
-            .map_err(|e| e.to_string())?;
-        Ok(bytes)
+        crate::files::rgb_exr_bytes(w, self.height as usize, |x, y| self.rgb[y * w + x]).map_err(|e| e.to_string())
     }
 }
 
