@@ -6,6 +6,9 @@
 //! elements/s are the gather's rays/s (BRDF and disk rays). The interior's
 //! PRT light is a constant here: it changes the values, not the rays.
 //!
+//! A third case times the tracer alone on the gather's own first rays
+//! (`first_rays_alone_spp40`), the raw rate the gather is measured against.
+//!
 //! Run: `cargo bench --bench panel` (one case: `cargo bench --bench panel -- spp40`);
 //! ten images per case, 16 min in all on two shared cores (docs/panel.md "Speed").
 
@@ -14,7 +17,8 @@ use prtbake::bake::Surfaces;
 use prtbake::brdf::PanelBrdf;
 use prtbake::fixtures::cabin::{generate_cabin, DRIVER_EYE};
 use prtbake::panel::{select_panel, Environment, GatherOptions, Interior, PanelGather, PanelLayout};
-use prtbake::trace::{BuildQuality, Scene};
+use prtbake::trace::{BuildQuality, RayQuery, Scene};
+use rayon::prelude::*;
 
 fn panel_gather(c: &mut Criterion) {
     let (raw, _) = generate_cabin(64.0);
@@ -38,12 +42,12 @@ fn panel_gather(c: &mut Criterion) {
     // 256 samples per texel is most of an hour on two cores.
     group.sample_size(10).sampling_mode(SamplingMode::Flat);
     for samples in [40u32, 256] {
-        let rays = {
+        let (rays, queries) = {
             let mut g = PanelGather::new(&interior, &env, &brdf, &layout, eye, GatherOptions::default());
             g.refine(samples);
-            g.rays()
+            (g.rays(), g.queries())
         };
-        eprintln!("{} texels on the panel, {samples} samples: {rays} rays", layout.covered());
+        eprintln!("{} texels on the panel, {samples} samples: {rays} rays, {queries} queries traced", layout.covered());
         group.throughput(Throughput::Elements(rays));
         group.bench_function(format!("spp{samples}"), |b| {
             b.iter(|| {
@@ -53,6 +57,28 @@ fn panel_gather(c: &mut Criterion) {
             })
         });
     }
+    // The tracer alone on the gather's own first rays (its BRDF draws, 40
+    // samples per texel), each texel's as one batch as the gather traces
+    // them: the raw rate the gather's rays/s is measured against. The
+    // gather also traces continuations through glass, sun-disk rays and
+    // shadow rays, and samples and evaluates the BRDF.
+    let gather = PanelGather::new(&interior, &env, &brdf, &layout, eye, GatherOptions::default());
+    let batches: Vec<Vec<RayQuery>> = (0..layout.texel_count()).map(|texel| gather.first_rays(texel, 0..40)).collect();
+    let first_rays: u64 = batches.iter().map(|b| b.len() as u64).sum();
+    eprintln!("the first rays of 40 samples: {first_rays}");
+    group.throughput(Throughput::Elements(first_rays));
+    group.bench_function("first_rays_alone_spp40", |b| {
+        b.iter(|| {
+            batches
+                .par_iter()
+                .map(|rays| {
+                    let mut hits = vec![None; rays.len()];
+                    scene.closest_hits(rays, &mut hits);
+                    hits.iter().filter(|h| h.is_some()).count() as u64
+                })
+                .sum::<u64>()
+        })
+    });
     group.finish();
 }
 

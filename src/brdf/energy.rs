@@ -5,6 +5,7 @@
 use super::frame::from_mu_phi;
 use super::Brdf;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::f64::consts::TAU;
 
 /// The (cos θ, φ) grid [`Brdf::albedo`] uses: 256 × 512 midpoints, within
@@ -80,9 +81,9 @@ pub struct EnergyReport {
 
 impl EnergyReport {
     /// Measures `brdf` (isotropic: `wo` in the xz-plane suffices).
-    pub fn of<B: Brdf + ?Sized>(brdf: &B) -> EnergyReport {
+    pub fn of<B: Brdf + Sync + ?Sized>(brdf: &B) -> EnergyReport {
         let rows = REPORT_THETA_OUT_DEG
-            .iter()
+            .par_iter()
             .map(|&deg| {
                 let wo = Vec3::new(deg.to_radians().sin(), 0.0, deg.to_radians().cos());
                 (deg, brdf.albedo(wo))

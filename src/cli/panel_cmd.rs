@@ -68,8 +68,13 @@ pub struct PanelRun {
     pub layout: PanelLayout,
     pub results: Vec<Option<TexelResult>>,
     pub readability: Readability,
+    /// Gather rays (BRDF and sun-disk draws) and every query traced for them
+    /// (continuations through glass, shadow rays toward the sun).
     pub rays: u64,
+    pub queries: u64,
+    /// The whole run, and the gather alone (no BVH build, no images).
     pub seconds: f64,
+    pub gather_seconds: f64,
     pub environment: String,
     pub brdf: String,
 }
@@ -144,6 +149,7 @@ pub fn gather_panel(
         );
     }
     let pass = samples.div_ceil(8).max(1);
+    let gather_started = Instant::now();
     while gather.samples() < samples {
         gather.refine(pass.min(samples - gather.samples()));
         if !quiet {
@@ -153,9 +159,10 @@ pub fn gather_panel(
     if !quiet {
         eprintln!();
     }
+    let gather_seconds = gather_started.elapsed().as_secs_f64();
     let results = gather.results();
     crate::panel::check_finite(&results, path, &env.describe())?;
-    let rays = gather.rays();
+    let (rays, queries) = (gather.rays(), gather.queries());
     let readability = Readability::of(&results, display, threshold).ok_or_else(|| PanelError::NoTexels {
         path: path.to_path_buf(),
         width,
@@ -168,7 +175,9 @@ pub fn gather_panel(
         results,
         readability,
         rays,
+        queries,
         seconds: started.elapsed().as_secs_f64(),
+        gather_seconds,
         environment: env.describe(),
         brdf: String::new(),
     })
@@ -201,8 +210,12 @@ pub fn run_json(run: &PanelRun, exr: &Path, png: &Path, display: Display, sample
         "contrast_ratio": "(L_white + L_reflected) / (L_black + L_reflected)",
         "readability": run.readability,
         "rays": run.rays,
+        "queries": run.queries,
         "seconds": run.seconds,
         "rays_per_second": run.rays as f64 / run.seconds.max(1e-9),
+        "gather_seconds": run.gather_seconds,
+        "gather_rays_per_second": run.rays as f64 / run.gather_seconds.max(1e-9),
+        "gather_queries_per_second": run.queries as f64 / run.gather_seconds.max(1e-9),
     })
 }
 
@@ -219,13 +232,20 @@ pub fn run(config: &PanelConfig) -> anyhow::Result<()> {
     if config.samples == 0 || config.samples > crate::panel::gather::MAX_SAMPLES {
         anyhow::bail!("--samples {}: expected 1..={}", config.samples, crate::panel::gather::MAX_SAMPLES);
     }
-    let (brdf, brdf_name) = match &config.brdf {
-        Some(path) => (PanelBrdf::load(path)?, path.display().to_string()),
-        None => (PanelBrdf::default(), "antiglare".to_string()),
+    // A BRDF file's energy is checked as it is read; the built-in one's by
+    // its tests (`brdf::analytic`), not again on every run.
+    let brdf_name = config.brdf.as_ref().map_or("antiglare".to_string(), |path| path.display().to_string());
+    let brdf = match &config.brdf {
+        Some(path) => {
+            let brdf = PanelBrdf::load(path)?;
+            let report = super::with_threads(config.threads, || EnergyReport::of(&brdf))?;
+            if let Some(warning) = report.warning(&brdf_name) {
+                eprintln!("warning: {warning}");
+            }
+            brdf
+        }
+        None => PanelBrdf::default(),
     };
-    if let Some(warning) = EnergyReport::of(&brdf).warning(&brdf_name) {
-        eprintln!("warning: {warning}");
-    }
     let env = environment(&config.light)?;
     let bundle = crate::bundle::read_bundle(&config.bundle)?;
     let quiet = config.quiet || config.json;
@@ -267,11 +287,13 @@ pub fn run(config: &PanelConfig) -> anyhow::Result<()> {
             100.0 * r.interior_share
         );
         println!(
-            "wrote {} and {} ({:.1} s, {:.2e} rays/s)",
+            "wrote {} and {} ({:.1} s; gather {:.1} s, {:.2e} rays/s, {:.2e} queries/s)",
             config.output.display(),
             config.contrast.display(),
             run.seconds,
-            run.rays as f64 / run.seconds.max(1e-9)
+            run.gather_seconds,
+            run.rays as f64 / run.gather_seconds.max(1e-9),
+            run.queries as f64 / run.gather_seconds.max(1e-9)
         );
     }
     Ok(())

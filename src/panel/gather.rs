@@ -55,6 +55,9 @@ struct Sums {
     /// Σ of each sample's luminance squared (for the standard error).
     luminance_sq: f64,
     rays: u64,
+    /// Queries traced: gather rays, their continuations through glass and
+    /// the shadow rays toward the sun from lit interior hits.
+    queries: u64,
 }
 
 /// A texel's estimate after the samples taken so far.
@@ -128,6 +131,12 @@ impl<'a> PanelGather<'a> {
         self.sums.iter().map(|s| s.rays).sum()
     }
 
+    /// Queries the gather traced so far: its rays, their continuations
+    /// through glass and the shadow rays toward the sun from interior hits.
+    pub fn queries(&self) -> u64 {
+        self.sums.iter().map(|s| s.queries).sum()
+    }
+
     /// The layout gathered over.
     pub fn layout(&self) -> &PanelLayout {
         self.layout
@@ -156,22 +165,31 @@ impl<'a> PanelGather<'a> {
         (0..self.sums.len()).map(|i| self.texel(i)).collect()
     }
 
-    fn add_samples(&self, texel: usize, range: std::ops::Range<u32>, sums: &mut Sums) {
+    /// The first rays of texel `texel`'s BRDF draws for samples `range`, as
+    /// the gather traces them (for measuring the tracer on the gather's own
+    /// rays); empty for a texel off the panel or not facing the eye.
+    pub fn first_rays(&self, texel: usize, range: std::ops::Range<u32>) -> Vec<RayQuery> {
+        if self.layout.triangle[texel] == NO_TRIANGLE {
+            return Vec::new();
+        }
+        self.texel_draws(texel, range).map_or_else(Vec::new, |d| d.first_rays)
+    }
+
+    /// Texel `texel`'s frame, its samples' random numbers and BRDF draws,
+    /// and the first ray of each draw; `None` when the eye sees the texel
+    /// edge-on or from behind (nothing reflects toward it).
+    fn texel_draws(&self, texel: usize, range: std::ops::Range<u32>) -> Option<TexelDraws> {
         let p = self.layout.point[texel];
         let n = self.layout.normal[texel];
         let face = self.interior.scene.face_normal(self.layout.triangle[texel]);
-        let Some(wo) = (self.eye - p).try_normalize() else { return };
+        let wo = (self.eye - p).try_normalize()?;
         let (t, b) = tangent_frame(n);
-        let to_local = |d: Vec3| Vec3::new(d.dot(t), d.dot(b), d.dot(n));
-        let to_world = |d: Vec3| (t * d.x + b * d.y + n * d.z).normalize();
-        let wo_local = to_local(wo);
+        let frame = Frame { t, b, n };
+        let wo_local = frame.to_local(wo);
         if wo_local.z <= 0.0 {
-            return; // seen edge-on or from behind: nothing reflects toward the eye
+            return None;
         }
         let seed = hash_seed(&[self.options.seed, texel as u32, 0x7a6e_1c0d]);
-        let sun = self.env.sun.as_ref();
-        let sun_radiance = sun.map(|s| s.radiance());
-        let sun_pdf = sun.map_or(0.0, |s| (1.0 / s.solid_angle()) as f32);
         let draw = |k: u32| match self.options.pattern {
             DirectionPattern::Sobol => sobol_burley::sample_4d(k, 0, seed),
             DirectionPattern::Random => {
@@ -179,13 +197,22 @@ impl<'a> PanelGather<'a> {
                 [a.0, a.1, b.0, b.1]
             }
         };
+        let draws: Vec<[f32; 4]> = range.map(draw).collect();
+        let brdf_samples: Vec<_> = draws.iter().map(|u| self.brdf.sample(wo_local, [u[0], u[1]])).collect();
+        let first_rays = brdf_samples.iter().flatten().map(|sample| self.interior.first_ray(p, face, frame.to_world(sample.wi))).collect();
+        Some(TexelDraws { p, face, frame, wo_local, draws, brdf_samples, first_rays })
+    }
+
+    fn add_samples(&self, texel: usize, range: std::ops::Range<u32>, sums: &mut Sums) {
+        let Some(TexelDraws { p, face, frame, wo_local, draws, brdf_samples, first_rays }) = self.texel_draws(texel, range) else {
+            return;
+        };
+        let sun = self.env.sun.as_ref();
+        let sun_radiance = sun.map(|s| s.radiance());
+        let sun_pdf = sun.map_or(0.0, |s| (1.0 / s.solid_angle()) as f32);
         // The BRDF's directions of every sample first, their first rays
         // traced as one batch (the scene's batch mode: interleaved where
         // the tree waits on memory), the same hits as one at a time.
-        let draws: Vec<[f32; 4]> = range.map(draw).collect();
-        let brdf_samples: Vec<_> = draws.iter().map(|u| self.brdf.sample(wo_local, [u[0], u[1]])).collect();
-        let first_rays: Vec<RayQuery> =
-            brdf_samples.iter().flatten().map(|sample| self.interior.first_ray(p, face, to_world(sample.wi))).collect();
         let mut first_hits = vec![None; first_rays.len()];
         self.interior.scene.closest_hits(&first_rays, &mut first_hits);
         let mut first = first_rays.iter().zip(first_hits);
@@ -212,6 +239,7 @@ impl<'a> PanelGather<'a> {
                 let weight = f.map(|f| f * sample.wi.z / sample.pdf);
                 let arrival = self.interior.trace_from(self.env, ray, hit);
                 sums.rays += 1;
+                sums.queries += u64::from(arrival.queries);
                 add(weight, arrival.radiance, arrival.through_window, arrival.sky_transmittance > 0.0);
                 if let (Some(sun), Some(l_sun)) = (sun, sun_radiance) {
                     if arrival.sky_transmittance > 0.0 && sun.contains(wi) {
@@ -223,12 +251,13 @@ impl<'a> PanelGather<'a> {
             // Strategy 2: a direction within the sun disk.
             if let (Some(sun), Some(l_sun), true) = (sun, sun_radiance, self.options.sun_sampling) {
                 let wi = sun.sample([u[2], u[3]]);
-                let wi_local = to_local(wi);
+                let wi_local = frame.to_local(wi);
                 if wi_local.z > 0.0 {
                     let f = self.brdf.eval(wi_local, wo_local);
                     if f.iter().any(|&x| x > 0.0) {
-                        let (tau, window) = self.interior.sun_arrival(sun, p, face, wi);
+                        let (tau, window, queries) = self.interior.sun_arrival(sun, p, face, wi);
                         sums.rays += 1;
+                        sums.queries += u64::from(queries);
                         if tau > 0.0 {
                             let mis = power_heuristic(sun_pdf, self.brdf.pdf(wo_local, wi_local));
                             let weight = f.map(|f| f * wi_local.z / sun_pdf * mis * tau);
@@ -246,6 +275,34 @@ impl<'a> PanelGather<'a> {
             sums.luminance_sq += y * y;
         }
     }
+}
+
+/// A texel's tangent frame: tangent, bitangent, normal.
+struct Frame {
+    t: Vec3,
+    b: Vec3,
+    n: Vec3,
+}
+
+impl Frame {
+    fn to_local(&self, d: Vec3) -> Vec3 {
+        Vec3::new(d.dot(self.t), d.dot(self.b), d.dot(self.n))
+    }
+
+    fn to_world(&self, d: Vec3) -> Vec3 {
+        (self.t * d.x + self.b * d.y + self.n * d.z).normalize()
+    }
+}
+
+/// What [`PanelGather::texel_draws`] prepares for a texel's samples.
+struct TexelDraws {
+    p: Vec3,
+    face: Vec3,
+    frame: Frame,
+    wo_local: Vec3,
+    draws: Vec<[f32; 4]>,
+    brdf_samples: Vec<Option<crate::brdf::BrdfSample>>,
+    first_rays: Vec<RayQuery>,
 }
 
 /// Veach's power heuristic (β = 2) for the strategy with density `a` against `b`.

@@ -30,6 +30,9 @@ pub struct Arrival {
     pub sky_transmittance: f32,
     /// The ray passed through at least one window.
     pub through_window: bool,
+    /// Queries traced for it: the first ray, its continuations through
+    /// glass, and the shadow ray toward the sun from a lit surface hit.
+    pub queries: u32,
 }
 
 /// The PRT-lit interior a gather reads.
@@ -81,10 +84,11 @@ impl Interior<'_> {
         let (mut from, dir) = (first.origin, first.direction);
         let mut next_hit = first_hit;
         let mut transmittance = 1.0f32;
+        let mut queries = 1;
         for layer in 0..=MAX_GLASS_LAYERS {
             let Some(hit) = next_hit else {
                 let radiance = env.radiance(dir).map(|c| c * transmittance);
-                return Arrival { radiance, sky_transmittance: transmittance, through_window: layer > 0 };
+                return Arrival { radiance, sky_transmittance: transmittance, through_window: layer > 0, queries };
             };
             let point = from + dir * hit.t;
             let normal = self.scene.face_normal(hit.triangle);
@@ -96,24 +100,26 @@ impl Interior<'_> {
                     }
                     from = self.scene.offset_origin(point, normal, dir);
                     next_hit = self.scene.closest_hit(from, dir, f32::INFINITY);
+                    queries += 1;
                 }
                 Some(_) => break,
                 None if hit.back_face && !self.two_sided => {
-                    return Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: layer > 0 };
+                    return Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: layer > 0, queries };
                 }
                 None => {
-                    let mut radiance = self.surface_radiance(env, hit.triangle, hit.u, hit.v, point, normal, dir);
+                    let (mut radiance, shadow_queries) = self.surface_radiance(env, hit.triangle, hit.u, hit.v, point, normal, dir);
                     radiance.iter_mut().for_each(|c| *c *= transmittance);
-                    return Arrival { radiance, sky_transmittance: 0.0, through_window: layer > 0 };
+                    return Arrival { radiance, sky_transmittance: 0.0, through_window: layer > 0, queries: queries + shadow_queries };
                 }
             }
         }
-        Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: true }
+        Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: true, queries }
     }
 
-    /// Radiance leaving opaque triangle `t` at barycentrics (u, v) toward the ray's origin.
+    /// Radiance leaving opaque triangle `t` at barycentrics (u, v) toward
+    /// the ray's origin, and the queries its shadow rays toward the sun took.
     #[allow(clippy::too_many_arguments)] // one hit's fields
-    fn surface_radiance(&self, env: &Environment, t: u32, u: f32, v: f32, point: Vec3, face_normal: Vec3, dir: Vec3) -> [f32; 3] {
+    fn surface_radiance(&self, env: &Environment, t: u32, u: f32, v: f32, point: Vec3, face_normal: Vec3, dir: Vec3) -> ([f32; 3], u32) {
         let [a, b, c] = self.mesh.triangle(t as usize).map(|i| self.vertex_light[i as usize]);
         let w0 = 1.0 - u - v;
         let albedo = self.surfaces.albedo[t as usize];
@@ -121,12 +127,14 @@ impl Interior<'_> {
         for k in 0..3 {
             light[k] = w0 * a[k] + u * b[k] + v * c[k];
         }
+        let mut queries = 0;
         if let Some(sun) = &env.sun {
             // The side the ray sees.
             let seen = if face_normal.dot(dir) < 0.0 { face_normal } else { -face_normal };
             let cosine = seen.dot(sun.direction);
             if cosine > 0.0 {
-                let (tau, _) = self.sky_transmittance(point, face_normal, sun.direction);
+                let (tau, _, n) = self.sky_transmittance_counted(point, face_normal, sun.direction);
+                queries = n;
                 if tau > 0.0 {
                     for k in 0..3 {
                         light[k] += tau * cosine * sun.irradiance[k] / std::f32::consts::PI;
@@ -134,34 +142,41 @@ impl Interior<'_> {
                 }
             }
         }
-        [albedo[0] * light[0], albedo[1] * light[1], albedo[2] * light[2]]
+        ([albedo[0] * light[0], albedo[1] * light[1], albedo[2] * light[2]], queries)
     }
 
     /// Glass transmittance from a surface point toward unit `dir` out of the
     /// scene (0 when an opaque surface blocks it), and whether it crossed glass.
     pub fn sky_transmittance(&self, origin: Vec3, face_normal: Vec3, dir: Vec3) -> (f32, bool) {
+        let (transmittance, crossed_glass, _) = self.sky_transmittance_counted(origin, face_normal, dir);
+        (transmittance, crossed_glass)
+    }
+
+    /// [`Interior::sky_transmittance`] and the queries it traced.
+    fn sky_transmittance_counted(&self, origin: Vec3, face_normal: Vec3, dir: Vec3) -> (f32, bool, u32) {
         let mut from = self.scene.offset_origin(origin, face_normal, dir);
         let mut transmittance = 1.0f32;
         for layer in 0..=MAX_GLASS_LAYERS {
             let Some(hit) = self.scene.closest_hit(from, dir, f32::INFINITY) else {
-                return (transmittance, layer > 0);
+                return (transmittance, layer > 0, layer + 1);
             };
             match self.surfaces.window_transmittance[hit.triangle as usize] {
                 Some(tau) if layer < MAX_GLASS_LAYERS && tau > 0.0 => {
                     transmittance *= tau;
                     from = self.scene.offset_origin(from + dir * hit.t, self.scene.face_normal(hit.triangle), dir);
                 }
-                _ => break,
+                _ => return (0.0, true, layer + 1),
             }
         }
-        (0.0, true)
+        (0.0, true, MAX_GLASS_LAYERS + 1)
     }
 
-    /// The sun strategy's light: the disk's radiance times the glass toward it.
-    pub fn sun_arrival(&self, sun: &Sun, origin: Vec3, face_normal: Vec3, dir: Vec3) -> (f32, bool) {
+    /// The sun strategy's light: the disk's radiance times the glass toward
+    /// it, whether it crossed glass, and the queries traced.
+    pub fn sun_arrival(&self, sun: &Sun, origin: Vec3, face_normal: Vec3, dir: Vec3) -> (f32, bool, u32) {
         if !sun.contains(dir) {
-            return (0.0, false);
+            return (0.0, false, 0);
         }
-        self.sky_transmittance(origin, face_normal, dir)
+        self.sky_transmittance_counted(origin, face_normal, dir)
     }
 }
