@@ -183,6 +183,9 @@ fn panel_gathers_the_ground_and_refuses_bad_input() {
     let doc: serde_json::Value = serde_json::from_slice(&one.stdout).unwrap();
     assert_eq!(doc["texels_on_panel"], 192);
     assert_eq!(doc["mapping"], "planar");
+    // Overcast: one BRDF ray per sample unless the draw is lost, each at least one query.
+    let (rays, queries) = (doc["rays"].as_u64().unwrap(), doc["queries"].as_u64().unwrap());
+    assert!(rays > 192 * 8 * 9 / 10 && rays <= 192 * 8 && queries >= rays, "{rays} rays, {queries} queries");
     let r = &doc["readability"];
     assert!(r["min_contrast_ratio"].as_f64().unwrap() <= r["median_contrast_ratio"].as_f64().unwrap());
     assert_eq!(r["window_share"], 0.0, "no windows in the open scene");
