@@ -102,7 +102,7 @@ pub fn bake_texel_sun_masks(
     let started = Instant::now();
     let plan = TexelSunPlan::new(mesh, atlas, points_per_texel, pattern, suns, params)?;
     let traced = plan.trace(mesh, scene, surfaces, 0..plan.texel_count());
-    Ok(plan.finish(traced.masks, traced.fractions, traced.points, traced.rays, started.elapsed().as_secs_f64()))
+    Ok(plan.finish(traced, started.elapsed().as_secs_f64()))
 }
 
 /// Lit texels at each of `steps` steps, from texel-major masks.
@@ -122,8 +122,9 @@ pub struct TexelSunPlan {
     params: SunParams,
 }
 
-/// A range of texels traced: their rows of [`TexelSunMasks::masks`] and
-/// [`TexelSunMasks::fractions`], the points traced and the rays.
+/// A range of texels traced (or every shard's ranges joined): their rows of
+/// [`TexelSunMasks::masks`] and [`TexelSunMasks::fractions`], the points
+/// traced and the rays.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TexelSunRange {
     pub masks: Vec<u32>,
@@ -245,7 +246,8 @@ impl TexelSunPlan {
     }
 
     /// The masks of every covered texel (ranges joined in order) with their statistics.
-    pub fn finish(&self, masks: Vec<u32>, fractions: Vec<u32>, points: u64, rays: u64, seconds: f64) -> TexelSunMasks {
+    pub fn finish(&self, traced: TexelSunRange, seconds: f64) -> TexelSunMasks {
+        let TexelSunRange { masks, fractions, points, rays } = traced;
         let words = self.words().0;
         let lit_texels = lit_counts(&masks, self.suns.len());
         let stats =

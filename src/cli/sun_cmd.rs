@@ -472,7 +472,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
                     let plan = texel_sun_plan(config, &input, &atlas, points_per_texel, &suns)?;
                     let traced = plan.trace(&input.mesh, &scene, &surfaces, 0..plan.texel_count());
                     let seconds = started.elapsed().as_secs_f64();
-                    let texel_masks = plan.finish(traced.masks, traced.fractions, traced.points, traced.rays, seconds);
+                    let texel_masks = plan.finish(traced, seconds);
                     Some((texel_masks, atlas, atlas_seconds))
                 }
             };

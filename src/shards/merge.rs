@@ -11,7 +11,7 @@ use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
-use crate::bake::{BakeStats, TransferResult};
+use crate::bake::{BakeStats, TexelSunRange, TransferResult};
 
 /// What two identities differ in, as "rays 32 here, 64 in" (the caller names
 /// the other file), or `None` when they are the same bake.
@@ -418,16 +418,7 @@ pub struct MergedSun {
     pub rays: u64,
     pub frame: Vec<u8>,
     /// Texel mode: every covered texel's rows, joined in texel order.
-    pub texels: Option<MergedTexelSun>,
-}
-
-/// The texel rows of every sun part, joined.
-pub struct MergedTexelSun {
-    pub masks: Vec<u32>,
-    /// Empty when the bundle stores no fractions.
-    pub fractions: Vec<u32>,
-    pub points: u64,
-    pub rays: u64,
+    pub texels: Option<TexelSunRange>,
 }
 
 /// Checks and concatenates the parts of a sharded sun bake.
@@ -489,7 +480,7 @@ fn merge_texel_rows(
     order: &[usize],
     key: &SunKey,
     last_word_mask: u32,
-) -> Result<Option<MergedTexelSun>, ShardError> {
+) -> Result<Option<TexelSunRange>, ShardError> {
     let Some(texel_key) = &key.texels else {
         return match parts.iter().find(|(_, p)| p.texels.is_some()) {
             Some((path, _)) => Err(ShardError::mismatch(path, "holds texel rows, but its key has no texel mode")),
@@ -497,7 +488,7 @@ fn merge_texel_rows(
         };
     };
     let (words, fraction_words) = (key.steps.div_ceil(32), if texel_key.fractions { key.steps.div_ceil(8) } else { 0 });
-    let mut merged = MergedTexelSun { masks: Vec::new(), fractions: Vec::new(), points: 0, rays: 0 };
+    let mut merged = TexelSunRange::default();
     let mut next = 0u32;
     for &i in order {
         let (path, part) = &parts[i];
