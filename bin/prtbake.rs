@@ -778,11 +778,6 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
     if a.gather_fit && (a.refine.refine.is_some() || a.refine.max_vertices.is_some()) {
         anyhow::bail!("--gather-fit with --refine: refinement's partial re-bakes gather from vertex rows (bake the refined mesh again with --gather-fit)");
     }
-    if a.denoise > 0.0 && a.shard.is_some() {
-        anyhow::bail!(
-            "--denoise with --shard: the filter needs the whole mesh's vertices (denoise is not yet run by merge; bake in one process)"
-        );
-    }
     if a.denoise > 0.0 && (a.refine.refine.is_some() || a.refine.max_vertices.is_some()) {
         anyhow::bail!(
             "--denoise with --refine: refinement's partial re-bakes keep vertices as baked (bake the refined mesh again with --denoise)"
@@ -837,9 +832,6 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
                 anyhow::bail!("--texel-points {}: expected 1..=256", a.texel_points);
             }
             let with = |flag: &str, why: &str| anyhow::anyhow!("--texel-size with {flag}: {why}");
-            if a.shard.is_some() {
-                return Err(with("--shard", "shards bake vertex items only (bake texels in one process)"));
-            }
             if refine.is_some() {
                 return Err(with("--refine", "texels already resolve the light where vertices cannot; refine or bake texels"));
             }

@@ -682,8 +682,8 @@ fn gather_fit_is_deterministic_recorded_and_refused_where_it_cannot_apply() {
 /// `bake --denoise K`: the same bytes at any thread count, the strength
 /// recorded in META (absent from a bake without it), the filtered values
 /// neither above the largest nor below the smallest of the unfiltered ones
-/// (a weighted mean of neighbours), and refused with `--shard`, `--refine`
-/// or `--sampling vertex` (exit 2, nothing written).
+/// (a weighted mean of neighbours), and refused with `--refine` or
+/// `--sampling vertex` (exit 2, nothing written).
 #[test]
 fn denoise_is_deterministic_recorded_bounded_and_refused_where_it_cannot_apply() {
     let dir = Scratch::new("denoise");
@@ -716,11 +716,7 @@ fn denoise_is_deterministic_recorded_bounded_and_refused_where_it_cannot_apply()
     assert_ne!(f, r, "the filter moved nothing");
     let (lo, hi) = r.iter().fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
     assert!(f.iter().all(|&x| x >= lo - 1e-6 && x <= hi + 1e-6), "a weighted mean left the range {lo}..{hi}");
-    for extra in [
-        &["--denoise", "2", "--shard", "0/2"][..],
-        &["--denoise", "2", "--refine", "0.1"],
-        &["--denoise", "2", "--sampling", "vertex", "--adaptive", "0"],
-    ] {
+    for extra in [&["--denoise", "2", "--refine", "0.1"][..], &["--denoise", "2", "--sampling", "vertex", "--adaptive", "0"]] {
         let (o, out) = bake("refused.prtb", extra);
         assert_eq!(o.status.code(), Some(2), "{extra:?}");
         assert!(String::from_utf8_lossy(&o.stderr).contains("denoise"), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));

@@ -287,6 +287,85 @@ fn sharded_texel_sun_merges_into_the_single_process_bundle() {
     assert!(!dir.path("x.prtb").exists());
 }
 
+/// Texel transfer through shards, with the denoiser the merge runs after
+/// the last round and the storage `--max-error` chooses: each shard traces its range of covered texels beside
+/// its items, and 1 and 3 shards (shuffled, at 1 or 2 threads) merge into
+/// the single process's bundle, itself the same at 1 and 2 threads. So
+/// does a per-vertex bake with `--denoise`. A part of other texel settings,
+/// and a layer without texels, are named.
+#[test]
+fn sharded_texel_transfer_merges_into_the_single_process_bundle() {
+    let dir = Scratch::new("shards-texel-transfer");
+    let mesh = write_cabin(&dir);
+    let texel_args: &[&str] = &[
+        "--window",
+        "glass",
+        "--bounces",
+        "2",
+        "--rays",
+        "12",
+        "--seed",
+        "5",
+        "--store-bounces",
+        "--clean",
+        "--quiet",
+        "--max-error",
+        "0.5",
+        "--texel-size",
+        "0.05",
+        "--texel-points",
+        "2",
+        "--denoise",
+        "1",
+    ];
+    let single = |name: &str, args: &[&str], threads: &str| {
+        let out = dir.path(name);
+        let mut a = vec!["bake", s(&mesh), "-o", s(&out), "--threads", threads];
+        a.extend(args);
+        run(&a);
+        std::fs::read(&out).unwrap()
+    };
+    let expected = single("single.prtb", texel_args, "2");
+    assert!(expected == single("single-1.prtb", texel_args, "1"), "the single-process texel bundle differs between 1 and 2 threads");
+    let b = prtbake::bundle::read_bundle(&dir.path("single.prtb")).unwrap();
+    let texels = b.texels.as_ref().expect("a texel bundle");
+    assert!(texels.texels.len() > 10_000 && texels.transfer.as_ref().unwrap().layers.len() == 4, "{} texels", texels.texels.len());
+    // The budget chose one storage for vertices and texels, measured on both.
+    assert!(b.meta["texels"]["storage"]["within_budget"] == true && b.meta["storage"]["within_budget"] == true, "{}", b.meta);
+    for n in [1u32, 3] {
+        let work = dir.path(&format!("texels-n{n}"));
+        std::fs::create_dir(&work).unwrap();
+        let merged = sharded_bake(&work, &mesh, texel_args, 2, n);
+        assert!(std::fs::read(&merged).unwrap() == expected, "{n} shards: the merged texel bundle differs from the single-process bake");
+    }
+    // Per vertex, denoised by the merge.
+    let vertex_args: Vec<&str> = texel_args[..texel_args.len() - 6].iter().copied().chain(["--denoise", "1"]).collect();
+    let expected = single("vertex.prtb", &vertex_args, "2");
+    let work = dir.path("vertex");
+    std::fs::create_dir(&work).unwrap();
+    let merged = sharded_bake(&work, &mesh, &vertex_args, 2, 2);
+    assert!(std::fs::read(&merged).unwrap() == expected, "2 denoised vertex shards: the merged bundle differs");
+    // Shard 2 of 3's pilot with 3 points per texel, beside the others' 2.
+    let work = dir.path("texels-n3");
+    let odd = work.join("odd.prtp");
+    let points_3: Vec<&str> =
+        texel_args.iter().copied().take(texel_args.len() - 4).chain(["--texel-points", "3", "--denoise", "1"]).collect();
+    let mut a = vec!["bake", s(&mesh), "-o", s(&odd), "--shard", "2/3", "--round", "pilot"];
+    a.extend(&points_3);
+    run(&a);
+    let (p0, p1) = (work.join("pilot-0.prtp"), work.join("pilot-1.prtp"));
+    let e = refused(&merge(&[&p0, &p1, &odd], &dir.path("x.prta")));
+    assert!(e.contains("odd.prtp") && e.contains("texel mode 0.05 m texels, 3 points each here, 0.05 m texels, 2 points each in"), "{e}");
+    // Round 1 of a texel bake given the pilot, layer and hit records of a per-vertex bake.
+    let vertex = dir.path("vertex");
+    let (layer, pilot) = (vertex.join("r0.prtl"), vertex.join("pilot.prta"));
+    let mut a = vec!["bake", s(&mesh), "-o", s(&odd), "--shard", "0/2", "--round", "1", "--layer", s(&layer), "--pilot", s(&pilot)];
+    a.extend(["--shard-dir", s(&vertex)]);
+    a.extend(texel_args);
+    let e = refused(&a);
+    assert!(e.contains("texel mode off here, 0.05 m texels, 2 points each in") && e.contains("another bake's"), "{e}");
+}
+
 /// A re-run shard writes the same bytes; a merge refuses a missing, a
 /// repeated and a foreign part, naming it, and writes nothing.
 #[test]

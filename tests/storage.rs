@@ -115,6 +115,49 @@ fn max_error_counts_the_bakes_own_noise() {
     assert!(s.get("noise_error").is_none() && s["shaded_error"].as_f64().unwrap() <= 0.2, "{s}");
 }
 
+/// Texel mode under `--max-error`: the vertices and the texels are stored
+/// at one order, channel count and quantization (the viewer reads both
+/// together), the smallest whose total error the budget holds on each, the
+/// texels measured with their own noise (META `texels.storage`). A budget
+/// under the texels' noise stores both as baked and warns.
+#[test]
+fn a_texel_bake_stores_vertices_and_texels_at_one_storage_within_the_budget_on_each() {
+    let dir = Scratch::new("budget-texels");
+    let texels = ["--order", "3", "--texel-size", "0.1", "--texel-points", "8"];
+    fn with<'a>(texels: &[&'a str], budget: &'a str) -> Vec<&'a str> {
+        texels.iter().copied().chain(["--max-error", budget]).collect()
+    }
+    let (path, report) = bake(&dir, "texels.prtb", &with(&texels, "0.3"));
+    let b = read_bundle(&path).unwrap();
+    let (vertices, texel_transfer) = (b.transfer.as_ref().unwrap(), b.texels.as_ref().unwrap().transfer.as_ref().unwrap());
+    assert_eq!(
+        (texel_transfer.order, texel_transfer.channels, texel_transfer.quantization),
+        (vertices.order, vertices.channels, vertices.quantization),
+        "vertices and texels are stored alike"
+    );
+    assert!(vertices.order < 3 || vertices.quantization.name() != "f32", "the budget left room to store less: {}", b.meta["storage"]);
+    let s = &b.meta["texels"]["storage"];
+    let total = s["total_error"].as_f64().unwrap();
+    assert!(total <= 0.3 && total >= s["noise_error"].as_f64().unwrap() && s["within_budget"] == true, "{s}");
+    assert_eq!(report["texels"]["storage"], *s, "--json reports the texels' measure");
+    assert_eq!(b.meta["storage"]["order"], vertices.order);
+
+    // Under the texels' noise: both stored as baked, and stderr says why.
+    let noise = s["noise_error"].as_f64().unwrap();
+    let tight = format!("{}", noise / 2.0);
+    let obj = dir.path("scene.obj");
+    let out = dir.path("tight.prtb");
+    let mut args = vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "64", "--bounces", "1"];
+    args.extend(with(&texels, &tight));
+    let o = prtbake(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the texels' own estimated noise"), "{}", String::from_utf8_lossy(&o.stderr));
+    let b = read_bundle(&out).unwrap();
+    let t = b.texels.as_ref().unwrap().transfer.as_ref().unwrap();
+    assert_eq!((t.order, t.quantization.name()), (3, "f32"));
+    assert_eq!(b.meta["texels"]["storage"]["within_budget"], false);
+}
+
 /// A box room with an object sealed in a crate: a view-box bake drops the
 /// sealed object and leaves the transfer of every kept vertex as in a full bake.
 #[test]

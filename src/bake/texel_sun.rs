@@ -144,16 +144,7 @@ impl TexelSunPlan {
     ) -> Result<TexelSunPlan, BakeError> {
         params.check()?;
         let suns = checked_suns(suns)?;
-        if atlas.triangle_count() != mesh.triangle_count() {
-            return Err(BakeError::Params(format!(
-                "the atlas has {} triangles, the mesh {}",
-                atlas.triangle_count(),
-                mesh.triangle_count()
-            )));
-        }
-        if points_per_texel == 0 {
-            return Err(BakeError::Params("points per texel must be at least 1".into()));
-        }
+        super::texels::check_texel_inputs(mesh, atlas, points_per_texel)?;
         let coverage = Coverage::of(atlas);
         let points = TexelPoints::new(atlas, &coverage, points_per_texel, pattern, params.seed);
         Ok(TexelSunPlan { coverage, points, points_per_texel, suns, params: *params })

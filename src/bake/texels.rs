@@ -6,7 +6,7 @@
 //! ([`super::texel_lookup`]), so the bounce gather's bias falls with the
 //! texel size; the vertices' own rows serve only back sides.
 
-use super::transfer::texels::TexelState;
+use super::transfer::texels::{denoise_texels, texel_charts, TexelRowsMut, TexelState};
 use super::{BakeError, BakeParams, Surfaces, TransferResult};
 use crate::atlas::coverage::Coverage;
 use crate::atlas::Atlas;
@@ -57,12 +57,7 @@ pub fn bake_texels(
     atlas: Atlas,
     points_per_texel: u32,
 ) -> Result<(TransferResult, TexelTransfer), BakeError> {
-    if atlas.triangle_count() != mesh.triangle_count() {
-        return Err(BakeError::Params(format!("the atlas has {} triangles, the mesh {}", atlas.triangle_count(), mesh.triangle_count())));
-    }
-    if points_per_texel == 0 {
-        return Err(BakeError::Params("points per texel must be at least 1".into()));
-    }
+    check_texel_inputs(mesh, &atlas, points_per_texel)?;
     let coverage = Coverage::of(&atlas);
     let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params.pattern, params.seed);
     let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, None, None, Some(&mut state))?;
@@ -83,6 +78,57 @@ pub fn bake_texels(
         atlas,
     };
     Ok((result, texel))
+}
+
+/// An atlas of `mesh`'s triangles and at least one point per texel.
+pub(crate) fn check_texel_inputs(mesh: &Mesh, atlas: &Atlas, points_per_texel: u32) -> Result<(), BakeError> {
+    if atlas.triangle_count() != mesh.triangle_count() {
+        return Err(BakeError::Params(format!("the atlas has {} triangles, the mesh {}", atlas.triangle_count(), mesh.triangle_count())));
+    }
+    if points_per_texel == 0 {
+        return Err(BakeError::Params("points per texel must be at least 1".into()));
+    }
+    Ok(())
+}
+
+/// Texel mode run in pieces (a sharded bake, `crate::shards`): the atlas's
+/// covered texels and their points, made once per process; each shard
+/// traces a range of texels in each round.
+pub struct TexelTransferPlan {
+    pub(crate) state: TexelState,
+}
+
+impl TexelTransferPlan {
+    /// The plan of `atlas` (unwrapped from `mesh`) with `points_per_texel` points a texel.
+    pub fn new(mesh: &Mesh, atlas: &Atlas, points_per_texel: u32, params: &BakeParams) -> Result<TexelTransferPlan, BakeError> {
+        check_texel_inputs(mesh, atlas, points_per_texel)?;
+        let coverage = Coverage::of(atlas);
+        Ok(TexelTransferPlan { state: TexelState::new(atlas, &coverage, points_per_texel, params.pattern, params.seed) })
+    }
+
+    /// The covered texels (`y * width + x`, ascending).
+    pub fn texels(&self) -> &[u32] {
+        &self.state.texels
+    }
+
+    /// Sample points of all covered texels.
+    pub fn point_count(&self) -> u64 {
+        self.state.points.len() as u64
+    }
+}
+
+/// `--denoise K` over a texel transfer summed elsewhere (a sharded bake's
+/// merge): the filter [`bake_texels`] runs, each texel's chart read from
+/// the atlas. `stride` is channels × coefficients.
+pub fn denoise_texel_transfer(texels: &mut TexelTransfer, stride: usize, k: f32) -> Result<(), BakeError> {
+    let coverage = Coverage::of(&texels.atlas);
+    if coverage.texels != texels.texels {
+        return Err(BakeError::Params(format!("{} texels are not the {} the atlas covers", texels.texels.len(), coverage.texels.len())));
+    }
+    let chart = texel_charts(&texels.atlas, &coverage);
+    let rows = TexelRowsMut { total: &mut texels.total, bounces: &mut texels.bounces, noise: &mut texels.noise };
+    denoise_texels(&texels.texels, texels.atlas.width, &chart, &texels.covered_area, rows, stride, k);
+    Ok(())
 }
 
 #[cfg(test)]

@@ -88,6 +88,55 @@ pub fn make_bundle_stored(
     }
 }
 
+/// Texel mode: adds the atlas and each covered texel's transfer to a bundle
+/// [`make_bundle_stored`] made, stored as the vertices are (`choices`, from
+/// [`StorageRequest::choose_with_texels`]: the vertices' choice and the
+/// texels' measure of it, recorded as META `texels.storage`), and META
+/// `texels` saying what they are. `atlas_source` names where the atlas came
+/// from (`xatlas` or `TEXCOORD_1`). The one way whole bakes and merged
+/// shards store texels.
+pub fn add_texel_transfer(
+    bundle: &mut Bundle,
+    texels: bake::texels::TexelTransfer,
+    result: &TransferResult,
+    choices: Option<&(budget::Choice, budget::Choice)>,
+    atlas_source: &str,
+    points_per_texel: u32,
+) {
+    bundle.meta["texels"] = json!({
+        "texel_size": texels.atlas.texel_size,
+        "atlas": atlas_source,
+        "points_per_texel": points_per_texel,
+        "covered": texels.texels.len(),
+        "points": texels.points,
+        "points_rejected": texels.points_rejected,
+        "rays": texels.rays,
+        "meaning": "mean of the transfer over the texel's footprint on its triangles, parts inside geometry left out; bounces ≥ 1 (of vertices and texels) read the previous bounce at a hit bilinearly from the texels of the hit's chart, from the hit triangle's vertices on back sides",
+    });
+    if let Some((_, on_texels)) = choices {
+        bundle.meta["texels"]["storage"] = storage_meta(on_texels, result);
+    }
+    let storage = choices
+        .map_or(budget::Storage { order: result.order, channels: result.channels, quantization: Quantization::F32 }, |(on_vertices, _)| {
+            on_vertices.chosen.storage
+        });
+    let stored = |data: Vec<f32>| budget::reduce(&data, result.order, result.channels, &storage);
+    let mut layers = vec![TransferLayer { kind: LayerKind::Total, data: stored(texels.total) }];
+    layers.extend(
+        texels.bounces.into_iter().enumerate().map(|(b, data)| TransferLayer { kind: LayerKind::Bounce(b as u32), data: stored(data) }),
+    );
+    bundle.texels = Some(super::TexelLayers {
+        texels: texels.texels,
+        transfer: Some(Transfer {
+            order: storage.order as u32,
+            channels: storage.channels as u32,
+            quantization: storage.quantization,
+            layers,
+        }),
+        atlas: texels.atlas,
+    });
+}
+
 /// META `storage`: what was kept, what it measured, against what.
 pub fn storage_meta(c: &budget::Choice, result: &TransferResult) -> serde_json::Value {
     let baked = budget::Storage { order: result.order, channels: result.channels, quantization: Quantization::F32 };
@@ -145,35 +194,85 @@ impl StorageRequest {
         if *self == StorageRequest::default() {
             return None;
         }
+        let (order, channels) = (result.order, result.channels);
+        let lightings = budget::reference_lightings(order);
+        let storages = self.storages(order, channels);
+        Some(self.choose_among(&result.total, &result.noise, order, channels, &storages, &lightings).0)
+    }
+
+    /// Texel mode: one storage for the vertices and the texels (the viewer
+    /// reads both at one order and channel count), the smallest whose error
+    /// the budget holds on each, the texels measured with their own noise.
+    /// Returns the vertices' choice and the texels' measure of it; `None`
+    /// when both are stored as baked.
+    pub fn choose_with_texels(
+        &self,
+        result: &TransferResult,
+        texels: &bake::texels::TexelTransfer,
+    ) -> Option<(budget::Choice, budget::Choice)> {
+        if *self == StorageRequest::default() {
+            return None;
+        }
+        let (order, channels) = (result.order, result.channels);
+        let lightings = budget::reference_lightings(order);
+        let storages = self.storages(order, channels);
+        let (on_texels, texel_noise) = self.choose_among(&texels.total, &texels.noise, order, channels, &storages, &lightings);
+        let limit = on_texels.budget.unwrap_or(f64::INFINITY);
+        let fitting: Vec<budget::Storage> =
+            on_texels.measured.iter().filter(|c| c.total_error.unwrap_or(c.shaded_error) <= limit).map(|c| c.storage).collect();
+        let (on_vertices, _) = self.choose_among(&result.total, &result.noise, order, channels, &fitting, &lightings);
+        // The vertices' choice is one the texels measured, or the bake as it is.
+        let chosen = on_vertices.chosen.storage;
+        let texel_chosen = match on_texels.measured.iter().find(|c| c.storage == chosen) {
+            Some(c) => c.clone(),
+            None => budget::measure(&texels.total, order, channels, &chosen, &lightings, texel_noise.as_deref()),
+        };
+        Some((on_vertices, budget::Choice { chosen: texel_chosen, ..on_texels }))
+    }
+
+    /// The storages to try: every quantization asked (all with `--quantize
+    /// auto`), and with a budget every smaller order and channel count too.
+    fn storages(&self, order: usize, channels: usize) -> Vec<budget::Storage> {
         let all = [Quantization::F16, Quantization::F16Tinted, Quantization::I16PerVertexScale, Quantization::F32];
         let quantizations: Vec<Quantization> = match self.quantize {
             Some(q) => vec![q],
             None => all.to_vec(),
         };
-        let (order, channels) = (result.order, result.channels);
-        let storages: Vec<budget::Storage> = match self.max_error {
+        match self.max_error {
             Some(_) => budget::candidates(order, channels, &quantizations),
             None => quantizations.iter().map(|&q| budget::Storage { order, channels, quantization: q }).collect(),
-        };
+        }
+    }
+
+    /// The smallest of `storages` within the budget for the rows `total`,
+    /// and the rows' noise per lighting when the budget counts it.
+    fn choose_among(
+        &self,
+        total: &[f32],
+        noise: &[f32],
+        order: usize,
+        channels: usize,
+        storages: &[budget::Storage],
+        lightings: &[budget::Lighting],
+    ) -> (budget::Choice, Option<Vec<f64>>) {
         let limit = match (self.max_error, self.quantize) {
             (Some(e), _) => e,
             (None, None) => AUTO_QUANTIZE_BUDGET,
             // A fixed quantization without a budget: always taken, but measured.
             (None, Some(_)) => f64::INFINITY,
         };
-        let lightings = budget::reference_lightings(order);
         // --max-error counts the total error, the bake's own noise included
         // (the definition `chart --real` measures); `--quantize auto` alone
         // bounds what quantization loses.
         let noise = match self.max_error {
-            Some(_) => budget::noise_errors(&result.total, order, channels, &result.noise, &lightings),
+            Some(_) => budget::noise_errors(total, order, channels, noise, lightings),
             None => None,
         };
-        let mut choice = budget::choose_within_total(&result.total, order, channels, &storages, limit, &lightings, noise.as_deref());
+        let mut choice = budget::choose_within_total(total, order, channels, storages, limit, lightings, noise.as_deref());
         if limit.is_infinite() {
             choice.budget = None;
         }
-        Some(choice)
+        (choice, noise)
     }
 }
 

@@ -149,6 +149,20 @@ pub fn warn_over_budget(choice: Option<&budget::Choice>, output: &std::path::Pat
     }
 }
 
+/// Texel mode: warns when the texels' own noise is over `--max-error`
+/// (vertices and texels are then stored as baked).
+pub fn warn_texels_over_budget(on_texels: Option<&budget::Choice>, output: &std::path::Path) {
+    let Some(c) = on_texels else { return };
+    if let (false, Some(budget), Some(noise)) = (c.within_budget(), c.budget, c.noise_error) {
+        eprintln!(
+            "warning: {}: the texels' own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: stored as baked (f32); more rays or --texel-points lower it",
+            output.display(),
+            100.0 * noise,
+            100.0 * budget
+        );
+    }
+}
+
 /// What a bake reports on stdout.
 pub struct BakeReport {
     pub output: PathBuf,
@@ -188,6 +202,8 @@ pub struct TexelReport {
     pub rays_traced: u64,
     pub atlas_seconds: f64,
     pub seconds_per_bounce: Vec<f64>,
+    /// The texels' measure of the storage chosen for vertices and texels (META `texels.storage`).
+    pub storage: Option<serde_json::Value>,
 }
 
 /// Extensions of a bundle output.
@@ -267,6 +283,16 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
     })
 }
 
+/// Where a texel bake's atlas comes from: the mesh's own lightmap
+/// coordinates (`TEXCOORD_1`) unless it has none or `--unwrap` asks for a new one.
+pub fn atlas_source_name(mesh: &Mesh, unwrap: bool) -> &'static str {
+    if mesh.lightmap_uvs.is_empty() || unwrap {
+        "xatlas"
+    } else {
+        "TEXCOORD_1"
+    }
+}
+
 /// Texel mode: unwraps the atlas, bakes vertices and texels together, and
 /// stages the bundle with its ATLS and TXFR sections (texels at the
 /// vertices' quantization, at the baked order and channels).
@@ -289,7 +315,7 @@ fn bake_texels_to_bundle(
         Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds))
     })??;
     let (result, texels, surfaces, build_seconds, atlas_seconds) = baked;
-    let atlas_source = if mesh.lightmap_uvs.is_empty() || request.unwrap { "xatlas" } else { "TEXCOORD_1" };
+    let atlas_source = atlas_source_name(mesh, request.unwrap);
     let texel_report = TexelReport {
         texel_size: request.size,
         atlas: atlas_source,
@@ -303,44 +329,22 @@ fn bake_texels_to_bundle(
         rays_traced: texels.rays_traced,
         atlas_seconds,
         seconds_per_bounce: texels.seconds_per_bounce.clone(),
+        storage: None,
     };
     check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
-    let mut meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
-    meta["texels"] = json!({
-        "texel_size": request.size,
-        "atlas": atlas_source,
-        "points_per_texel": request.points,
-        "covered": texels.texels.len(),
-        "points": texels.points,
-        "points_rejected": texels.points_rejected,
-        "rays": texels.rays,
-        "meaning": "mean of the transfer over the texel's footprint on its triangles, parts inside geometry left out; bounces ≥ 1 (of vertices and texels) read the previous bounce at a hit bilinearly from the texels of the hit's chart, from the hit triangle's vertices on back sides",
-    });
-    let choice = config.storage.choose(&result);
-    let mut bundle = crate::bundle::make_bundle_stored(mesh, &result, &config.params, meta, choice.as_ref());
-    let mut layers = vec![crate::bundle::TransferLayer { kind: crate::bundle::LayerKind::Total, data: texels.total.clone() }];
-    layers.extend(
-        texels
-            .bounces
-            .iter()
-            .enumerate()
-            .map(|(b, l)| crate::bundle::TransferLayer { kind: crate::bundle::LayerKind::Bounce(b as u32), data: l.clone() }),
-    );
-    bundle.texels = Some(crate::bundle::TexelLayers {
-        texels: texels.texels.clone(),
-        transfer: Some(crate::bundle::Transfer {
-            order: result.order as u32,
-            channels: result.channels as u32,
-            // The vertices' quantization (`--quantize`, or what `--max-error` chose), at the baked order and channels.
-            quantization: choice.as_ref().map_or(Quantization::F32, |c| c.chosen.storage.quantization),
-            layers,
-        }),
-        atlas: texels.atlas,
-    });
+    let meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
+    // One storage for vertices and texels, within the budget on each.
+    let choices = config.storage.choose_with_texels(&result, &texels);
+    let mut texel_report = texel_report;
+    texel_report.storage = choices.as_ref().map(|(_, on_texels)| storage_meta(on_texels, &result));
+    let mut bundle = crate::bundle::make_bundle_stored(mesh, &result, &config.params, meta, choices.as_ref().map(|c| &c.0));
+    crate::bundle::add_texel_transfer(&mut bundle, texels, &result, choices.as_ref(), atlas_source, request.points);
     let encoded =
         crate::bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
-    warn_over_budget(choice.as_ref(), &config.output);
+    warn_over_budget(choices.as_ref().map(|c| &c.0), &config.output);
+    warn_texels_over_budget(choices.as_ref().map(|c| &c.1), &config.output);
+    let choice = choices.map(|c| c.0);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
     Ok(BakeReport {
         output: config.output.clone(),
@@ -568,6 +572,15 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             }),
             s.shaded_error,
             c.budget.map(|b| format!(" (budget {b:.3e})")).unwrap_or_default()
+        );
+    }
+    if let Some(storage) = report.texels.as_ref().and_then(|t| t.storage.as_ref()) {
+        let error = |name: &str| storage.get(name).and_then(|e| e.as_f64()).map(|e| format!(", {} {e:.3e}", name.replace('_', " ")));
+        println!(
+            "texel storage: the same, measured on the texels{}{}{}",
+            error("shaded_error").unwrap_or_default(),
+            error("noise_error").unwrap_or_default(),
+            error("total_error").unwrap_or_default()
         );
     }
     Ok(())

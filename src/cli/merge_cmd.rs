@@ -13,7 +13,7 @@ use super::sun_cmd::sun_stats_meta;
 use super::Output;
 use crate::bake::Surfaces;
 use crate::bundle;
-use crate::bundle::{encode_transfer_bundle, StorageRequest};
+use crate::bundle::StorageRequest;
 use crate::files::Staged;
 use crate::shards::run::{decode, read_shard_file};
 use crate::shards::{self, FileKind, LayerFile, MeshId, ShardError, SunPart, TransferMerge, TransferPart};
@@ -115,7 +115,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             staged.stage(output, |w| layer.write_to(w).map(drop)).with_context(|| format!("cannot write {}", output.display()))?;
             json!({ "kind": "layer", "round": round, "vertices": layer.identity.mesh.vertices })
         }
-        TransferMerge::Final { result, key, frame } => {
+        TransferMerge::Final { result, key, frame, texels } => {
             if !has_extension(output, "prtb") {
                 anyhow::bail!("{}: round {round} is the last: its merge is the bundle; name the output .prtb", output.display());
             }
@@ -139,10 +139,47 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
                 let base = crate::bake::transfer::base_point_count(&b.mesh, &surfaces, &key.params)?;
                 result.stats.points_added = result.stats.points.saturating_sub(base);
             }
-            let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
-            let (encoded, choice) =
-                super::with_threads(config.threads, || encode_transfer_bundle(&b.mesh, &result, &key.params, b.meta, &storage))?
-                    .with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
+            let frame_error = |problem: String| ShardError::Malformed { path: frame_path.to_path_buf(), problem };
+            let mut b = b;
+            let texels = match (texels, b.texels.take(), &key.texels) {
+                (None, None, None) => None,
+                (Some(merged), Some(frame_texels), Some(texel_key)) => {
+                    Some(shards::merged_texel_transfer(merged, frame_texels, texel_key).map_err(frame_error)?)
+                }
+                _ => return Err(frame_error("its bundle frame's atlas does not go with the parts' texel mode".into()).into()),
+            };
+            let atlas_source = b.meta.pointer("/texels/atlas").and_then(|a| a.as_str()).unwrap_or("xatlas").to_string();
+            let encoded = super::with_threads(config.threads, || -> anyhow::Result<_> {
+                let mut texels = texels;
+                // `--denoise`: the filters a whole bake runs after its last bounce, vertices and texels.
+                let k = key.params.denoise;
+                if k > 0.0 {
+                    let stride = result.channels * crate::sh::coeff_count(result.order);
+                    crate::bake::denoise::denoise(&b.mesh, &mut result.total, &mut result.bounces, &mut result.noise, stride, k);
+                    if let Some(t) = &mut texels {
+                        crate::bake::texels::denoise_texel_transfer(t, stride, k).map_err(|e| frame_error(e.to_string()))?;
+                    }
+                }
+                let storage = StorageRequest { quantize: key.quantize, max_error: key.max_error };
+                let (bundle, choice) = match texels {
+                    None => {
+                        let choice = storage.choose(&result);
+                        (bundle::make_bundle_stored(&b.mesh, &result, &key.params, b.meta, choice.as_ref()), choice)
+                    }
+                    Some(t) => {
+                        // One storage for vertices and texels, within the budget on each, as a whole bake.
+                        let choices = storage.choose_with_texels(&result, &t);
+                        let mut bundle = bundle::make_bundle_stored(&b.mesh, &result, &key.params, b.meta, choices.as_ref().map(|c| &c.0));
+                        let points = key.texels.as_ref().map_or(0, |t| t.points_per_texel);
+                        bundle::add_texel_transfer(&mut bundle, t, &result, choices.as_ref(), &atlas_source, points);
+                        super::bake_cmd::warn_texels_over_budget(choices.as_ref().map(|c| &c.1), output);
+                        (bundle, choices.map(|c| c.0))
+                    }
+                };
+                let encoded = bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", output.display()))?;
+                Ok((encoded, choice))
+            })??;
+            let (encoded, choice) = encoded;
             super::bake_cmd::warn_over_budget(choice.as_ref(), output);
             staged.stage_bytes(output, &encoded).with_context(|| format!("cannot write {}", output.display()))?;
             let s = &result.stats;

@@ -17,10 +17,12 @@ use super::sun_cmd::{
     texel_points, texel_sun_meta, texel_sun_plan, SunConfig,
 };
 use super::Output;
+use crate::atlas::Atlas;
+use crate::bake::texels::TexelTransferPlan;
 use crate::bake::{SunStats, TexelSunStats};
 use crate::bundle::bundle_meta;
 use crate::bundle::{self, Bundle, SunSeries, SunStep};
-use crate::shards::{self, FileKind, Shard, ShardRun, Stage, SunKey, TexelSunKey, TransferKey};
+use crate::shards::{self, FileKind, Shard, ShardRun, Stage, SunKey, TexelKey, TransferKey};
 use crate::sky;
 use crate::trace::{BuildQuality, Scene};
 
@@ -52,25 +54,60 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let loaded = load_for_bake(config, &outputs)?;
     // The inputs of later rounds are read (and checked) before any ray.
     let files = run.read_inputs(&config.output)?;
-    let key = TransferKey {
+    let mut key = TransferKey {
         params: config.params,
         window_patterns: config.window_patterns.clone(),
         one_sided_patterns: config.one_sided_patterns.clone(),
         quantize: config.storage.quantize,
         max_error: config.storage.max_error,
+        texels: None,
     };
     let mesh = &loaded.mesh;
-    let (mut output, surfaces, build_seconds) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+    let input = config.input.display().to_string();
+    let (mut output, surfaces, build_seconds, atlas) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = super::bake_cmd::surfaces_of(mesh, config)?;
         check_windows(config, &surfaces)?;
-        let scene = run.scene(mesh).with_context(|| config.input.display().to_string())?;
-        let output = run.bake(mesh, &scene, &surfaces, &key, config.params.quiet, files, &config.output)?;
-        Ok((output, surfaces, scene.build_time.as_secs_f64()))
+        // Texel mode: every shard unwraps the same atlas and makes the same texel points.
+        let mut texels = match &config.texels {
+            Some(request) => {
+                let atlas = Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?;
+                let plan = TexelTransferPlan::new(mesh, &atlas, request.points, &config.params).with_context(|| input.clone())?;
+                key.texels = Some(TexelKey {
+                    texel_size: atlas.texel_size,
+                    points_per_texel: request.points,
+                    fractions: false,
+                    covered_texels: plan.texels().len() as u32,
+                    atlas_crc: shards::atlas_crc(&atlas),
+                });
+                Some((atlas, plan))
+            }
+            None => None,
+        };
+        let scene = run.scene(mesh).with_context(|| input.clone())?;
+        let plan = texels.as_mut().map(|(_, plan)| plan);
+        let output = run.bake(mesh, &scene, &surfaces, &key, plan, config.params.quiet, files, &config.output)?;
+        Ok((output, surfaces, scene.build_time.as_secs_f64(), texels))
     })??;
     if run.stage() == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
-        let meta = bundle_meta(loaded.meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
-        let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None, texels: None };
+        let mut meta = bundle_meta(loaded.meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
+        let texels = match (atlas, &config.texels) {
+            (Some((atlas, plan)), Some(request)) => {
+                // The atlas and its covered texels; the merge puts in their transfer (zeros here) and META `texels`.
+                meta["texels"] = json!({ "atlas": super::bake_cmd::atlas_source_name(mesh, request.unwrap) });
+                let zeros = vec![0.0; plan.texels().len() * output.part.channels as usize * output.part.coeffs as usize];
+                let layers = vec![bundle::TransferLayer { kind: bundle::LayerKind::Total, data: zeros }];
+                let transfer = bundle::Transfer {
+                    order: config.params.order as u32,
+                    channels: output.part.channels,
+                    quantization: bundle::Quantization::F32,
+                    layers,
+                };
+                Some(bundle::TexelLayers { atlas, texels: plan.texels().to_vec(), transfer: Some(transfer) })
+            }
+            _ => None,
+        };
+        let frame = Bundle { meta, mesh: loaded.mesh, transfer: None, sun: None, texels };
         output.part.frame = bundle::encode_bundle(&frame).context("cannot encode the bundle frame")?;
     }
     run.write(&output, &config.output)?;
@@ -92,6 +129,13 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             "points": [part.points.start, part.points.end],
             "opened_vertices": part.opened.len(),
             "late_contributions": part.late.len(),
+            "texels": part.texels.as_ref().map(|t| json!({
+                "range": [t.texels.start, t.texels.end],
+                "covered": t.texel_count,
+                "points": [t.points.start, t.points.end],
+                "rays": t.rays,
+                "rays_traced": t.traced,
+            })),
             "rays": part.rays,
             "rays_traced": part.traced,
             "bvh_build_seconds": build_seconds,
@@ -100,8 +144,22 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
         }));
     }
     let what = if run.pilot_stage { "pilot".to_string() } else { format!("round {round}/{bounces}") };
+    let texels = part
+        .texels
+        .as_ref()
+        .map(|t| {
+            format!(
+                "; texels {}..{} of {}, {} points, {} rays",
+                t.texels.start,
+                t.texels.end,
+                t.texel_count,
+                t.points.end - t.points.start,
+                t.rays
+            )
+        })
+        .unwrap_or_default();
     println!(
-        "shard {shard}, {what}: items {}..{} of {}, {} points, {} rays in {:.2}s; wrote {} ({} bytes){}",
+        "shard {shard}, {what}: items {}..{} of {}, {} points, {} rays{texels} in {:.2}s; wrote {} ({} bytes){}",
         part.items.start,
         part.items.end,
         part.item_count,
@@ -161,7 +219,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             m.remove("stats");
         }
         let mut key = SunKey::of_day(config.params, config.window_patterns.clone(), &steps, &meta);
-        key.texels = atlas.as_ref().zip(texel_plan.as_ref()).map(|(atlas, plan)| TexelSunKey {
+        key.texels = atlas.as_ref().zip(texel_plan.as_ref()).map(|(atlas, plan)| TexelKey {
             texel_size: atlas.texel_size,
             points_per_texel,
             fractions: config.texel_fractions,

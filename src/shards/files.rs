@@ -194,9 +194,86 @@ pub struct TransferPart {
     pub opened: VertexRows,
     /// Contributions to vertices an earlier shard opened, in item and corner order.
     pub late: VertexRows,
+    /// Texel mode: this shard's range of covered texels and their sums.
+    pub texels: Option<TexelRoundPart>,
     /// Last round, shard 0: a bundle holding the mesh and the metadata the
     /// final bundle is made with (empty otherwise).
     pub frame: Vec<u8>,
+}
+
+/// A shard's covered texels in one transfer round. A texel's points all lie
+/// in one shard's range, so its sums are whole and the merge joins the
+/// ranges in texel order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelRoundPart {
+    pub texels: Range<u32>,
+    pub texel_count: u32,
+    /// The texels' sample points, of `point_count` in all texels.
+    pub points: Range<u64>,
+    pub point_count: u64,
+    /// Rays evaluated and traced, and points found inside geometry (round 0).
+    pub rays: u64,
+    pub traced: u64,
+    pub rejected: u64,
+    /// Per texel, `stride` sums of its points' results weighted by area.
+    pub sums: Vec<f32>,
+    /// Per texel in round 0, the footprint its kept points stand for; else empty.
+    pub weights: Vec<f32>,
+    /// Per texel, the moments of its points' DC (`bake::noise::Moments`).
+    pub moments: Vec<[f64; 3]>,
+}
+
+impl TexelRoundPart {
+    fn write<W: Write>(part: Option<&TexelRoundPart>, w: &mut Writer<W>) -> std::io::Result<()> {
+        let Some(t) = part else { return w.u32(0) };
+        w.u32(1)?;
+        for v in [t.texels.start, t.texels.end, t.texel_count] {
+            w.u32(v)?;
+        }
+        for v in [t.points.start, t.points.end, t.point_count, t.rays, t.traced, t.rejected] {
+            w.u64(v)?;
+        }
+        w.f32s(&t.sums)?;
+        w.u32(!t.weights.is_empty() as u32)?;
+        w.f32s(&t.weights)?;
+        write_moments(w, &t.moments)
+    }
+
+    fn read(r: &mut Reader, stride: u64, round: u32) -> Result<Option<TexelRoundPart>, String> {
+        match r.u32("texel flag")? {
+            0 => return Ok(None),
+            1 => {}
+            f => return Err(format!("texel flag is {f}, not 0 or 1")),
+        }
+        let texels = read_range32(r, "texel range", u32::MAX)?;
+        let texel_count = r.u32("texel count")?;
+        if texels.end > texel_count {
+            return Err(format!("texel range {texels:?} is past the {texel_count} covered texels"));
+        }
+        let points = read_range64(r, "texel point range", u64::MAX)?;
+        let point_count = r.u64("texel point count")?;
+        if points.end > point_count {
+            return Err(format!("texel point range {points:?} is past the {point_count} texel points"));
+        }
+        let (rays, traced, rejected) = (r.u64("texel rays")?, r.u64("texel rays traced")?, r.u64("texel points rejected")?);
+        let n = (texels.end - texels.start) as u64;
+        let sums = r.f32s(n.saturating_mul(stride), "texel sums")?;
+        let with_weights = flag_u32(r.u32("texel weight flag")?, "texel weight")?;
+        if with_weights != (round == 0) {
+            return Err(format!("round {round} {} texel weights", if with_weights { "carries" } else { "lacks" }));
+        }
+        let weights = if with_weights { r.f32s(n, "texel weights")? } else { Vec::new() };
+        let moments = read_moments(r, n, "texel moments")?;
+        Ok(Some(TexelRoundPart { texels, texel_count, points, point_count, rays, traced, rejected, sums, weights, moments }))
+    }
+}
+
+fn flag_u32(value: u32, what: &str) -> Result<bool, String> {
+    match value {
+        0 => Ok(false),
+        1 => Ok(true),
+        v => Err(format!("{what} flag is {v}, not 0 or 1")),
+    }
 }
 
 impl TransferPart {
@@ -222,6 +299,7 @@ impl TransferPart {
         w.u32(self.tracks_noise as u32 | (self.pilot as u32) << 1)?;
         self.opened.write(&mut w)?;
         self.late.write(&mut w)?;
+        TexelRoundPart::write(self.texels.as_ref(), &mut w)?;
         w.blob(&self.frame)?;
         w.finish()
     }
@@ -270,6 +348,10 @@ impl TransferPart {
         let vertex_count = identity.plan_vertices;
         let opened = VertexRows::read(&mut r, "opened vertices", stride, round == 0, tracks_noise, vertex_count)?;
         let late = VertexRows::read(&mut r, "late contributions", stride, round == 0, tracks_noise, vertex_count)?;
+        let texels = TexelRoundPart::read(&mut r, stride, round)?;
+        if pilot && texels.is_some() {
+            return Err("a pilot part holds texel rows: the pilot stage samples vertices only".into());
+        }
         let frame = r.blob("bundle frame")?.to_vec();
         r.finish()?;
         Ok(TransferPart {
@@ -292,6 +374,7 @@ impl TransferPart {
             pilot,
             opened,
             late,
+            texels,
             frame,
         })
     }
@@ -311,6 +394,24 @@ pub struct HitFile {
     pub rejected: Vec<u32>,
     /// `rays` records per point, in point order ([`crate::bake`]'s hit encoding).
     pub records: Vec<u64>,
+    /// Texel mode: the same for this shard's texels' points.
+    pub texels: Option<TexelHits>,
+}
+
+/// A shard's texel points' bounce-0 hit records and rejections.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelHits {
+    pub texels: Range<u32>,
+    pub points: Range<u64>,
+    /// Bit p % 32 of word p / 32: texel point `points.start + p` was rejected.
+    pub rejected: Vec<u32>,
+    pub records: Vec<u64>,
+}
+
+impl TexelHits {
+    pub fn is_rejected(&self, local_point: u64) -> bool {
+        (self.rejected[(local_point / 32) as usize] >> (local_point % 32)) & 1 == 1
+    }
 }
 
 impl HitFile {
@@ -329,6 +430,19 @@ impl HitFile {
         w.u32(self.rays)?;
         w.u32s(&self.rejected)?;
         w.u64s(&self.records)?;
+        match &self.texels {
+            None => w.u32(0)?,
+            Some(t) => {
+                w.u32(1)?;
+                for v in [t.texels.start, t.texels.end] {
+                    w.u32(v)?;
+                }
+                w.u64(t.points.start)?;
+                w.u64(t.points.end)?;
+                w.u32s(&t.rejected)?;
+                w.u64s(&t.records)?;
+            }
+        }
         w.finish()
     }
 
@@ -342,13 +456,25 @@ impl HitFile {
         let count = points.end - points.start;
         let rejected = r.u32s(count.div_ceil(32), "rejected points")?;
         let records = r.u64s(count.saturating_mul(rays as u64), "hit records")?;
+        let texels = match flag_u32(r.u32("texel flag")?, "texel")? {
+            false => None,
+            true => {
+                let texels = read_range32(&mut r, "texel range", u32::MAX)?;
+                let points = read_range64(&mut r, "texel point range", u64::MAX)?;
+                let count = points.end - points.start;
+                let rejected = r.u32s(count.div_ceil(32), "rejected texel points")?;
+                let records = r.u64s(count.saturating_mul(rays as u64), "texel hit records")?;
+                Some(TexelHits { texels, points, rejected, records })
+            }
+        };
         r.finish()?;
         // The gather indexes the hit triangle's corners: a record past the mesh would read out of bounds.
         let triangles = identity.plan_triangles;
-        if let Some(i) = records.iter().position(|&h| h != crate::bake::gather::NO_HIT && h >> 32 >= triangles) {
-            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", records[i] >> 32));
+        let all = records.iter().chain(texels.iter().flat_map(|t| &t.records));
+        if let Some((i, h)) = all.enumerate().find(|&(_, &h)| h != crate::bake::gather::NO_HIT && h >> 32 >= triangles) {
+            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", h >> 32));
         }
-        Ok(HitFile { identity, shard, items, points, rays, rejected, records })
+        Ok(HitFile { identity, shard, items, points, rays, rejected, records, texels })
     }
 }
 
@@ -380,6 +506,24 @@ pub struct LayerFile {
     pub total: Vec<f32>,
     /// With `--store-bounces`, each bounce so far; else empty.
     pub layers: Vec<Vec<f32>>,
+    /// Texel mode: the same per covered texel.
+    pub texels: Option<TexelLayer>,
+}
+
+/// The texels' rounds so far, merged: as [`LayerFile`]'s vertex fields, per covered texel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelLayer {
+    pub texel_count: u32,
+    pub points: u64,
+    pub points_rejected: u64,
+    pub rays: u64,
+    pub rays_traced: u64,
+    /// Per texel: the footprint its kept points stand for (from round 0).
+    pub weights: Vec<f32>,
+    pub noise: Vec<f32>,
+    pub source: Vec<f32>,
+    pub total: Vec<f32>,
+    pub layers: Vec<Vec<f32>>,
 }
 
 impl LayerFile {
@@ -402,6 +546,22 @@ impl LayerFile {
         w.u32(self.layers.len() as u32)?;
         for layer in &self.layers {
             w.f32s(layer)?;
+        }
+        match &self.texels {
+            None => w.u32(0)?,
+            Some(t) => {
+                w.u32(1)?;
+                w.u32(t.texel_count)?;
+                for v in [t.points, t.points_rejected, t.rays, t.rays_traced] {
+                    w.u64(v)?;
+                }
+                for rows in [&t.weights, &t.noise, &t.source, &t.total] {
+                    w.f32s(rows)?;
+                }
+                for layer in &t.layers {
+                    w.f32s(layer)?;
+                }
+            }
         }
         w.finish()
     }
@@ -441,6 +601,25 @@ impl LayerFile {
             return Err(format!("{stored} stored layers after round {round}"));
         }
         let layers = (0..stored).map(|_| r.f32s(layer_len, "stored layer")).collect::<Result<_, _>>()?;
+        let texels = match flag_u32(r.u32("texel flag")?, "texel")? {
+            false => None,
+            true => {
+                let texel_count = r.u32("texel count")?;
+                let (points, points_rejected, rays, rays_traced) =
+                    (r.u64("texel points")?, r.u64("texel points rejected")?, r.u64("texel rays")?, r.u64("texel rays traced")?);
+                let n = texel_count as u64;
+                let weights = r.f32s(n, "texel weights")?;
+                let noise = r.f32s(n, "texel noise")?;
+                if noise.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+                    return Err("a texel's noise is negative or not finite".into());
+                }
+                let source = r.f32s(n.saturating_mul((source_channels * coeffs) as u64), "texel source rows")?;
+                let layer_len = n.saturating_mul((channels * coeffs) as u64);
+                let total = r.f32s(layer_len, "texel total")?;
+                let layers = (0..stored).map(|_| r.f32s(layer_len, "stored texel layer")).collect::<Result<_, _>>()?;
+                Some(TexelLayer { texel_count, points, points_rejected, rays, rays_traced, weights, noise, source, total, layers })
+            }
+        };
         r.finish()?;
         let layer = LayerFile {
             identity,
@@ -458,6 +637,7 @@ impl LayerFile {
             source,
             total,
             layers,
+            texels,
         };
         Ok((layer, crc))
     }
@@ -676,6 +856,18 @@ mod tests {
                 weights: vec![0.5, 0.25],
                 moments: vec![[0.25, 0.0, 0.0], [0.0625, -0.5, 4.0]],
             },
+            texels: Some(TexelRoundPart {
+                texels: 3..5,
+                texel_count: 6,
+                points: 10..17,
+                point_count: 20,
+                rays: 224,
+                traced: 230,
+                rejected: 1,
+                sums: vec![0.125; 8],
+                weights: vec![0.5, 0.75],
+                moments: vec![[0.25, 0.5, 1.0], [0.0, 0.0, 0.0]],
+            }),
             frame: b"frame".to_vec(),
         }
     }
@@ -692,6 +884,7 @@ mod tests {
             rays: 2,
             rejected: vec![0b010],
             records: vec![1, 2, 3, 4, u64::MAX, u64::MAX],
+            texels: Some(TexelHits { texels: 1..2, points: 4..6, rejected: vec![0b01], records: vec![7, 8, 2 << 32, u64::MAX] }),
         };
         let layer = LayerFile {
             identity: identity(),
@@ -709,6 +902,18 @@ mod tests {
             source: vec![0.25; 15],
             total: vec![0.5; 15],
             layers: vec![vec![0.25; 15], vec![0.25; 15]],
+            texels: Some(TexelLayer {
+                texel_count: 2,
+                points: 8,
+                points_rejected: 1,
+                rays: 512,
+                rays_traced: 260,
+                weights: vec![1.0, 0.0],
+                noise: vec![0.125, 0.0],
+                source: vec![0.5; 6],
+                total: vec![0.75; 6],
+                layers: vec![vec![0.25; 6], vec![0.5; 6]],
+            }),
         };
         let sun = SunPart {
             identity: identity(),
@@ -777,10 +982,32 @@ mod tests {
         p.opened.rows.push(0.0);
         assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("5 coefficients"));
         let mut hits = Vec::new();
-        HitFile { identity: identity(), shard: 0, items: 0..1, points: 0..1, rays: 2, rejected: vec![0], records: vec![u64::MAX, 3 << 32] }
-            .write_to(&mut hits)
-            .unwrap();
+        let bad_hits = HitFile {
+            identity: identity(),
+            shard: 0,
+            items: 0..1,
+            points: 0..1,
+            rays: 2,
+            rejected: vec![0],
+            records: vec![u64::MAX, 3 << 32],
+            texels: None,
+        };
+        bad_hits.write_to(&mut hits).unwrap();
         assert!(HitFile::decode(&hits).unwrap_err().contains("names triangle 3 of a mesh of 3"));
+        let bad_texel_hits = HitFile {
+            records: vec![u64::MAX, 0],
+            texels: Some(TexelHits { texels: 0..1, points: 0..1, rejected: vec![0], records: vec![0, 4 << 32] }),
+            ..bad_hits
+        };
+        let mut hits = Vec::new();
+        bad_texel_hits.write_to(&mut hits).unwrap();
+        assert!(HitFile::decode(&hits).unwrap_err().contains("names triangle 4 of a mesh of 3"));
+        let mut p = part();
+        p.texels.as_mut().unwrap().texels = 5..7;
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("past the 6 covered texels"));
+        let mut p = part();
+        p.texels.as_mut().unwrap().weights.clear();
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("round 0 lacks texel weights"));
         let big = codec::to_vec(FileKind::Hits, |w| {
             identity().write(w)?;
             for v in [0u32, 0, 1] {

@@ -96,12 +96,13 @@ fn real_files() -> Round {
     let (mut mesh, _) = shapes::integrating_sphere(1, 0.6, 0.7, shapes::Opening::Window);
     mesh.materials[0].albedo = [0.7, 0.5, 0.3];
     let params = BakeParams { rays: 8, bounces: 1, mode: Mode::Window, adaptive: 1.0, quiet: true, ..BakeParams::default() };
-    let key = TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None };
+    let key =
+        TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None, texels: None };
     let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
     let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
     let shard = |index| Shard { index, count: 2 };
     let pilot_parts: Vec<TransferPart> = (0..2)
-        .map(|k| bake_transfer_shard(&mesh, &scene, &surfaces, &key, true, shard(k), Stage::Pilot, None, None).unwrap().part)
+        .map(|k| bake_transfer_shard(&mesh, &scene, &surfaces, &key, None, true, shard(k), Stage::Pilot, None, None).unwrap().part)
         .collect();
     let named = |parts: &[TransferPart]| -> Vec<(PathBuf, TransferPart)> {
         parts.iter().enumerate().map(|(k, p)| (PathBuf::from(format!("part-{k}")), p.clone())).collect()
@@ -111,7 +112,7 @@ fn real_files() -> Round {
     let (pilot, pilot_crc) = PilotFile::decode(&pilot_bytes).unwrap();
     let input = |pilot: &PilotFile| Some(PilotInput { path: Path::new("pilot"), pilot: pilot.clone(), crc: pilot_crc });
     let outs: Vec<RoundOutput> = (0..2)
-        .map(|k| bake_transfer_shard(&mesh, &scene, &surfaces, &key, true, shard(k), Stage::Round(0), None, input(&pilot)).unwrap())
+        .map(|k| bake_transfer_shard(&mesh, &scene, &surfaces, &key, None, true, shard(k), Stage::Round(0), None, input(&pilot)).unwrap())
         .collect();
     let round0: Vec<TransferPart> = outs.iter().map(|o| o.part.clone()).collect();
     let hits: Vec<HitFile> = outs.iter().map(|o| o.hits.clone().unwrap()).collect();
@@ -127,9 +128,10 @@ fn real_files() -> Round {
                 layer: layer.clone(),
                 layer_crc,
             };
-            let mut part = bake_transfer_shard(&mesh, &scene, &surfaces, &key, true, shard(k), Stage::Round(1), Some(round), input(&pilot))
-                .unwrap()
-                .part;
+            let mut part =
+                bake_transfer_shard(&mesh, &scene, &surfaces, &key, None, true, shard(k), Stage::Round(1), Some(round), input(&pilot))
+                    .unwrap()
+                    .part;
             part.frame = b"not a bundle".to_vec();
             part
         })

@@ -18,6 +18,8 @@ pub struct TransferKey {
     /// How the bundle stores the transfer: a fixed quantization, or `None` to choose one within the budget.
     pub quantize: Option<Quantization>,
     pub max_error: Option<f64>,
+    /// Texel mode (`--texel-size`): transfer per texel of this atlas too.
+    pub texels: Option<TexelKey>,
 }
 
 /// What a sun bake's masks and bundle depend on besides the mesh.
@@ -31,15 +33,17 @@ pub struct SunKey {
     /// and of the sun metadata (site, date, north, turbidity, …).
     pub day_crc: u32,
     /// Texel mode: the atlas and points the texels' bits come from.
-    pub texels: Option<TexelSunKey>,
+    pub texels: Option<TexelKey>,
 }
 
-/// What every part's texel sun bits depend on besides the day.
+/// Texel mode: what every part's texel rows depend on besides the
+/// parameters (the atlas, unwrapped by each shard, and the texels' points).
 #[derive(Clone, Debug, PartialEq)]
-pub struct TexelSunKey {
+pub struct TexelKey {
     pub texel_size: f32,
     pub points_per_texel: u32,
-    /// Whether the bundle stores each texel's lit share (`--texel-fractions`).
+    /// Sun bakes: whether the bundle stores each texel's lit share
+    /// (`--texel-fractions`); always false in a transfer key.
     pub fractions: bool,
     pub covered_texels: u32,
     /// [`atlas_crc`] of the atlas.
@@ -190,6 +194,8 @@ impl TransferKey {
         out.extend_from_slice(&p.adaptive.to_le_bytes());
         put_patterns(&mut out, &self.window_patterns);
         put_patterns(&mut out, &self.one_sided_patterns);
+        out.extend_from_slice(&p.denoise.to_le_bytes());
+        put_texel_key(&mut out, self.texels.as_ref());
         out
     }
 
@@ -236,6 +242,11 @@ impl TransferKey {
             let adaptive = r.f32("adaptive")?;
             let window_patterns = read_patterns(r)?;
             let one_sided_patterns = read_patterns(r)?;
+            let denoise = r.f32("denoise")?;
+            let texels = read_texel_key(r)?;
+            if texels.as_ref().is_some_and(|t| t.fractions) {
+                return Err("texel fractions are a sun bake's, not a transfer's".into());
+            }
             let params = BakeParams {
                 order,
                 rays,
@@ -252,10 +263,12 @@ impl TransferKey {
                 inside_distance,
                 adaptive,
                 two_sided,
+                denoise,
                 ..BakeParams::default()
             };
             params.check().map_err(|e| e.to_string())?;
-            Ok(TransferKey { params, window_patterns, one_sided_patterns, quantize, max_error: has_max_error.then_some(max_error) })
+            let max_error = has_max_error.then_some(max_error);
+            Ok(TransferKey { params, window_patterns, one_sided_patterns, quantize, max_error, texels })
         })
     }
 
@@ -282,7 +295,11 @@ impl TransferKey {
             ("one-sided patterns", format!("{:?}", self.one_sided_patterns)),
             ("quantize", format!("{:?}", self.quantize)),
             ("max error", format!("{:?}", self.max_error)),
+            ("denoise", p.denoise.to_string()),
         ]
+        .into_iter()
+        .chain(texel_fields(self.texels.as_ref()).into_iter().filter(|(name, _)| *name != "texel fractions"))
+        .collect()
     }
 }
 
@@ -303,16 +320,7 @@ impl SunKey {
         out.extend_from_slice(&self.steps.to_le_bytes());
         out.extend_from_slice(&self.day_crc.to_le_bytes());
         put_patterns(&mut out, &self.window_patterns);
-        match &self.texels {
-            None => out.extend_from_slice(&0u32.to_le_bytes()),
-            Some(t) => {
-                out.extend_from_slice(&t.points_per_texel.to_le_bytes());
-                out.extend_from_slice(&t.texel_size.to_le_bytes());
-                out.extend_from_slice(&t.covered_texels.to_le_bytes());
-                out.extend_from_slice(&t.atlas_crc.to_le_bytes());
-                out.extend_from_slice(&[t.fractions as u8, 0, 0, 0]);
-            }
-        }
+        put_texel_key(&mut out, self.texels.as_ref());
         out
     }
 
@@ -338,22 +346,7 @@ impl SunKey {
             }
             let day_crc = r.u32("day CRC")?;
             let window_patterns = read_patterns(r)?;
-            let points_per_texel = r.u32("points per texel")?;
-            let texels = if points_per_texel == 0 {
-                None
-            } else {
-                let texel_size = r.f32("texel size")?;
-                if !(texel_size.is_finite() && texel_size > 0.0) {
-                    return Err(format!("texel size {texel_size} is not a positive length"));
-                }
-                let covered_texels = r.u32("covered texels")?;
-                let atlas_crc = r.u32("atlas CRC")?;
-                let fractions = flag(r.u8("fractions")?, "fractions")?;
-                if r.take(3, "reserved")? != [0, 0, 0] {
-                    return Err("reserved bytes are not zero".into());
-                }
-                Some(TexelSunKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc })
-            };
+            let texels = read_texel_key(r)?;
             Ok(SunKey { params, window_patterns, steps, day_crc, texels })
         })
     }
@@ -369,15 +362,52 @@ impl SunKey {
             ("window patterns", format!("{:?}", self.window_patterns)),
             ("steps", self.steps.to_string()),
             ("day and sky (site, date, time line, north, turbidity, sky order)", format!("CRC-32 {:08x}", self.day_crc)),
-            (
-                "texel mode",
-                self.texels.as_ref().map_or("off".into(), |t| format!("{} m texels, {} points each", t.texel_size, t.points_per_texel)),
-            ),
-            ("texel fractions", self.texels.as_ref().is_some_and(|t| t.fractions).to_string()),
-            ("covered texels", self.texels.as_ref().map_or(0, |t| t.covered_texels).to_string()),
-            ("atlas", self.texels.as_ref().map_or("none".into(), |t| format!("CRC-32 {:08x}", t.atlas_crc))),
         ]
+        .into_iter()
+        .chain(texel_fields(self.texels.as_ref()))
+        .collect()
     }
+}
+
+/// A texel key after its parameter block's other fields (a zero `u32` when off).
+fn put_texel_key(out: &mut Vec<u8>, texels: Option<&TexelKey>) {
+    match texels {
+        None => out.extend_from_slice(&0u32.to_le_bytes()),
+        Some(t) => {
+            out.extend_from_slice(&t.points_per_texel.to_le_bytes());
+            out.extend_from_slice(&t.texel_size.to_le_bytes());
+            out.extend_from_slice(&t.covered_texels.to_le_bytes());
+            out.extend_from_slice(&t.atlas_crc.to_le_bytes());
+            out.extend_from_slice(&[t.fractions as u8, 0, 0, 0]);
+        }
+    }
+}
+
+fn read_texel_key(r: &mut Reader) -> Result<Option<TexelKey>, String> {
+    let points_per_texel = r.u32("points per texel")?;
+    if points_per_texel == 0 {
+        return Ok(None);
+    }
+    let texel_size = r.f32("texel size")?;
+    if !(texel_size.is_finite() && texel_size > 0.0) {
+        return Err(format!("texel size {texel_size} is not a positive length"));
+    }
+    let covered_texels = r.u32("covered texels")?;
+    let atlas_crc = r.u32("atlas CRC")?;
+    let fractions = flag(r.u8("fractions")?, "fractions")?;
+    if r.take(3, "reserved")? != [0, 0, 0] {
+        return Err("reserved bytes are not zero".into());
+    }
+    Ok(Some(TexelKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc }))
+}
+
+fn texel_fields(texels: Option<&TexelKey>) -> Vec<(&'static str, String)> {
+    vec![
+        ("texel mode", texels.map_or("off".into(), |t| format!("{} m texels, {} points each", t.texel_size, t.points_per_texel))),
+        ("texel fractions", texels.is_some_and(|t| t.fractions).to_string()),
+        ("covered texels", texels.map_or(0, |t| t.covered_texels).to_string()),
+        ("atlas", texels.map_or("none".into(), |t| format!("CRC-32 {:08x}", t.atlas_crc))),
+    ]
 }
 
 /// The first field whose values differ, as "rays 32 here, 64 in the other".
@@ -397,12 +427,22 @@ mod tests {
             one_sided_patterns: vec!["curtain".into()],
             quantize: Some(Quantization::F16),
             max_error: Some(0.01),
+            texels: None,
         };
         let block = key.encode();
         assert_eq!(block.len() % 4, 0);
         assert_eq!(TransferKey::decode(&block).unwrap(), key);
         let other = TransferKey { params: BakeParams { rays: 32, ..key.params }, ..key.clone() };
         assert_eq!(first_difference(&other.fields(), &key.fields()).unwrap(), "rays 32 here, 64 in");
+        let texel_key = TexelKey { texel_size: 0.02, points_per_texel: 16, fractions: false, covered_texels: 99, atlas_crc: 0xabc };
+        let texel_mode = TransferKey { params: BakeParams { denoise: 1.5, ..key.params }, texels: Some(texel_key), ..key.clone() };
+        assert_eq!(TransferKey::decode(&texel_mode.encode()).unwrap(), texel_mode);
+        assert_eq!(first_difference(&key.fields(), &texel_mode.fields()).unwrap(), "denoise 0 here, 1.5 in");
+        let vertex_only = TransferKey { params: texel_mode.params, ..key.clone() };
+        assert_eq!(
+            first_difference(&vertex_only.fields(), &texel_mode.fields()).unwrap(),
+            "texel mode off here, 0.02 m texels, 16 points each in"
+        );
 
         let sun = SunKey {
             params: SunParams { seed: 9, ..SunParams::default() },
@@ -412,7 +452,7 @@ mod tests {
             texels: None,
         };
         assert_eq!(SunKey::decode(&sun.encode()).unwrap(), sun);
-        let texels = TexelSunKey { texel_size: 0.05, points_per_texel: 4, fractions: true, covered_texels: 1234, atlas_crc: 0xfeed };
+        let texels = TexelKey { texel_size: 0.05, points_per_texel: 4, fractions: true, covered_texels: 1234, atlas_crc: 0xfeed };
         let with_texels = SunKey { texels: Some(texels.clone()), ..sun.clone() };
         let block = with_texels.encode();
         assert_eq!(block.len() % 4, 0);
@@ -420,7 +460,7 @@ mod tests {
         for len in 0..block.len() {
             assert!(SunKey::decode(&block[..len]).is_err(), "a block cut to {len} bytes decoded");
         }
-        let other_atlas = SunKey { texels: Some(TexelSunKey { atlas_crc: 0xbeef, ..texels }), ..sun.clone() };
+        let other_atlas = SunKey { texels: Some(TexelKey { atlas_crc: 0xbeef, ..texels }), ..sun.clone() };
         assert_eq!(
             first_difference(&other_atlas.fields(), &with_texels.fields()).unwrap(),
             "atlas CRC-32 0000beef here, CRC-32 0000feed in"
@@ -436,6 +476,7 @@ mod tests {
             one_sided_patterns: Vec::new(),
             quantize: None,
             max_error: None,
+            texels: None,
         }
         .encode();
         for len in 0..block.len() {

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use super::codec::FileKind;
-use super::files::{Identity, LayerFile, PilotFile, SunPart, TransferPart};
+use super::files::{Identity, LayerFile, PilotFile, SunPart, TexelLayer, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
@@ -161,6 +161,8 @@ pub enum TransferMerge {
         result: TransferResult,
         key: TransferKey,
         frame: Vec<u8>,
+        /// Texel mode: every covered texel's rounds merged (no source rows).
+        texels: Option<TexelLayer>,
     },
 }
 
@@ -219,8 +221,8 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     if round > params.bounces {
         return Err(ShardError::mismatch(first_path, format!("is round {round} of a bake of {} bounce(s)", params.bounces)));
     }
-    let previous = match (round, layer) {
-        (0, None) => None,
+    let (mut previous, layer_path) = match (round, layer) {
+        (0, None) => (None, first_path.as_path()),
         (0, Some((path, ..))) => {
             return Err(ShardError::mismatch(path, "round 0 parts gather from no layer: merge them without --layer"));
         }
@@ -232,7 +234,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         }
         (_, Some((path, layer, crc))) => {
             check_layer(path, &layer, crc, reference, parts)?;
-            Some(layer)
+            (Some(layer), path)
         }
     };
 
@@ -298,6 +300,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             moments,
         }));
     }
+    let texels = merge_texel_round(parts, &order, &key, reference, previous.as_mut().map(|p| (p.texels.take(), layer_path)))?;
     // As a whole bake computes it: the rounds so far, in quadrature.
     let mut noise = previous.as_ref().map_or_else(Vec::new, |layer| layer.noise.clone());
     if tracks_noise {
@@ -334,6 +337,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             source,
             total,
             layers,
+            texels,
         }));
     }
     let frame_part = &parts[order[0]];
@@ -362,7 +366,133 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         ..BakeStats::default()
     };
     let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, back: Vec::new(), stats };
-    Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key })
+    let texels = texels.map(|t| TexelLayer { source: Vec::new(), ..t });
+    Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key, texels })
+}
+
+/// The texel transfer a sharded texel bake stores: the merged rounds of
+/// every covered texel, on the atlas and texels shard 0's frame carries,
+/// which must be the atlas the key names.
+pub fn merged_texel_transfer(
+    merged: TexelLayer,
+    frame: crate::bundle::TexelLayers,
+    key: &super::TexelKey,
+) -> Result<crate::bake::texels::TexelTransfer, String> {
+    if super::atlas_crc(&frame.atlas) != key.atlas_crc || frame.texels.len() != merged.texel_count as usize {
+        return Err(format!(
+            "its bundle frame holds another atlas ({} covered texels, CRC-32 {:08x}) than the parts baked ({}, {:08x})",
+            frame.texels.len(),
+            super::atlas_crc(&frame.atlas),
+            merged.texel_count,
+            key.atlas_crc
+        ));
+    }
+    Ok(crate::bake::texels::TexelTransfer {
+        atlas: frame.atlas,
+        texels: frame.texels,
+        total: merged.total,
+        bounces: merged.layers,
+        covered_area: merged.weights,
+        noise: merged.noise,
+        points: merged.points,
+        points_rejected: merged.points_rejected,
+        rays: merged.rays,
+        rays_traced: merged.rays_traced,
+        seconds_per_bounce: Vec::new(),
+    })
+}
+
+/// Texel mode: joins the parts' texel ranges (in shard order, end to end
+/// over the covered texels) and runs the round's normalisation a whole
+/// bake runs on its texels; `previous` is the texels of the layer the
+/// parts gathered from (rounds ≥ 1), with its path.
+fn merge_texel_round(
+    parts: &[(PathBuf, TransferPart)],
+    order: &[usize],
+    key: &TransferKey,
+    reference: &TransferPart,
+    previous: Option<(Option<TexelLayer>, &Path)>,
+) -> Result<Option<TexelLayer>, ShardError> {
+    let first_path = &parts[order[0]].0;
+    let Some(texel_key) = &key.texels else {
+        if let Some((path, _)) = parts.iter().find(|(_, p)| p.texels.is_some()) {
+            return Err(ShardError::mismatch(path, "holds texel rows, but its key has no texel mode"));
+        }
+        if let Some((Some(_), path)) = previous {
+            return Err(ShardError::mismatch(path, "holds texel rows, but the parts' key has no texel mode"));
+        }
+        return Ok(None);
+    };
+    if reference.pilot {
+        return Ok(None);
+    }
+    let params = &key.params;
+    let round = reference.round;
+    let (pass_channels, channels, coeffs) = (reference.pass_channels as usize, reference.channels as usize, reference.coeffs as usize);
+    let stride = pass_channels * coeffs;
+    let covered = texel_key.covered_texels;
+    let mut sums = Vec::new();
+    let (mut weights, mut moments) = (Vec::new(), Vec::new());
+    let (mut next, mut next_point, mut point_count) = (0u32, 0u64, None);
+    let (mut rays, mut traced, mut rejected) = (0u64, 0u64, 0u64);
+    for &i in order {
+        let (path, part) = &parts[i];
+        let t = part.texels.as_ref().ok_or_else(|| ShardError::mismatch(path, "holds no texel rows, but its key is texel mode's"))?;
+        if t.texel_count != covered || *point_count.get_or_insert(t.point_count) != t.point_count {
+            return Err(ShardError::mismatch(
+                path,
+                format!("holds {} covered texels of {} points, not the key's {covered} of the other parts'", t.texel_count, t.point_count),
+            ));
+        }
+        if t.texels.start != next || t.points.start != next_point {
+            return Err(ShardError::mismatch(path, format!("holds texels {:?}, but the shards before it end at texel {next}", t.texels)));
+        }
+        (next, next_point) = (t.texels.end, t.points.end);
+        sums.extend_from_slice(&t.sums);
+        weights.extend_from_slice(&t.weights);
+        moments.extend(t.moments.iter().map(|&m| Moments::from_array(m)));
+        (rays, traced, rejected) = (rays + t.rays, traced + t.traced, rejected + t.rejected);
+    }
+    if next != covered || Some(next_point) != point_count {
+        let (path, _) = &parts[order[order.len() - 1]];
+        return Err(ShardError::mismatch(path, format!("ends at texel {next}: the parts do not cover the {covered} covered texels")));
+    }
+    let previous = match previous {
+        None => None,
+        Some((None, path)) => return Err(ShardError::mismatch(path, "holds no texel rows, but the parts are texel mode's")),
+        Some((Some(layer), path)) if layer.texel_count != covered => {
+            return Err(ShardError::mismatch(path, format!("holds {} covered texels, the parts {covered}", layer.texel_count)))
+        }
+        Some((Some(layer), _)) => Some(layer),
+    };
+    // As a whole bake's texel pass: bounce 0's weights normalise every bounce.
+    let mut merged = match previous {
+        Some(layer) => TexelLayer { rays: layer.rays + rays, rays_traced: layer.rays_traced + traced, ..layer },
+        None => TexelLayer {
+            texel_count: covered,
+            points: point_count.unwrap_or(0),
+            points_rejected: rejected,
+            rays,
+            rays_traced: traced,
+            weights,
+            noise: Vec::new(),
+            source: Vec::new(),
+            total: zeroed(covered as usize * channels * coeffs, first_path)?,
+            layers: Vec::new(),
+        },
+    };
+    let sigma = VertexDc::new(&merged.weights, &sums, stride, &moments).standard_errors();
+    add_noise_in_quadrature(&mut merged.noise, &sigma);
+    let layer = normalised_layer(&sums, &merged.weights, pass_channels, channels, coeffs);
+    add_layer(&mut merged.total, &layer);
+    if params.store_bounces {
+        merged.layers.push(layer);
+    }
+    merged.source = vec![0.0f32; if round < params.bounces { covered as usize * stride } else { 0 }];
+    if round < params.bounces {
+        normalise_rows(&mut merged.source, &sums, &merged.weights, stride);
+    }
+    Ok(Some(merged))
 }
 
 /// `len` zeros, or an error naming `path` when they cannot be allocated.
@@ -560,8 +690,8 @@ mod tests {
     /// without texels under a texel key is refused, naming the part.
     #[test]
     fn texel_rows_that_do_not_tile_the_covered_texels_are_refused() {
-        use crate::shards::{TexelSunKey, TexelSunPart};
-        let texel_key = TexelSunKey { texel_size: 0.1, points_per_texel: 4, fractions: false, covered_texels: 5, atlas_crc: 9 };
+        use crate::shards::{TexelKey, TexelSunPart};
+        let texel_key = TexelKey { texel_size: 0.1, points_per_texel: 4, fractions: false, covered_texels: 5, atlas_crc: 9 };
         let key = SunKey {
             params: crate::bake::SunParams::default(),
             window_patterns: Vec::new(),

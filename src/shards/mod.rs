@@ -38,9 +38,9 @@ use std::path::PathBuf;
 use crate::mesh::Mesh;
 
 pub use codec::FileKind;
-pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TexelSunPart, TransferPart};
-pub use key::{atlas_crc, SunKey, TexelSunKey, TransferKey};
-pub use merge::{merge_sun_parts, merge_transfer, MergedSun, TransferMerge};
+pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TexelHits, TexelLayer, TexelRoundPart, TexelSunPart, TransferPart};
+pub use key::{atlas_crc, SunKey, TexelKey, TransferKey};
+pub use merge::{merge_sun_parts, merge_transfer, merged_texel_transfer, MergedSun, TransferMerge};
 pub use round::{bake_sun_shard, bake_transfer_shard, PilotInput, RoundInput, RoundOutput, Stage};
 pub use run::ShardRun;
 
@@ -224,20 +224,31 @@ mod tests {
     }
 
     /// Runs every round of a sharded bake in process, shards in reverse
-    /// order and every file through its bytes, and returns the merged result.
-    fn sharded(mesh: &Mesh, key: &TransferKey, count: u32) -> crate::bake::TransferResult {
+    /// order and every file through its bytes, and returns the merged
+    /// result (and in texel mode, with the atlas `texels`, its texels).
+    fn sharded_with(
+        mesh: &Mesh,
+        key: &TransferKey,
+        count: u32,
+        texels: Option<&crate::atlas::Atlas>,
+    ) -> (crate::bake::TransferResult, Option<TexelLayer>) {
         use std::path::{Path, PathBuf};
         let surfaces = crate::bake::Surfaces::resolve(mesh, &key.window_patterns).unwrap();
         let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).unwrap();
         let bounces = key.params.bounces;
+        let points_per_texel = key.texels.as_ref().map_or(0, |t| t.points_per_texel);
+        let texel_plan =
+            || texels.map(|atlas| crate::bake::texels::TexelTransferPlan::new(mesh, atlas, points_per_texel, &key.params).unwrap());
         let mut layer: Option<(LayerFile, u32)> = None;
         let mut hits: Vec<Option<HitFile>> = vec![None; count as usize];
         // Adaptive allocation: the pilot stage first, merged into the pilot every round reads.
         let pilot: Option<(PilotFile, u32)> = (key.params.adaptive > 0.0).then(|| {
             let parts: Vec<(PathBuf, TransferPart)> = (0..count)
                 .map(|index| {
+                    let shard = Shard { index, count };
                     let out =
-                        bake_transfer_shard(mesh, &scene, &surfaces, key, true, Shard { index, count }, Stage::Pilot, None, None).unwrap();
+                        bake_transfer_shard(mesh, &scene, &surfaces, key, texel_plan().as_mut(), true, shard, Stage::Pilot, None, None)
+                            .unwrap();
                     assert!(out.hits.is_none(), "the pilot keeps no hit records");
                     (PathBuf::from(format!("pilot-{index}")), TransferPart::decode(&out.part.to_bytes()).unwrap())
                 })
@@ -258,9 +269,20 @@ mod tests {
                     layer_crc: *crc,
                 });
                 let pilot = pilot.as_ref().map(|(p, crc)| PilotInput { path: Path::new("pilot"), pilot: p.clone(), crc: *crc });
-                let out =
-                    bake_transfer_shard(mesh, &scene, &surfaces, key, true, Shard { index, count }, Stage::Round(round), input, pilot)
-                        .unwrap();
+                let shard = Shard { index, count };
+                let out = bake_transfer_shard(
+                    mesh,
+                    &scene,
+                    &surfaces,
+                    key,
+                    texel_plan().as_mut(),
+                    true,
+                    shard,
+                    Stage::Round(round),
+                    input,
+                    pilot,
+                )
+                .unwrap();
                 if round == 0 {
                     hits[index as usize] = out.hits.map(|h| {
                         let mut bytes = Vec::new();
@@ -278,11 +300,72 @@ mod tests {
                     l.write_to(&mut bytes).unwrap();
                     layer = Some(LayerFile::decode(&bytes).unwrap());
                 }
-                TransferMerge::Final { result, .. } => return result,
+                TransferMerge::Final { result, texels, .. } => return (result, texels),
                 TransferMerge::Pilot(_) => panic!("rounds do not merge into a pilot"),
             }
         }
         unreachable!("the last round's merge is final")
+    }
+
+    /// The key of a bake of `params` with no patterns and the bake's own storage.
+    fn key_of(params: crate::bake::BakeParams, texels: Option<TexelKey>) -> TransferKey {
+        TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None, texels }
+    }
+
+    fn sharded(mesh: &Mesh, key: &TransferKey, count: u32) -> crate::bake::TransferResult {
+        sharded_with(mesh, key, count, None).0
+    }
+
+    /// Texel mode through shards: each shard traces its range of texels
+    /// beside its items, and the merged vertices and texels (every bounce,
+    /// the noise, the counts) are a whole texel bake's bits, with uniform
+    /// and adaptive points, at several shard counts.
+    #[test]
+    fn merged_texel_shards_equal_a_whole_texel_bake_bit_for_bit() {
+        use crate::bake::{BakeParams, Mode};
+        use crate::verify::shapes;
+        use glam::Vec3;
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut mesh = shapes::plane_grid(4, 2.0);
+        let mut sphere = shapes::icosphere(2);
+        shapes::transform(&mut sphere, 0.3, Vec3::new(0.2, 0.45, 0.0));
+        shapes::append(&mut mesh, &sphere);
+        mesh.materials[0].albedo = [0.7, 0.5, 0.3];
+        let atlas = crate::atlas::Atlas::unwrap(&mesh, 0.1).unwrap();
+        let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
+        let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
+        for (adaptive, counts) in [(0.0f32, [1u32, 2, 5].as_slice()), (1.0, &[3])] {
+            let params =
+                BakeParams { rays: 16, seed: 4, bounces: 2, mode: Mode::Open, store_bounces: true, adaptive, ..BakeParams::default() };
+            let (whole, whole_texels) = crate::bake::texels::bake_texels(&mesh, &scene, &surfaces, &params, atlas.clone(), 3).unwrap();
+            let texel_key = TexelKey {
+                texel_size: atlas.texel_size,
+                points_per_texel: 3,
+                fractions: false,
+                covered_texels: whole_texels.texels.len() as u32,
+                atlas_crc: atlas_crc(&atlas),
+            };
+            let key = key_of(params, Some(texel_key));
+            for &count in counts {
+                let what = format!("adaptive {adaptive}, {count} shards");
+                let (merged, texels) = sharded_with(&mesh, &key, count, Some(&atlas));
+                assert_eq!(bits(&merged.total), bits(&whole.total), "{what}: vertex total");
+                let t = texels.expect("texel mode merges texels");
+                assert!(t.total.iter().any(|&x| x != 0.0), "{what}: the texels hold light");
+                assert_eq!(bits(&t.total), bits(&whole_texels.total), "{what}: texel total");
+                assert_eq!(t.layers.len(), 3);
+                for (a, b) in t.layers.iter().zip(&whole_texels.bounces) {
+                    assert_eq!(bits(a), bits(b), "{what}: a texel bounce");
+                }
+                assert_eq!(bits(&t.noise), bits(&whole_texels.noise), "{what}: texel noise");
+                assert_eq!(bits(&t.weights), bits(&whole_texels.covered_area), "{what}: texel weights");
+                assert_eq!(
+                    (t.points, t.points_rejected, t.rays, t.rays_traced),
+                    (whole_texels.points, whole_texels.points_rejected, whole_texels.rays, whole_texels.rays_traced),
+                    "{what}: texel counts"
+                );
+            }
+        }
     }
 
     /// Merged shards give a whole bake's bits (noise estimate included): interior and vertex sampling,
@@ -310,7 +393,7 @@ mod tests {
             }
             let params =
                 BakeParams { rays: 24, bounces, mode, sampling, window_sampling, store_bounces: true, adaptive, ..BakeParams::default() };
-            let key = TransferKey { params, window_patterns: Vec::new(), one_sided_patterns: Vec::new(), quantize: None, max_error: None };
+            let key = key_of(params, None);
             let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
             let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
             let whole = bake_transfer(&mesh, &scene, &surfaces, &params).unwrap();

@@ -6,7 +6,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TexelSunPart, TransferPart, VertexRows};
+use super::files::{
+    HitFile, Identity, LayerFile, PilotFile, SunPart, TexelHits, TexelLayer, TexelRoundPart, TexelSunPart, TransferPart, VertexRows,
+};
 use super::key::{SunKey, TransferKey};
 use super::merge::identity_difference;
 use super::{split_by_cost, MeshId, Shard, ShardError};
@@ -14,6 +16,7 @@ use crate::bake::gather::RowBuffer;
 use crate::bake::noise::{Moments, VertexDc};
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
+use crate::bake::texels::TexelTransferPlan;
 use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};
 use crate::bake::{BakeError, Surfaces, TexelSunPlan};
 use crate::mesh::Mesh;
@@ -64,12 +67,17 @@ pub enum Stage {
 /// Errors: bad parameters, a round past the bounces, inputs missing or
 /// present against the round, and inputs from another bake, shard or round
 /// (named with their path).
+///
+/// In texel mode (`key.texels`, with the plan of the atlas it describes),
+/// every round also traces the shard's range of covered texels, balanced
+/// apart by their points; the pilot stage samples vertices only.
 #[allow(clippy::too_many_arguments)]
 pub fn bake_transfer_shard(
     mesh: &Mesh,
     scene: &Scene,
     surfaces: &Surfaces,
     key: &TransferKey,
+    texels: Option<&mut TexelTransferPlan>,
     quiet: bool,
     shard: Shard,
     stage: Stage,
@@ -115,6 +123,9 @@ pub fn bake_transfer_shard(
         ))
         .into());
     }
+    if key.texels.as_ref().map(|t| t.covered_texels as usize) != texels.as_ref().map(|p| p.texels().len()) {
+        return Err(BakeError::Params("the texel plan is not the one the key describes".into()).into());
+    }
     let mut plan = Plan::new(mesh, scene, surfaces, &params, None)?;
     let identity = Identity {
         mesh: MeshId::of(mesh),
@@ -153,6 +164,22 @@ pub fn bake_transfer_shard(
         source.rows.as_mut_slice().copy_from_slice(&input.layer.source);
         source.channels = input.layer.source_channels as usize;
     }
+    // Texel mode: the shard's covered texels, and in later rounds what
+    // their points found inside geometry and the texels' previous bounce,
+    // which vertices and texels alike gather at hits on atlas triangles.
+    let mut texels = texels.filter(|_| stage != Stage::Pilot).map(|texel_plan| {
+        let costs = texel_plan.state.costs(params.rays);
+        let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
+        (texel_plan, range)
+    });
+    if let (Some((texel_plan, range)), Some(input)) = (&mut texels, &input) {
+        let points = texel_plan.state.point_range(range.clone());
+        let (hits, layer) = check_texel_inputs(input, range.clone(), points.clone(), texel_plan.texels().len())?;
+        for local in 0..points.end - points.start {
+            texel_plan.state.rejected[(points.start + local) as usize] = hits.is_rejected(local);
+        }
+        source.texels = Some(texel_plan.state.source_from_merged(&layer.weights, &layer.source));
+    }
     let record = stage == Stage::Round(0) && params.bounces > 0;
     let label = match stage {
         Stage::Pilot => format!("shard {shard}, pilot"),
@@ -176,6 +203,13 @@ pub fn bake_transfer_shard(
         }
     };
     drop(progress);
+    let (texel_part, texel_hits) = match texels {
+        Some((texel_plan, range)) => {
+            let (part, hits) = trace_texels(texel_plan, range, &plan, &source, round, record, input.as_ref(), shard)?;
+            (Some(part), hits)
+        }
+        None => (None, None),
+    };
 
     let stride = plan.pass_channels(round) * plan.coeffs;
     let tracks_noise = !sums.moments.is_empty();
@@ -208,6 +242,7 @@ pub fn bake_transfer_shard(
             rays: params.rays,
             rejected: bits,
             records: sums.hits,
+            texels: texel_hits,
         }
     });
     let part = TransferPart {
@@ -236,9 +271,88 @@ pub fn bake_transfer_shard(
             weights: sums.late.weights,
             moments: sums.late.moments.iter().map(|m| m.to_array()).collect(),
         },
+        texels: texel_part,
         frame: Vec::new(),
     };
     Ok(RoundOutput { part, hits, seconds: started.elapsed().as_secs_f64() })
+}
+
+/// One round over a shard's covered texels `range`: the texels' pass of a
+/// whole bake ([`crate::bake::texels`]), gathering from `source`; round 0
+/// of a bake with bounces records the texel points' hits.
+#[allow(clippy::too_many_arguments)]
+fn trace_texels(
+    texel_plan: &mut TexelTransferPlan,
+    range: std::ops::Range<usize>,
+    plan: &Plan,
+    source: &SourceRows,
+    round: u32,
+    record: bool,
+    input: Option<&RoundInput>,
+    shard: Shard,
+) -> Result<(TexelRoundPart, Option<TexelHits>), ShardError> {
+    let params = plan.params;
+    let state = &mut texel_plan.state;
+    let points = state.point_range(range.clone());
+    let cached = input.and_then(|i| i.hits.texels.as_ref()).map(|h| HitRecords { records: &h.records, first_point: points.start });
+    let pass = plan.pass(round, source, &[], cached, record);
+    let label = format!("shard {shard}, texels, round {round}/{}", params.bounces);
+    let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
+    let sums = state.trace_range(&pass, range.clone(), &progress);
+    drop(progress);
+    let rejected: Vec<bool> = state.rejected[points.start as usize..points.end as usize].to_vec();
+    let part = TexelRoundPart {
+        texels: range.start as u32..range.end as u32,
+        texel_count: state.texels.len() as u32,
+        points: points.clone(),
+        point_count: state.points.len() as u64,
+        rays: sums.rays,
+        traced: sums.traced,
+        rejected: if round == 0 { rejected.iter().filter(|&&r| r).count() as u64 } else { 0 },
+        sums: sums.sums,
+        weights: if round == 0 { sums.weights } else { Vec::new() },
+        moments: sums.moments.iter().map(|m| m.to_array()).collect(),
+    };
+    let hits = record.then(|| {
+        let mut bits = vec![0u32; rejected.len().div_ceil(32)];
+        for (local, _) in rejected.iter().enumerate().filter(|(_, &r)| r) {
+            bits[local / 32] |= 1 << (local % 32);
+        }
+        TexelHits { texels: part.texels.clone(), points, rejected: bits, records: sums.hits }
+    });
+    Ok((part, hits))
+}
+
+/// A texel round's inputs: this shard's texel hit records and the merged
+/// texels of the round before, for `covered` texels.
+fn check_texel_inputs<'a>(
+    input: &'a RoundInput,
+    range: std::ops::Range<usize>,
+    points: std::ops::Range<u64>,
+    covered: usize,
+) -> Result<(&'a TexelHits, &'a TexelLayer), ShardError> {
+    let hits =
+        input.hits.texels.as_ref().ok_or_else(|| {
+            ShardError::mismatch(input.hits_path, "holds no texel hit records, but this bake is texel mode's (--texel-size)")
+        })?;
+    if hits.texels != (range.start as u32..range.end as u32) || hits.points != points {
+        return Err(ShardError::mismatch(
+            input.hits_path,
+            format!("holds the hit records of texels {:?}, but this shard traces texels {range:?}", hits.texels),
+        ));
+    }
+    let layer = input
+        .layer
+        .texels
+        .as_ref()
+        .ok_or_else(|| ShardError::mismatch(input.layer_path, "holds no texel rows, but this bake is texel mode's (--texel-size)"))?;
+    if layer.texel_count as usize != covered {
+        return Err(ShardError::mismatch(
+            input.layer_path,
+            format!("holds {} covered texels, but this atlas covers {covered}", layer.texel_count),
+        ));
+    }
+    Ok((hits, layer))
 }
 
 /// A later round's inputs must be this bake's and this shard's: its own hit

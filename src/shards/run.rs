@@ -136,13 +136,15 @@ impl ShardRun {
     }
 
     /// Bakes this shard's part of its stage: the estimator over the shard's
-    /// items, from the round's merged inputs.
+    /// items (and in texel mode its texels), from the round's merged inputs.
+    #[allow(clippy::too_many_arguments)]
     pub fn bake(
         &self,
         mesh: &Mesh,
         scene: &Scene,
         surfaces: &Surfaces,
         key: &TransferKey,
+        texels: Option<&mut crate::bake::texels::TexelTransferPlan>,
         quiet: bool,
         files: RoundFiles,
         part: &Path,
@@ -158,7 +160,7 @@ impl ShardRun {
             layer_crc,
         });
         let pilot = files.pilot.map(|(pilot, crc)| PilotInput { path: &pilot_path, pilot, crc });
-        super::bake_transfer_shard(mesh, scene, surfaces, key, quiet, self.shard, stage, input, pilot)
+        super::bake_transfer_shard(mesh, scene, surfaces, key, texels, quiet, self.shard, stage, input, pilot)
     }
 
     /// Writes the part and its hit records, together or not at all.

@@ -17,6 +17,7 @@
 //! point's seed is the texel's and its index there, so the bytes do not
 //! depend on the thread count.
 
+use std::ops::Range;
 use std::sync::Arc;
 
 use glam::{DVec2, Vec2};
@@ -148,7 +149,8 @@ fn barycentric(uv: [Vec2; 3], p: DVec2) -> [f32; 3] {
     w.map(|x| (x / s) as f32)
 }
 
-/// One bounce of the texel pass: per texel, the weighted sums of its points'
+/// One bounce of the texel pass over a range of texels (a shard's, or all):
+/// per texel, the weighted sums of its points'
 /// results (`pass.channels × pass.coeffs` each) and their weights; bounce 0
 /// marks the points inside geometry in `rejected`, later bounces skip them.
 /// With a hit cache, bounce 0 returns one hit record per ray of every point
@@ -167,17 +169,19 @@ pub(crate) fn run_texel_pass(
     pass: &Pass,
     points: &TexelPoints,
     texel_ids: &[u32],
+    texels: Range<usize>,
     rejected: &mut [bool],
     progress: &crate::bake::progress::Progress,
 ) -> TexelSums {
     let bounce = pass.bounce;
     let stride = pass.channels * pass.coeffs;
-    let texels = points.start.len() - 1;
+    let first = texels.start;
+    let texels = texels.len();
     type Task = (Vec<f32>, Vec<f32>, Vec<Moments>, Vec<u32>, u64, u64, Vec<u64>);
     let tasks: Vec<Task> = (0..texels.div_ceil(TEXELS_PER_TASK))
         .into_par_iter()
         .map(|task| {
-            let range = task * TEXELS_PER_TASK..((task + 1) * TEXELS_PER_TASK).min(texels);
+            let range = first + task * TEXELS_PER_TASK..first + ((task + 1) * TEXELS_PER_TASK).min(texels);
             let mut sums = vec![0.0f32; range.len() * stride];
             let mut weights = vec![0.0f32; range.len()];
             let mut moments = vec![Moments::default(); range.len()];
@@ -278,8 +282,7 @@ pub(crate) struct TexelState {
 impl TexelState {
     pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, pattern: DirectionPattern, seed: u32) -> TexelState {
         let points = TexelPoints::new(atlas, coverage, points_per_texel, pattern, seed);
-        let chart: Vec<u32> =
-            (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect();
+        let chart = texel_charts(atlas, coverage);
         TexelState {
             lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &chart)),
             next: None,
@@ -330,7 +333,7 @@ impl TexelState {
         let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
         let clock = std::time::Instant::now();
         let progress = crate::bake::progress::Progress::start(label, rays, pass.params.quiet);
-        let mut sums = run_texel_pass(pass, &self.points, &self.texels, &mut self.rejected, &progress);
+        let mut sums = run_texel_pass(pass, &self.points, &self.texels, 0..self.texels.len(), &mut self.rejected, &progress);
         drop(progress);
         if !sums.hits.is_empty() {
             self.hits = std::mem::take(&mut sums.hits);
@@ -370,37 +373,79 @@ impl TexelState {
         self.next.take().map(|rows| TexelRows { lookup: Arc::clone(&self.lookup), rows })
     }
 
-    /// `--denoise K` over the texels: the vertices' filter
-    /// ([`crate::bake::denoise`]) with each texel's 8 surrounding texels of
-    /// its own chart as neighbours and its covered area as its weight.
+    /// `--denoise K` over the texels ([`denoise_texels`]).
     pub(crate) fn denoise(&mut self, stride: usize, k: f32) {
-        let n = self.texels.len();
-        let index_of = |id: u32| self.texels.binary_search(&id).ok();
-        let mut pairs = Vec::with_capacity(n * 8);
-        for (i, &id) in self.texels.iter().enumerate() {
-            let (x, y) = ((id % self.width) as i64, (id / self.width) as i64);
-            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
-                let (u, v) = (x + dx, y + dy);
-                if u < 0 || v < 0 || u >= self.width as i64 {
-                    continue;
-                }
-                if let Some(j) = index_of((v * self.width as i64 + u) as u32).filter(|&j| self.chart[j] == self.chart[i]) {
-                    pairs.push((i as u32, j as u32));
-                }
+        let rows = TexelRowsMut { total: &mut self.total, bounces: &mut self.bounces, noise: &mut self.noise };
+        denoise_texels(&self.texels, self.width, &self.chart, &self.weights, rows, stride, k);
+    }
+}
+
+/// A sharded bake's texels (each shard traces a range of them; see
+/// `crate::shards`): the same points, passes and sums as a whole bake's.
+impl TexelState {
+    /// Each covered texel's cost, its points × `rays` (shards split the texels by it).
+    pub(crate) fn costs(&self, rays: u32) -> Vec<u64> {
+        self.points.start.windows(2).map(|w| (w[1] - w[0]) as u64 * rays as u64).collect()
+    }
+
+    /// The sample points of covered texels `texels`, as point indices.
+    pub(crate) fn point_range(&self, texels: Range<usize>) -> Range<u64> {
+        self.points.start[texels.start] as u64..self.points.start[texels.end] as u64
+    }
+
+    /// Bounce `pass.bounce` over covered texels `texels`, the sums left
+    /// unnormalised for the merge; bounce 0 marks the points inside geometry.
+    pub(crate) fn trace_range(&mut self, pass: &Pass, texels: Range<usize>, progress: &crate::bake::progress::Progress) -> TexelSums {
+        run_texel_pass(pass, &self.points, &self.texels, texels, &mut self.rejected, progress)
+    }
+
+    /// What a later round gathers at hits on atlas triangles: the merged
+    /// previous bounce (`rows`, normalised), read through the lookup without
+    /// the texels bounce 0 left empty (`weights`), as a whole bake reads it.
+    pub(crate) fn source_from_merged(&mut self, weights: &[f32], rows: &[f32]) -> TexelRows {
+        if let Some(lookup) = Arc::get_mut(&mut self.lookup) {
+            lookup.drop_empty(&self.texels, weights);
+        }
+        let mut buffer = RowBuffer::zeroed(rows.len());
+        buffer.as_mut_slice().copy_from_slice(rows);
+        TexelRows { lookup: Arc::clone(&self.lookup), rows: buffer }
+    }
+}
+
+/// Each covered texel's chart (that of its first triangle).
+pub(crate) fn texel_charts(atlas: &Atlas, coverage: &Coverage) -> Vec<u32> {
+    (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect()
+}
+
+/// The rows `--denoise` filters in place.
+pub(crate) struct TexelRowsMut<'a> {
+    pub(crate) total: &'a mut [f32],
+    pub(crate) bounces: &'a mut [Vec<f32>],
+    pub(crate) noise: &'a mut Vec<f32>,
+}
+
+/// `--denoise K` over covered texels `texels` of an atlas `width` wide: the
+/// vertices' filter ([`crate::bake::denoise`]) with each texel's 8
+/// surrounding texels of its own chart as neighbours and its covered area
+/// (`weights`) as its weight.
+pub(crate) fn denoise_texels(texels: &[u32], width: u32, chart: &[u32], weights: &[f32], rows: TexelRowsMut, stride: usize, k: f32) {
+    let n = texels.len();
+    let index_of = |id: u32| texels.binary_search(&id).ok();
+    let mut pairs = Vec::with_capacity(n * 8);
+    for (i, &id) in texels.iter().enumerate() {
+        let (x, y) = ((id % width) as i64, (id / width) as i64);
+        for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+            let (u, v) = (x + dx, y + dy);
+            if u < 0 || v < 0 || u >= width as i64 {
+                continue;
+            }
+            if let Some(j) = index_of((v * width as i64 + u) as u32).filter(|&j| chart[j] == chart[i]) {
+                pairs.push((i as u32, j as u32));
             }
         }
-        let neighbours = crate::bake::denoise::Neighbours::from_pairs(n, pairs);
-        crate::bake::denoise::filter_receivers(
-            &neighbours,
-            &self.weights,
-            |_, _| true,
-            &mut self.total,
-            &mut self.bounces,
-            &mut self.noise,
-            stride,
-            k,
-        );
     }
+    let neighbours = crate::bake::denoise::Neighbours::from_pairs(n, pairs);
+    crate::bake::denoise::filter_receivers(&neighbours, weights, |_, _| true, rows.total, rows.bounces, rows.noise, stride, k);
 }
 
 #[cfg(test)]
