@@ -17,6 +17,7 @@
 //! is touched by one chart only ([`coverage`]).
 
 pub mod coverage;
+pub mod lightmap;
 mod xatlas_ffi;
 
 use crate::disjoint::{find, union};

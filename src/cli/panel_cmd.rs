@@ -77,6 +77,8 @@ pub struct PanelRun {
     pub gather_seconds: f64,
     pub environment: String,
     pub brdf: String,
+    /// Where the interior's PRT light is read at a hit: "texels" (a texel bundle) or "vertices".
+    pub interior_light: &'static str,
 }
 
 /// The environment of `light` (the map is read here; errors name it).
@@ -134,11 +136,18 @@ pub fn gather_panel(
     let order = transfer.order as usize;
     let light = interior::vertex_light(&transfer.total(), order, transfer.channels as usize, &env.sh_lighting(order));
     let two_sided = bundle.is_window_mode();
-    let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: light, two_sided };
+    // A texel bundle: the interior's light where the viewer takes it, from the texels.
+    let texel_light = bundle.texels.as_ref().and_then(|t| {
+        let transfer = t.transfer.as_ref()?;
+        let order = transfer.order as usize;
+        Some(interior::texel_light(&t.atlas, &t.texels, &transfer.total(), order, transfer.channels as usize, &env.sh_lighting(order)))
+    });
+    let interior_light = if texel_light.is_some() { "texels" } else { "vertices" };
+    let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: light, two_sided, texel_light };
     let mut gather = PanelGather::new(&interior, env, brdf, &layout, eye, GatherOptions { seed, ..GatherOptions::default() });
     if !quiet {
         eprintln!(
-            "panel: {} triangles, {}x{} texels ({} on the panel, {} mapping), {} samples per texel; {}",
+            "panel: {} triangles, {}x{} texels ({} on the panel, {} mapping), {} samples per texel; {}; the interior's light from its {interior_light}",
             triangles.len(),
             width,
             height,
@@ -180,6 +189,7 @@ pub fn gather_panel(
         gather_seconds,
         environment: env.describe(),
         brdf: String::new(),
+        interior_light,
     })
 }
 
@@ -204,6 +214,7 @@ pub fn run_json(run: &PanelRun, exr: &Path, png: &Path, display: Display, sample
         "mapping": run.layout.mapping.name(),
         "samples_per_texel": samples,
         "environment": run.environment,
+        "interior_light": run.interior_light,
         "brdf": run.brdf,
         "display": display,
         "luminance": "Rec. 709: Y = 0.2126 R + 0.7152 G + 0.0722 B",

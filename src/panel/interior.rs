@@ -46,6 +46,9 @@ pub struct Interior<'a> {
     /// transfer is side-blind); otherwise, as the open-mode bake gathers, a
     /// surface's back is black.
     pub two_sided: bool,
+    /// A texel bundle: its texels' light (`Σ_i L_i t_i`), read at a hit as
+    /// the viewer reads it; the vertices' serves triangles in no chart.
+    pub texel_light: Option<crate::atlas::lightmap::LightmapLight>,
 }
 
 /// `Σ_i L_i t_i(v)` for every vertex of a `[vertex][channel][coeff]` transfer
@@ -63,6 +66,22 @@ pub fn vertex_light(total: &[f32], order: usize, channels: usize, lighting: &[[f
             e
         })
         .collect()
+}
+
+/// A texel bundle's light under `lighting` ([`Interior::texel_light`]):
+/// each covered texel's `Σ_i L_i t_i` from its `[texel][channel][coeff]`
+/// row, held where the row is not all zero (as the viewer decides).
+pub fn texel_light(
+    atlas: &crate::atlas::Atlas,
+    texels: &[u32],
+    rows: &[f32],
+    order: usize,
+    channels: usize,
+    lighting: &[[f32; 3]],
+) -> crate::atlas::lightmap::LightmapLight {
+    let irradiance = vertex_light(rows, order, channels, lighting);
+    let holds: Vec<bool> = rows.chunks_exact((order * order * channels).max(1)).map(|row| row.iter().any(|&x| x != 0.0)).collect();
+    crate::atlas::lightmap::LightmapLight::new(atlas, texels, &irradiance, &holds)
 }
 
 impl Interior<'_> {
@@ -120,13 +139,15 @@ impl Interior<'_> {
     /// the ray's origin, and the queries its shadow rays toward the sun took.
     #[allow(clippy::too_many_arguments)] // one hit's fields
     fn surface_radiance(&self, env: &Environment, t: u32, u: f32, v: f32, point: Vec3, face_normal: Vec3, dir: Vec3) -> ([f32; 3], u32) {
-        let [a, b, c] = self.mesh.triangle(t as usize).map(|i| self.vertex_light[i as usize]);
-        let w0 = 1.0 - u - v;
         let albedo = self.surfaces.albedo[t as usize];
-        let mut light = [0.0f32; 3];
-        for k in 0..3 {
-            light[k] = w0 * a[k] + u * b[k] + v * c[k];
-        }
+        let mut light = match self.texel_light.as_ref().and_then(|l| l.at(t as usize, u, v)) {
+            Some(light) => light,
+            None => {
+                let [a, b, c] = self.mesh.triangle(t as usize).map(|i| self.vertex_light[i as usize]);
+                let w0 = 1.0 - u - v;
+                [0, 1, 2].map(|k| w0 * a[k] + u * b[k] + v * c[k])
+            }
+        };
         let mut queries = 0;
         if let Some(sun) = &env.sun {
             // The side the ray sees.
@@ -178,5 +199,57 @@ impl Interior<'_> {
             return (0.0, false, 0);
         }
         self.sky_transmittance_counted(origin, face_normal, dir)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bake::{BakeParams, Mode};
+    use crate::trace::BuildQuality;
+    use crate::verify::{plane_point_reference, shapes};
+    use glam::DVec3;
+
+    /// A 4 m floor of two triangles under a sphere (radius 0.5, centre 1 m
+    /// up), baked in texels of 10 cm: a gather ray that meets the floor
+    /// under the sphere reads the texels' light, the sphere's shadow, within
+    /// 2% of the closed form (0.14% seen), where the floor's four corner
+    /// vertices, which see nearly the open sky, read 22% too much.
+    #[test]
+    fn a_texel_bundle_lights_the_gather_from_its_texels() {
+        let (radius, height) = (0.5f32, 1.0f32);
+        let mut mesh = shapes::plane_grid(1, 4.0);
+        let mut sphere = shapes::icosphere(4);
+        shapes::transform(&mut sphere, radius, Vec3::new(0.0, height, 0.0));
+        shapes::append(&mut mesh, &sphere);
+        let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+        let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+        let params = BakeParams { order: 2, rays: 256, seed: 3, mode: Mode::Open, adaptive: 0.0, ..BakeParams::default() };
+        let atlas = crate::atlas::Atlas::unwrap(&mesh, 0.1).unwrap();
+        let (vertices, texels) = crate::bake::texels::bake_texels(&mesh, &scene, &surfaces, &params, atlas, 8).unwrap();
+        // A constant sky of radiance 1: L_00 = 2√π.
+        let mut lighting = vec![[0.0f32; 3]; 4];
+        lighting[0] = [2.0 * std::f32::consts::PI.sqrt(); 3];
+        let env = Environment::sh(2, lighting.clone(), 0.0);
+        let interior = |texel_light| Interior {
+            scene: &scene,
+            mesh: &mesh,
+            surfaces: &surfaces,
+            vertex_light: vertex_light(&vertices.total, 2, vertices.channels, &lighting),
+            two_sided: false,
+            texel_light,
+        };
+        let read = texel_light(&texels.atlas, &texels.texels, &texels.total, 2, vertices.channels, &lighting);
+        let (from_texels, from_vertices) = (interior(Some(read)), interior(None));
+        let albedo = surfaces.albedo[0][0];
+        // Straight down between the sphere and the floor, at (0.1, 0, 0.2).
+        let x = Vec3::new(0.1, 0.0, 0.2);
+        let down = |i: &Interior| i.trace(&env, x + Vec3::Y * 0.3, Vec3::Y, -Vec3::Y).radiance[0] / albedo;
+        let reference = plane_point_reference(2, x.as_dvec3(), DVec3::new(0.0, height as f64, 0.0), radius as f64);
+        let expected = (lighting[0][0] as f64 * reference[0]) as f32;
+        let (got, vertex) = (down(&from_texels), down(&from_vertices));
+        eprintln!("irradiance under the sphere: texels {got}, vertices {vertex}, closed form {expected}");
+        assert!((got / expected - 1.0).abs() < 0.02, "texels read {got}, the closed form is {expected}");
+        assert!(vertex > 1.15 * expected, "the corner vertices read {vertex}: the test does not tell texels from vertices");
     }
 }

@@ -184,6 +184,10 @@ pub struct PanelSource {
     map: Option<Environment>,
     /// The transfer summed for the last layer selection.
     selected: Option<(LayerSelection, Vec<f32>)>,
+    /// A texel bundle's atlas, covered texels and their transfer, and that
+    /// transfer summed for the last layer selection: the interior's light.
+    texels: Option<(crate::atlas::Atlas, Vec<u32>, Transfer)>,
+    selected_texels: Option<(LayerSelection, Vec<f32>)>,
     pub seed: u32,
 }
 
@@ -205,6 +209,8 @@ impl PanelSource {
             two_sided: bundle.is_window_mode(),
             map: environment.map(|image| Environment::map(image, 0.0)),
             selected: None,
+            texels: bundle.texels.as_ref().and_then(|t| Some((t.atlas.clone(), t.texels.clone(), t.transfer.clone()?))),
+            selected_texels: None,
             seed: 1,
         })
     }
@@ -239,7 +245,25 @@ impl PanelSource {
         };
         let selected = self.selected.as_ref().map_or(&[][..], |(_, t)| t);
         let vertex_light = crate::panel::interior::vertex_light(selected, order, self.transfer.channels as usize, &request.lighting);
-        let interior = Interior { scene: &self.scene, mesh: &self.mesh, surfaces: &self.surfaces, vertex_light, two_sided: self.two_sided };
+        // A texel bundle: the interior's light from its texels, as the frame draws it.
+        let texel_light = match &self.texels {
+            Some((atlas, texels, transfer)) if transfer.order == self.transfer.order => {
+                if self.selected_texels.as_ref().is_none_or(|(layers, _)| *layers != request.layers) {
+                    self.selected_texels = Some((request.layers.clone(), request.layers.combine(transfer)));
+                }
+                let rows = self.selected_texels.as_ref().map_or(&[][..], |(_, t)| t);
+                Some(crate::panel::interior::texel_light(atlas, texels, rows, order, transfer.channels as usize, &request.lighting))
+            }
+            _ => None,
+        };
+        let interior = Interior {
+            scene: &self.scene,
+            mesh: &self.mesh,
+            surfaces: &self.surfaces,
+            vertex_light,
+            two_sided: self.two_sided,
+            texel_light,
+        };
         let options = GatherOptions { seed: self.seed, ..GatherOptions::default() };
         let mut gather = PanelGather::new(&interior, env, &self.brdf, &self.layout, request.eye, options);
         for pass in 1..=passes {
