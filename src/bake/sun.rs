@@ -357,7 +357,8 @@ impl<'a> SunPlan<'a> {
             _ => (0, 0),
         };
         let mut sample_bits = vec![0u32; (end - base) * words];
-        let test = SunTest { scene, surfaces, params: self.params };
+        let glass = Glass::for_sun(self.mesh, surfaces, self.params);
+        let test = SunTest { scene, surfaces, params: self.params, glass: glass.as_ref() };
         let tracer = Tracer { mesh: self.mesh, test, layout, suns: &self.suns, words };
         let points: u64 = runs.iter().flat_map(|r| &layout.counts[r.clone()]).map(|&c| c as u64).sum();
         let progress = Progress::start("sun".into(), points * day_steps, self.params.quiet);
@@ -584,6 +585,49 @@ pub(crate) struct SunTest<'a> {
     pub(crate) scene: &'a Scene,
     pub(crate) surfaces: &'a Surfaces,
     pub(crate) params: &'a SunParams,
+    /// Window mode with packets: the glass as a scene of its own ([`Glass`]).
+    pub(crate) glass: Option<&'a Glass>,
+}
+
+/// Window mode's glass as a scene of its own. A point sees the sun through
+/// a window when the first glass along its ray lets light through and
+/// nothing opaque lies nearer: the first glass here (one closest hit on a
+/// small tree), then an occlusion test of the whole scene short of it,
+/// which packets answer ([`Scene::occluded_parallel_each`]).
+pub(crate) struct Glass {
+    scene: Scene,
+    /// Glass-scene triangle → mesh triangle.
+    mesh_triangle: Vec<u32>,
+}
+
+impl Glass {
+    /// The glass of `mesh` (its window triangles), when the sun test would
+    /// take packets through it (window mode, step-outer with the shadow
+    /// cache and packets on); `None` otherwise or without glass.
+    pub(crate) fn for_sun(mesh: &Mesh, surfaces: &Surfaces, params: &SunParams) -> Option<Glass> {
+        if params.mode != Mode::Window || !params.packets || !params.shadow_cache {
+            return None;
+        }
+        let triangles: Vec<u32> =
+            (0..mesh.triangle_count() as u32).filter(|&t| surfaces.window_transmittance[t as usize].is_some()).collect();
+        if triangles.is_empty() {
+            return None;
+        }
+        let glass = Mesh {
+            positions: mesh.positions.clone(),
+            normals: mesh.normals.clone(),
+            uvs: Vec::new(),
+            lightmap_uvs: Vec::new(),
+            colors: Vec::new(),
+            indices: triangles.iter().flat_map(|&t| mesh.triangle(t as usize)).collect(),
+            tri_material: triangles.iter().map(|&t| mesh.tri_material[t as usize]).collect(),
+            tri_group: triangles.iter().map(|&t| mesh.tri_group[t as usize]).collect(),
+            materials: mesh.materials.clone(),
+            groups: mesh.groups.clone(),
+        };
+        let scene = Scene::build(&glass, crate::trace::BuildQuality::Sah).ok()?;
+        Some(Glass { scene, mesh_triangle: triangles })
+    }
 }
 
 /// The shadow cache and buffers of [`SunTest::sees_sun_each`], kept from
@@ -598,6 +642,8 @@ pub(crate) struct SunScratch {
     origins: Vec<Vec3>,
     hints: Vec<u32>,
     blocked: Vec<bool>,
+    /// Window mode: each ray's reach, short of its first glass.
+    reach: Vec<f32>,
 }
 
 impl SunScratch {
@@ -609,6 +655,7 @@ impl SunScratch {
             origins: Vec::new(),
             hints: Vec::new(),
             blocked: Vec::new(),
+            reach: Vec::new(),
         }
     }
 }
@@ -631,6 +678,9 @@ impl SunTest<'_> {
         lit: &mut [bool],
     ) -> u64 {
         assert!(points.len() == lit.len() && points.len() == scratch.point_hints.len(), "one answer and one hint per point");
+        if let (Mode::Window, Some(glass)) = (self.params.mode, self.glass) {
+            return self.sees_sun_through_glass(glass, points, s, sides, scratch, lit);
+        }
         if self.params.mode != Mode::Open || !self.params.packets || !self.params.shadow_cache {
             let mut rays = 0u64;
             for (p, point) in points.iter().enumerate() {
@@ -640,7 +690,7 @@ impl SunTest<'_> {
             }
             return rays;
         }
-        let SunScratch { point_hints, facing, origins, hints, blocked, lone_hint } = scratch;
+        let SunScratch { point_hints, facing, origins, hints, blocked, lone_hint, .. } = scratch;
         facing.clear();
         origins.clear();
         hints.clear();
@@ -660,6 +710,73 @@ impl SunTest<'_> {
             }
         }
         facing.len() as u64
+    }
+
+    /// [`SunTest::sees_sun_each`] in window mode with packets: per point,
+    /// its first glass (`glass`), then the whole scene's occlusion short of
+    /// it in packets (each ray its own reach, the shadow cache as in open
+    /// mode); the side verdicts as [`SunTest::sees_sun`]. The rays counted
+    /// are the lone test's (one per point, and the side probes). A blocker
+    /// that is itself glass (the two trees' distances to one pane can differ
+    /// by rounding) sends its point to the lone test.
+    fn sees_sun_through_glass(
+        &self,
+        glass: &Glass,
+        points: &[Point],
+        s: Vec3,
+        sides: &mut [[Option<bool>; 2]],
+        scratch: &mut SunScratch,
+        lit: &mut [bool],
+    ) -> u64 {
+        let SunScratch { point_hints, facing, origins, hints, blocked, lone_hint, reach } = scratch;
+        let tau = &self.surfaces.window_transmittance;
+        facing.clear();
+        origins.clear();
+        hints.clear();
+        reach.clear();
+        lit.fill(false);
+        for (p, point) in points.iter().enumerate() {
+            let origin = self.scene.offset_origin(point.position, point.face_normal, s);
+            let Some(hit) = glass.scene.closest_hit(origin, s, f32::INFINITY) else { continue };
+            if !tau[glass.mesh_triangle[hit.triangle as usize] as usize].is_some_and(|t| t > 0.0) {
+                continue;
+            }
+            facing.push(p as u32);
+            origins.push(origin);
+            reach.push(hit.t.next_down());
+            hints.push(if point_hints[p] == u32::MAX { *lone_hint } else { point_hints[p] });
+        }
+        blocked.resize(origins.len(), false);
+        self.scene.occluded_parallel_each(origins, s, reach, hints, blocked);
+        let mut rays = points.len() as u64;
+        for ((&p, &b), &h) in facing.iter().zip(blocked.iter()).zip(hints.iter()) {
+            let (p, point) = (p as usize, &points[p as usize]);
+            let by_glass = b && self.scene.mesh_triangle_of_leaf(h).is_some_and(|t| tau[t as usize].is_some());
+            let through = if by_glass {
+                let origin = self.scene.offset_origin(point.position, point.face_normal, s);
+                self.scene.closest_hit(origin, s, f32::INFINITY).is_some_and(|hit| tau[hit.triangle as usize].is_some_and(|t| t > 0.0))
+            } else {
+                !b
+            };
+            if b && !by_glass {
+                point_hints[p] = h;
+                *lone_hint = h;
+            }
+            if !through {
+                continue;
+            }
+            if self.params.keep_outside_sides {
+                lit[p] = true;
+                continue;
+            }
+            let side = Sides::of(point.face_normal, s);
+            let probed = sides[p][side].is_none();
+            let outside =
+                *sides[p][side].get_or_insert_with(|| side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side));
+            rays += if probed { SIDE_PROBE_RAYS as u64 } else { 0 };
+            lit[p] = !outside;
+        }
+        rays
     }
 
     /// Whether `point` sees the sun toward unit `s`, and the rays traced.
@@ -703,6 +820,98 @@ mod tests {
     use super::*;
     use crate::mesh::Material;
     use crate::trace::{BuildQuality, Scene};
+
+    /// Window mode's packets against its lone test (the first hit is glass)
+    /// at a point inside each opaque triangle of `mesh` for eight suns: the
+    /// same verdict for every point, but where an opaque surface and the
+    /// first glass lie within the scene's tie distance along the ray (the
+    /// lone closest hit counts them as one surface and picks by facing and
+    /// index; the packets ask whether anything opaque lies before the
+    /// glass). Returns the lit point-steps and the ties.
+    fn window_packets_against_lone(mesh: &Mesh, window: &str) -> (usize, usize) {
+        let surfaces = Surfaces::resolve(mesh, &[window.to_string()]).unwrap();
+        let scene = Scene::build(mesh, BuildQuality::Sah).unwrap();
+        let params = SunParams { mode: Mode::Window, ..SunParams::default() };
+        let glass = Glass::for_sun(mesh, &surfaces, &params).expect("the mesh has glass");
+        let packets = SunTest { scene: &scene, surfaces: &surfaces, params: &params, glass: Some(&glass) };
+        let lone = SunTest { glass: None, ..packets };
+        let points: Vec<Point> = (0..mesh.triangle_count())
+            .filter(|&t| surfaces.window_transmittance[t].is_none())
+            .map(|t| Point::on_triangle(mesh, &scene, t, [0.5, 0.3, 0.2]))
+            .collect();
+        let (mut lit, mut ties) = (0usize, 0usize);
+        for k in 0..8 {
+            let a = k as f32 * 0.8;
+            let s = Vec3::new(a.cos(), 0.3 + 0.08 * k as f32, a.sin()).normalize();
+            let mut sides = vec![[None; 2]; points.len()];
+            let mut scratch = SunScratch::new(points.len());
+            let mut answers = vec![false; points.len()];
+            let rays = packets.sees_sun_each(&points, s, &mut sides, &mut scratch, &mut answers);
+            let mut lone_sides = vec![[None; 2]; points.len()];
+            let (mut lone_rays, mut hint, mut step_ties) = (0u64, u32::MAX, 0);
+            for (p, point) in points.iter().enumerate() {
+                let (sees, traced) = lone.sees_sun(point, s, &mut hint, &mut lone_sides[p]);
+                lone_rays += u64::from(traced);
+                lit += usize::from(sees);
+                if sees != answers[p] {
+                    // A tie: the nearest opaque surface (brute force, f64)
+                    // within the scene's tie distance of the first glass,
+                    // where the lone closest hit counts the two as one
+                    // surface and picks by facing and index.
+                    let origin = scene.offset_origin(point.position, point.face_normal, s);
+                    let t_glass = glass.scene.closest_hit(origin, s, f32::INFINITY).unwrap().t as f64;
+                    let (o, d) = (origin.as_dvec3(), s.as_dvec3());
+                    let nearest_opaque = (0..mesh.triangle_count())
+                        .filter(|&t| surfaces.window_transmittance[t].is_none())
+                        .filter_map(|t| {
+                            let [a, b, c] = mesh.triangle_positions(t).map(|v| v.as_dvec3());
+                            let (e1, e2) = (b - a, c - a);
+                            let pv = d.cross(e2);
+                            let det = e1.dot(pv);
+                            let tv = o - a;
+                            let (u, qv) = (tv.dot(pv) / det, tv.cross(e1));
+                            let (v, t) = (d.dot(qv) / det, e2.dot(qv) / det);
+                            (det != 0.0 && u >= -1e-6 && v >= -1e-6 && u + v <= 1.0 + 1e-6 && t > 0.0).then_some(t)
+                        })
+                        .fold(f64::INFINITY, f64::min);
+                    assert!(
+                        (nearest_opaque - t_glass).abs() <= 1.01 * scene.tie_distance as f64,
+                        "point {p}, sun {k}: lone {sees}, packets {}: glass at {t_glass}, nearest opaque at {nearest_opaque}, tie {}",
+                        answers[p],
+                        scene.tie_distance
+                    );
+                    step_ties += 1;
+                }
+            }
+            if step_ties == 0 {
+                assert_eq!(rays, lone_rays, "sun {k}: the rays counted as the lone test counts them");
+            }
+            ties += step_ties;
+        }
+        (lit, ties)
+    }
+
+    #[test]
+    fn window_packets_agree_with_the_lone_first_hit_test() {
+        let (mesh, _) = crate::fixtures::cabin::generate_cabin(10.0);
+        let (lit, ties) = window_packets_against_lone(&mesh, "glass");
+        assert!(lit > 1000 && ties == 0, "{lit} lit point-steps, {ties} ties");
+    }
+
+    /// The same on the Ferrari (window `Glass_Gray`), whose glass meets its
+    /// frames: ties occur, and every differing verdict is one.
+    #[test]
+    fn window_packets_agree_with_the_lone_test_on_the_ferrari_but_for_ties() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/car-ferrari458/ferrari_nodraco.glb");
+        if !path.exists() {
+            eprintln!("skipped: {} is absent", path.display());
+            return;
+        }
+        let mesh = crate::mesh::load_mesh(&path, &crate::mesh::LoadOptions::default()).unwrap().mesh;
+        let (lit, ties) = window_packets_against_lone(&mesh, "Glass_Gray");
+        eprintln!("Ferrari: {lit} lit point-steps, {ties} ties");
+        assert!(lit > 10_000 && ties * 1000 < lit, "{lit} lit point-steps, {ties} ties");
+    }
 
     /// A unit-square grid in the XZ plane at height y, normal ±Y.
     fn floor(n: u32, y: f32, up: bool) -> Mesh {

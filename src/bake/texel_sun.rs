@@ -177,7 +177,8 @@ impl TexelSunPlan {
         let (words, fwords) = self.words();
         let (suns, points) = (&self.suns, &self.points);
         let day_steps = suns.iter().filter(|s| s.is_some()).count() as u64;
-        let test = SunTest { scene, surfaces, params: &self.params };
+        let glass = super::sun::Glass::for_sun(mesh, surfaces, &self.params);
+        let test = SunTest { scene, surfaces, params: &self.params, glass: glass.as_ref() };
         let point_count = (points.start[range.end] - points.start[range.start]) as u64;
         let progress = Progress::start("sun, texels".into(), point_count * day_steps, self.params.quiet);
         let mut masks = vec![0u32; range.len() * words];

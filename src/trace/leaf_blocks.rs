@@ -161,7 +161,7 @@ impl LeafTest for AvxLeaf {
             let splat = _mm256_set1_ps;
             let origin = [splat(ray.origin.x), splat(ray.origin.y), splat(ray.origin.z)];
             let direction = [splat(ray.direction.x), splat(ray.direction.y), splat(ray.direction.z)];
-            let (mask, den, t) = moller_trumbore_lanes(&triangles, origin, direction, ray.tmin, t_max);
+            let (mask, den, t) = moller_trumbore_lanes(&triangles, origin, direction, ray.tmin, splat(t_max));
             let lanes = (1u32 << n) - 1;
             let mut hits = LeafHits {
                 mask: mask & lanes,
@@ -179,7 +179,7 @@ impl LeafTest for AvxLeaf {
 /// obvhs's operations in its order without fused multiply-add, so each
 /// lane gives `RtTriangle::intersect`'s bits. `triangles` holds the rows
 /// v0, e1, e2, ng (x, y, z each). Returns the mask of lanes hit within
-/// `[t_min, t_max]` at a finite distance, and each lane's determinant
+/// `[t_min, t_max]` (`t_max` per lane) at a finite distance, and each lane's determinant
 /// (negative: the back face) and distance. Only called from AVX2 code.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
@@ -188,7 +188,7 @@ pub(super) unsafe fn moller_trumbore_lanes(
     origin: [std::arch::x86_64::__m256; 3],
     direction: [std::arch::x86_64::__m256; 3],
     t_min: f32,
-    t_max: f32,
+    t_max: std::arch::x86_64::__m256,
 ) -> (u32, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
     use std::arch::x86_64::*;
     let row = |r: usize| triangles[r];
@@ -211,7 +211,7 @@ pub(super) unsafe fn moller_trumbore_lanes(
     // Predicates as Rust's operators: `!=` is true for NaN, the rest false.
     let valid = _mm256_and_ps(
         _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(inv, _mm256_setzero_ps()), _mm256_cmp_ps::<_CMP_GE_OQ>(t, splat(t_min))),
-        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t, splat(t_max)), _mm256_cmp_ps::<_CMP_LT_OQ>(t, splat(f32::INFINITY))),
+        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max), _mm256_cmp_ps::<_CMP_LT_OQ>(t, splat(f32::INFINITY))),
     );
     (_mm256_movemask_ps(valid) as u32 & !outside, den, t)
 }

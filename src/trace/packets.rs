@@ -41,6 +41,23 @@ pub const HINTS_TRIED: usize = 4;
 /// Stack entries of a packet walk before it spills to the heap.
 const STACK: usize = 64;
 
+/// How far the rays of a parallel query reach: all alike, or each its own.
+#[derive(Clone, Copy)]
+enum Reach<'a> {
+    All(f32),
+    Each(&'a [f32]),
+}
+
+impl Reach<'_> {
+    #[inline(always)]
+    fn at(&self, k: usize) -> f32 {
+        match self {
+            Reach::All(t) => *t,
+            Reach::Each(t) => t[k],
+        }
+    }
+}
+
 /// A packet's origins swept along the shared direction, prepared for box tests.
 #[derive(Clone, Copy, Debug)]
 pub struct Beam {
@@ -82,12 +99,13 @@ impl Beam {
     }
 }
 
-/// The origins of a packet's rays, a row per axis (lanes past the packet's
-/// rays hold copies of its first).
+/// The origins of a packet's rays, a row per axis, and each ray's `t_max`
+/// (lanes past the packet's rays hold copies of its first).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
 pub struct PacketOrigins {
     pub rows: [[f32; PACKET]; 3],
+    pub t_max: [f32; PACKET],
 }
 
 /// The box tests of a packet walk.
@@ -95,14 +113,15 @@ pub trait BeamTest {
     /// The mask of `node`'s children that some ray of `beam` may enter within `[0, t_max]`.
     fn test(node: &Node8, beam: &Beam, t_max: f32) -> u32;
     /// The mask of the rays (lanes of `origins`, each along `template`'s
-    /// direction, within `t_max`) that hit `triangle`: per lane exactly
-    /// `RtTriangle::intersect` (the leaf tests' arithmetic).
-    fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray, t_max: f32) -> u32;
+    /// direction, within its own `t_max`) that hit `triangle`: per lane
+    /// exactly `RtTriangle::intersect` (the leaf tests' arithmetic).
+    fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray) -> u32;
     /// The mask of the rays (lanes of `origins`, all along `beam`'s
     /// direction) whose lone walk enters child `slot` of `node` within
-    /// `[0, t_max]`: the lone walk's slab test ([`bvh8::ScalarTest`], whose
-    /// lanes the AVX2 test matches bit for bit) with `t_min` 0.
-    fn rays_entering(node: &Node8, slot: usize, origins: &PacketOrigins, beam: &Beam, t_max: f32) -> u32;
+    /// `[0, t_max]`, each its own `t_max`: the lone walk's slab test
+    /// ([`bvh8::ScalarTest`], whose lanes the AVX2 test matches bit for
+    /// bit) with `t_min` 0.
+    fn rays_entering(node: &Node8, slot: usize, origins: &PacketOrigins, beam: &Beam) -> u32;
 }
 
 /// Portable path.
@@ -119,22 +138,22 @@ impl BeamTest for ScalarBeam {
     }
 
     #[inline(always)]
-    fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray, t_max: f32) -> u32 {
+    fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray) -> u32 {
         let mut mask = 0;
         for lane in 0..PACKET {
             let origin = glam::Vec3A::new(origins.rows[0][lane], origins.rows[1][lane], origins.rows[2][lane]);
-            let ray = Ray { origin, tmax: t_max, ..*template };
+            let ray = Ray { origin, tmax: origins.t_max[lane], ..*template };
             mask |= u32::from(triangle.intersect(&ray).is_finite()) << lane;
         }
         mask
     }
 
     #[inline(always)]
-    fn rays_entering(node: &Node8, slot: usize, origins: &PacketOrigins, beam: &Beam, t_max: f32) -> u32 {
+    fn rays_entering(node: &Node8, slot: usize, origins: &PacketOrigins, beam: &Beam) -> u32 {
         let mut mask = 0;
         for lane in 0..PACKET {
             let origin = [origins.rows[0][lane], origins.rows[1][lane], origins.rows[2][lane]];
-            mask |= u32::from(slab_passes(node, slot, beam, origin, origin, t_max)) << lane;
+            mask |= u32::from(slab_passes(node, slot, beam, origin, origin, origins.t_max[lane])) << lane;
         }
         mask
     }
@@ -186,7 +205,7 @@ impl BeamTest for Avx2Beam {
     }
 
     #[inline(always)]
-    fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray, t_max: f32) -> u32 {
+    fn rays_blocked_by(triangle: &RtTriangle, origins: &PacketOrigins, template: &Ray) -> u32 {
         use std::arch::x86_64::*;
         // SAFETY: as `test`; every load reads one aligned row of `origins`.
         // The leaf test's arithmetic with rays in the lanes instead of
@@ -199,6 +218,7 @@ impl BeamTest for Avx2Beam {
             let mut mask = 0;
             for half in 0..PACKET / 8 {
                 let origin = std::array::from_fn(|axis| _mm256_load_ps(origins.rows[axis].as_ptr().add(8 * half)));
+                let t_max = _mm256_load_ps(origins.t_max.as_ptr().add(8 * half));
                 let (hits, _, _) = super::leaf_blocks::moller_trumbore_lanes(&rows, origin, direction, template.tmin, t_max);
                 mask |= hits << (8 * half);
             }
@@ -207,7 +227,7 @@ impl BeamTest for Avx2Beam {
     }
 
     #[inline(always)]
-    fn rays_entering(node: &Node8, slot: usize, origins: &PacketOrigins, beam: &Beam, t_max: f32) -> u32 {
+    fn rays_entering(node: &Node8, slot: usize, origins: &PacketOrigins, beam: &Beam) -> u32 {
         use std::arch::x86_64::*;
         // SAFETY: as `test`; every load reads one aligned row of `origins`.
         unsafe {
@@ -225,7 +245,8 @@ impl BeamTest for Avx2Beam {
                     near = _mm256_max_ps(plane(row, axis), near);
                     far = _mm256_min_ps(plane(row ^ 1, axis), far);
                 }
-                far = _mm256_min_ps(_mm256_mul_ps(far, _mm256_set1_ps(bvh8::EXIT_STRETCH)), _mm256_set1_ps(t_max));
+                let t_max = _mm256_load_ps(origins.t_max.as_ptr().add(8 * half));
+                far = _mm256_min_ps(_mm256_mul_ps(far, _mm256_set1_ps(bvh8::EXIT_STRETCH)), t_max);
                 mask |= (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far)) as u32) << (8 * half);
             }
             mask
@@ -248,31 +269,44 @@ impl Scene {
     /// blockers the walk finds are written back. Same answers as
     /// [`Scene::occluded`], bit for bit, whatever the hints hold.
     pub fn occluded_parallel(&self, origins: &[Vec3], direction: Vec3, t_max: f32, hints: &mut [u32], out: &mut [bool]) {
+        self.occluded_parallel_reach(origins, direction, Reach::All(t_max), hints, out);
+    }
+
+    /// [`Scene::occluded_parallel`] with each ray's own `t_max` (one per
+    /// origin): the same answers as [`Scene::occluded`] of each ray within
+    /// its own reach. A packet's beam reaches as far as its farthest ray; at
+    /// a leaf, each ray takes its lone test within its own.
+    pub fn occluded_parallel_each(&self, origins: &[Vec3], direction: Vec3, t_max: &[f32], hints: &mut [u32], out: &mut [bool]) {
+        assert_eq!(origins.len(), t_max.len(), "one t_max per origin");
+        self.occluded_parallel_reach(origins, direction, Reach::Each(t_max), hints, out);
+    }
+
+    fn occluded_parallel_reach(&self, origins: &[Vec3], direction: Vec3, reach: Reach, hints: &mut [u32], out: &mut [bool]) {
         assert!(origins.len() == out.len() && origins.len() == hints.len(), "one hint and one answer per origin");
         // The box tree alone answers, and its boxes nest; with fans, or a
         // direction that cannot be traced, each ray takes the lone path.
         if self.fans.is_some()
             || self.nodes.is_empty()
             || !self.boxes_nest
-            || !(RayQuery { origin: Vec3::ZERO, direction, t_max }).is_traceable()
+            || !(RayQuery { origin: Vec3::ZERO, direction, t_max: f32::INFINITY }).is_traceable()
         {
-            for ((o, answer), hint) in origins.iter().zip(out.iter_mut()).zip(hints.iter_mut()) {
-                *answer = self.occluded_cached(*o, direction, t_max, hint);
+            for (k, ((o, answer), hint)) in origins.iter().zip(out.iter_mut()).zip(hints.iter_mut()).enumerate() {
+                *answer = self.occluded_cached(*o, direction, reach.at(k), hint);
             }
             return;
         }
         #[cfg(target_arch = "x86_64")]
         if self.traversal == Traversal::Avx2 {
             // SAFETY: `traversal` is Avx2 only when the CPU reported AVX2.
-            return unsafe { self.occluded_packets_avx2(origins, direction, t_max, hints, out) };
+            return unsafe { self.occluded_packets_avx2(origins, direction, reach, hints, out) };
         }
-        self.occluded_packets::<ScalarBeam, ScalarLeaf>(origins, direction, t_max, hints, out);
+        self.occluded_packets::<ScalarBeam, ScalarLeaf>(origins, direction, reach, hints, out);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn occluded_packets_avx2(&self, origins: &[Vec3], direction: Vec3, t_max: f32, hints: &mut [u32], out: &mut [bool]) {
-        self.occluded_packets::<Avx2Beam, super::leaf_blocks::AvxLeaf>(origins, direction, t_max, hints, out)
+    unsafe fn occluded_packets_avx2(&self, origins: &[Vec3], direction: Vec3, reach: Reach, hints: &mut [u32], out: &mut [bool]) {
+        self.occluded_packets::<Avx2Beam, super::leaf_blocks::AvxLeaf>(origins, direction, reach, hints, out)
     }
 
     /// [`Scene::occluded_parallel`] on traceable directions, a packet at a time.
@@ -281,12 +315,12 @@ impl Scene {
         &self,
         origins: &[Vec3],
         direction: Vec3,
-        t_max: f32,
+        reach: Reach,
         hints: &mut [u32],
         out: &mut [bool],
     ) {
         // The inverse direction depends on the direction alone: computed once.
-        let template = Ray::new(Vec3::ZERO.into(), direction.into(), 0.0, t_max);
+        let template = Ray::new(Vec3::ZERO.into(), direction.into(), 0.0, f32::INFINITY);
         let (all_origins, all_out, all_hints) = (origins, out, hints);
         let limit = self.diagonal * SPREAD;
         let mut start = 0;
@@ -301,26 +335,41 @@ impl Scene {
                 }
                 (lo, hi, end) = (l, h, end + 1);
             }
+            let first_index = start;
             let (origins, out, hints) = (&all_origins[start..end], &mut all_out[start..end], &mut all_hints[start..end]);
             start = end;
             let mut rays = [template; PACKET];
             let mut traceable = 0u32;
+            out.fill(false);
             for (k, o) in origins.iter().enumerate() {
-                // A ray that cannot be traced answers "no hit", as a lone ray.
-                if o.is_finite() {
+                let t_max = reach.at(first_index + k);
+                // A ray that cannot be traced answers "no hit", as a lone
+                // ray; one whose reach is not positive takes the lone path.
+                if !(t_max > 0.0) && !t_max.is_nan() {
+                    out[k] = self.occluded_cached(*o, direction, t_max, &mut hints[k]);
+                } else if o.is_finite() && !t_max.is_nan() {
                     rays[k].origin = (*o).into();
+                    rays[k].tmax = t_max;
                     traceable |= 1 << k;
                 }
             }
-            out.fill(false);
             if traceable == 0 {
                 continue;
             }
-            let first = rays[traceable.trailing_zeros() as usize].origin;
-            let mut lanes = PacketOrigins { rows: [[first.x; PACKET], [first.y; PACKET], [first.z; PACKET]] };
+            let first = traceable.trailing_zeros() as usize;
+            let (first_origin, first_t_max) = (rays[first].origin, rays[first].tmax);
+            let mut lanes = PacketOrigins {
+                rows: [[first_origin.x; PACKET], [first_origin.y; PACKET], [first_origin.z; PACKET]],
+                t_max: [first_t_max; PACKET],
+            };
+            let mut packet_t_max = 0.0f32;
             for k in (0..PACKET).filter(|k| traceable >> k & 1 == 1) {
                 (lanes.rows[0][k], lanes.rows[1][k], lanes.rows[2][k]) = (rays[k].origin.x, rays[k].origin.y, rays[k].origin.z);
+                lanes.t_max[k] = rays[k].tmax;
+                packet_t_max = packet_t_max.max(rays[k].tmax);
             }
+            // Hints block within a margin short of each reach (`hint_reach`).
+            let hint_lanes = PacketOrigins { t_max: lanes.t_max.map(super::queries::hint_reach), ..lanes };
             // The shadow cache: each distinct hint of a ray not yet
             // answered, tested against every ray of the packet.
             let mut by_hint = 0u32;
@@ -334,15 +383,18 @@ impl Scene {
                 };
                 tried[attempt] = hints[k];
                 let triangle = self.leaf_triangles.triangle(hints[k]);
-                by_hint |= B::rays_blocked_by(&triangle, &lanes, &template, t_max) & traceable;
+                by_hint |= B::rays_blocked_by(&triangle, &hint_lanes, &template) & traceable;
                 candidates &= !by_hint & !(1 << k);
             }
             let active = traceable & !by_hint;
             let mut found = [None; PACKET];
             if active != 0 {
-                self.packet_walk::<B, Lf>(&rays, &lanes, active, t_max, &mut found);
+                self.packet_walk::<B, Lf>(&rays, &lanes, active, packet_t_max, &mut found);
             }
             for (k, ((answer, blocker), hint)) in out.iter_mut().zip(found).zip(hints.iter_mut()).enumerate() {
+                if traceable >> k & 1 == 0 {
+                    continue;
+                }
                 *answer = by_hint >> k & 1 == 1;
                 if let Some(leaf) = blocker {
                     *answer = true;
@@ -354,7 +406,8 @@ impl Scene {
 
     /// Walks the tree once for the rays in `active`, writing each blocked
     /// ray's blocker (leaf order) to `found`. The beam narrows to the rays
-    /// still unanswered as blockers are found; the walk ends when none is left.
+    /// still unanswered as blockers are found; the walk ends when none is
+    /// left. `t_max` is the farthest ray's reach (each ray's own is its `tmax`).
     #[inline(always)]
     fn packet_walk<B: BeamTest, Lf: LeafTest>(
         &self,
@@ -394,8 +447,8 @@ impl Scene {
                     inner_count += 1;
                     continue;
                 }
-                let entering = B::rays_entering(node, slot, origins, &beam, t_max) & active;
-                let blocked = test_leaf_rays::<Lf>(blocks, child, rays, entering, t_max, found);
+                let entering = B::rays_entering(node, slot, origins, &beam) & active;
+                let blocked = test_leaf_rays::<Lf>(blocks, child, rays, entering, found);
                 if blocked != 0 {
                     active &= !blocked;
                     if active == 0 {
@@ -417,15 +470,15 @@ impl Scene {
     }
 }
 
-/// Tests leaf `child` against each ray in `entering`; returns the mask of
-/// rays it blocks, their blockers (leaf order) in `found`.
+/// Tests leaf `child` against each ray in `entering` within the ray's own
+/// `tmax`; returns the mask of rays it blocks, their blockers (leaf order)
+/// in `found`.
 #[inline(always)]
 fn test_leaf_rays<Lf: LeafTest>(
     blocks: &LeafBlocks,
     child: u32,
     rays: &[Ray; PACKET],
     entering: u32,
-    t_max: f32,
     found: &mut [Option<u32>; PACKET],
 ) -> u32 {
     let (first, count) = bvh8::leaf_range(child);
@@ -436,7 +489,7 @@ fn test_leaf_rays<Lf: LeafTest>(
         rest &= rest - 1;
         #[cfg(test)]
         super::queries::work::add(u64::from(count));
-        let hits = Lf::test_leaf(blocks, first, count, &rays[k], t_max);
+        let hits = Lf::test_leaf(blocks, first, count, &rays[k], rays[k].tmax);
         if hits.mask != 0 {
             found[k] = Some(first + hits.mask.trailing_zeros());
             blocked |= 1 << k;
@@ -510,6 +563,65 @@ mod tests {
         }
         // Both answers occur often enough to be tested.
         assert!(blocked_rays * 10 > rays && blocked_rays * 10 < rays * 9, "{blocked_rays} of {rays} blocked");
+    }
+
+    /// Each ray within its own reach: the lone walk's answer for every ray,
+    /// whatever the hints, with reaches that cut some blockers off (at each
+    /// ray's first hit, a float either side of it, short of it or past it),
+    /// reaches of zero (the lone path), and NaN. At a reach within rounding
+    /// of a hit a box's entry distance may round past the reach while its
+    /// triangle's does not: hints block only short of the reach, so the
+    /// walk answers there, as alone.
+    #[test]
+    fn packets_with_a_reach_per_ray_answer_as_lone_rays() {
+        let mesh = colonnade(&ColonnadeParams::small());
+        let mut scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+        let (mut cut, mut rays) = (0, 0);
+        for traversal in [Traversal::Avx2, Traversal::Portable] {
+            scene.set_traversal(traversal);
+            for d in [Vec3::new(0.4, 0.8, 0.3), Vec3::new(-0.7, 0.25, 0.1), Vec3::X].map(Vec3::normalize) {
+                let from = origins(&scene, &mesh, d);
+                let reach: Vec<f32> = from
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &o)| {
+                        let t = scene.closest_hit(o, d, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
+                        match i % 6 {
+                            0 => t,
+                            1 => t.next_down(),
+                            2 => {
+                                if i % 12 == 2 {
+                                    t.next_up()
+                                } else {
+                                    0.999 * t
+                                }
+                            }
+                            3 => 0.5 * t,
+                            4 if i % 12 == 4 => 0.0,
+                            4 => f32::NAN,
+                            _ => f32::INFINITY,
+                        }
+                    })
+                    .collect();
+                let lone: Vec<bool> = from.iter().zip(&reach).map(|(&o, &t)| scene.occluded(o, d, t)).collect();
+                let mut hints = vec![u32::MAX; from.len()];
+                for round in 0..3 {
+                    if round == 2 {
+                        hints.iter_mut().enumerate().for_each(|(i, h)| *h = (i as u32 * 7919) % scene.leaf_triangles.len() as u32);
+                    }
+                    let mut answers = vec![false; from.len()];
+                    for (((o, t), a), h) in from.chunks(37).zip(reach.chunks(37)).zip(answers.chunks_mut(37)).zip(hints.chunks_mut(37)) {
+                        scene.occluded_parallel_each(o, d, t, h, a);
+                    }
+                    let wrong = lone.iter().zip(&answers).filter(|(l, a)| l != a).count();
+                    assert_eq!(wrong, 0, "{traversal:?}, {d}, round {round}: {wrong} of {} rays differ", from.len());
+                }
+                cut += (0..from.len()).filter(|&i| i % 6 == 1 && !lone[i] && scene.occluded(from[i], d, f32::INFINITY)).count();
+                rays += from.len();
+            }
+        }
+        // Reaches a float short of the first hit leave those rays unblocked.
+        assert!(cut * 20 > rays / 6, "{cut} of {} rays cut short", rays / 6);
     }
 
     /// A packet walks the tree once for its rays: on the sun's coherent

@@ -125,7 +125,7 @@ impl Scene {
             return false;
         }
         if (*hint as usize) < self.leaf_triangles.len() {
-            let ray = Ray::new(origin.into(), direction.into(), 0.0, t_max);
+            let ray = Ray::new(origin.into(), direction.into(), 0.0, hint_reach(t_max));
             if self.leaf_triangles.triangle(*hint).intersect(&ray).is_finite() {
                 return true;
             }
@@ -138,6 +138,19 @@ impl Scene {
             None => false,
         }
     }
+}
+
+/// How much of a finite reach a shadow-cache hint may block within: the
+/// hint's triangle skips the box tests, whose entry distances round, so a
+/// triangle within rounding of the reach could block a ray the walk finds
+/// unblocked. Short of the reach by this fraction, a blocking hint is one
+/// the walk finds too, and the answer never depends on the hints.
+pub const HINT_MARGIN: f32 = 1e-4;
+
+/// The reach a hint is tested within (infinite stays infinite).
+#[inline(always)]
+pub fn hint_reach(t_max: f32) -> f32 {
+    t_max * (1.0 - HINT_MARGIN)
 }
 
 /// Rays walked at once when interleaving: enough that a node fetch is

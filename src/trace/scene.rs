@@ -158,6 +158,13 @@ impl Scene {
         self.face_normals[t as usize]
     }
 
+    /// The mesh triangle at leaf position `leaf` (what shadow-cache hints
+    /// name), if there is one.
+    #[inline]
+    pub fn mesh_triangle_of_leaf(&self, leaf: u32) -> Option<u32> {
+        self.leaf_to_mesh.get(leaf as usize).copied()
+    }
+
     /// Moves `point` off the surface with geometric normal `face_normal` toward
     /// the side `direction` leaves from, so a ray cannot stop on its own
     /// surface or on a coincident twin of it.
