@@ -749,32 +749,20 @@ impl SunTest<'_> {
         blocked.resize(origins.len(), false);
         self.scene.occluded_parallel_each(origins, s, reach, hints, blocked);
         let mut rays = points.len() as u64;
-        for ((&p, &b), &h) in facing.iter().zip(blocked.iter()).zip(hints.iter()) {
+        for (((&p, &b), &h), &origin) in facing.iter().zip(blocked.iter()).zip(hints.iter()).zip(origins.iter()) {
             let (p, point) = (p as usize, &points[p as usize]);
             let by_glass = b && self.scene.mesh_triangle_of_leaf(h).is_some_and(|t| tau[t as usize].is_some());
-            let through = if by_glass {
-                let origin = self.scene.offset_origin(point.position, point.face_normal, s);
-                self.scene.closest_hit(origin, s, f32::INFINITY).is_some_and(|hit| tau[hit.triangle as usize].is_some_and(|t| t > 0.0))
-            } else {
-                !b
-            };
             if b && !by_glass {
                 point_hints[p] = h;
                 *lone_hint = h;
             }
+            let through = if by_glass { self.first_hit_is_clear_glass(origin, s) } else { !b };
             if !through {
                 continue;
             }
-            if self.params.keep_outside_sides {
-                lit[p] = true;
-                continue;
-            }
-            let side = Sides::of(point.face_normal, s);
-            let probed = sides[p][side].is_none();
-            let outside =
-                *sides[p][side].get_or_insert_with(|| side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side));
-            rays += if probed { SIDE_PROBE_RAYS as u64 } else { 0 };
-            lit[p] = !outside;
+            let (inside, probes) = self.side_inside(point, s, &mut sides[p]);
+            rays += u64::from(probes);
+            lit[p] = inside;
         }
         rays
     }
@@ -798,20 +786,37 @@ impl SunTest<'_> {
             }
             Mode::Window => {
                 let origin = self.scene.offset_origin(point.position, point.face_normal, s);
-                let lit = self
-                    .scene
-                    .closest_hit(origin, s, f32::INFINITY)
-                    .is_some_and(|hit| self.surfaces.window_transmittance[hit.triangle as usize].is_some_and(|tau| tau > 0.0));
-                if !lit || self.params.keep_outside_sides {
-                    return (lit, 1);
+                if !self.first_hit_is_clear_glass(origin, s) {
+                    return (false, 1);
                 }
-                let side = Sides::of(point.face_normal, s);
-                let probed = sides[side].is_none();
-                let outside =
-                    *sides[side].get_or_insert_with(|| side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side));
-                (!outside, 1 + if probed { SIDE_PROBE_RAYS } else { 0 })
+                let (inside, probes) = self.side_inside(point, s, sides);
+                (inside, 1 + probes)
             }
         }
+    }
+
+    /// Window mode: whether the first hit from `origin` along `s` is glass
+    /// that lets light through (one closest hit).
+    #[inline]
+    fn first_hit_is_clear_glass(&self, origin: Vec3, s: Vec3) -> bool {
+        let tau = &self.surfaces.window_transmittance;
+        self.scene.closest_hit(origin, s, f32::INFINITY).is_some_and(|hit| tau[hit.triangle as usize].is_some_and(|t| t > 0.0))
+    }
+
+    /// Window mode, a point whose ray toward `s` leaves through glass:
+    /// whether its light counts (the side it looks from is inside, or
+    /// `--keep-outside-sides`), and the probe rays its side took the first
+    /// time it was asked (`sides` keeps the verdicts).
+    #[inline]
+    fn side_inside(&self, point: &Point, s: Vec3, sides: &mut [Option<bool>; 2]) -> (bool, u32) {
+        if self.params.keep_outside_sides {
+            return (true, 0);
+        }
+        let side = Sides::of(point.face_normal, s);
+        let probed = sides[side].is_none();
+        let outside =
+            *sides[side].get_or_insert_with(|| side_is_outside(self.scene, self.surfaces, point.position, point.face_normal, side));
+        (!outside, if probed { SIDE_PROBE_RAYS } else { 0 })
     }
 }
 

@@ -138,24 +138,20 @@ pub fn check_windows(config: &BakeConfig, surfaces: &bake::Surfaces) -> anyhow::
 /// Says on stderr when `--max-error` cannot be met by any storage: the
 /// bake's own estimated noise is over the budget (it is stored as baked).
 pub fn warn_over_budget(choice: Option<&budget::Choice>, output: &std::path::Path) {
-    let Some(c) = choice else { return };
-    if let (false, Some(budget), Some(noise)) = (c.within_budget(), c.budget, c.noise_error) {
-        eprintln!(
-            "warning: {}: the bake's own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: stored as baked (f32); more rays or --adaptive lower the noise",
-            output.display(),
-            100.0 * noise,
-            100.0 * budget
-        );
-    }
+    warn_noise_over_budget(choice, output, "the bake's", "more rays or --adaptive lower the noise");
 }
 
 /// Texel mode: warns when the texels' own noise is over `--max-error`
 /// (vertices and texels are then stored as baked).
 pub fn warn_texels_over_budget(on_texels: Option<&budget::Choice>, output: &std::path::Path) {
-    let Some(c) = on_texels else { return };
+    warn_noise_over_budget(on_texels, output, "the texels'", "more rays or --texel-points lower it");
+}
+
+fn warn_noise_over_budget(choice: Option<&budget::Choice>, output: &std::path::Path, whose: &str, remedy: &str) {
+    let Some(c) = choice else { return };
     if let (false, Some(budget), Some(noise)) = (c.within_budget(), c.budget, c.noise_error) {
         eprintln!(
-            "warning: {}: the texels' own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: stored as baked (f32); more rays or --texel-points lower it",
+            "warning: {}: {whose} own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: stored as baked (f32); {remedy}",
             output.display(),
             100.0 * noise,
             100.0 * budget
