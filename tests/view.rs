@@ -280,6 +280,56 @@ fn time_lapse_shadow_moves_where_the_bits_say() {
     assert!(checked > 1500);
 }
 
+/// A single-layer plane whose every bit is set, in a window-mode bundle (bits
+/// for points lit from either side), under a sun from above: seen from above
+/// it takes the sun (`n·s` of its upward normal), seen from below the side the
+/// eye sees faces away from the sun and takes none, the sky term alone,
+/// pixel for pixel as the CPU formula gives with the normal turned toward
+/// the eye.
+#[test]
+fn the_sun_lights_only_the_side_of_a_surface_that_faces_it() {
+    let Some(gpu) = gpu_or_skip("the_sun_lights_only_the_side_of_a_surface_that_faces_it") else { return };
+    let order = 1;
+    let mesh = shapes::plane_grid(8, 4.0);
+    let sun_dir = Vec3::new(0.3, 1.0, 0.2).normalize();
+    let (words_per_vertex, masks) = SunSeries::pack(1, mesh.vertex_count(), |_, _| true);
+    let step = SunStep {
+        unix_time_utc: 1_773_993_600.0,
+        direction: sun_dir.to_array(),
+        elevation_deg: sun_dir.y.asin().to_degrees(),
+        azimuth_deg: 0.0,
+        sun_rgb: [1.5, 1.5, 1.5],
+        night: false,
+        sky_sh: Vec::new(),
+    };
+    let sun = SunSeries { sky_order: 0, steps: vec![step], words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() };
+    // A flat transfer, the same on both sides: the sky term is `ambient` whichever side is seen.
+    let transfer = vec![1.0 / (4.0 * std::f32::consts::PI).sqrt(); mesh.vertex_count()];
+    let mut bundle = bundle_of(mesh, order, transfer, Some(sun));
+    bundle.meta = serde_json::json!({ "params": { "mode": "window" } });
+    let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();
+    let ambient = 0.1f32;
+    let lighting = vec![[ambient * (4.0 * std::f32::consts::PI).sqrt(); 3]];
+    let settings = FrameSettings { lighting: lighting.clone(), sun_step: Some(0), backdrop: Backdrop::Black, tonemap: linear_tonemap(0.0) };
+    let albedo = bundle.mesh.materials[0].albedo;
+    let sun = bundle.sun.as_ref().unwrap();
+    for (eye, seen_normal) in [(Vec3::new(0.0, 3.0, 0.5), [0.0, 1.0, 0.0]), (Vec3::new(0.0, -3.0, 0.5), [0.0, -1.0, 0.0])] {
+        let camera = Camera::look_at(eye, Vec3::ZERO, scene.bounds);
+        let image = render_image(&gpu, &scene, Some(sun), &camera, &settings, 64, 64).unwrap();
+        let light = reference::vertex_light(&scene, &lighting, Some((sun, 0)), 0, seen_normal);
+        let want = tonemap::linear(reference::radiance(albedo, light), 0.0, 2.2).map(tonemap::to_u8);
+        let got = image.pixel(32, 32);
+        let diff = (0..3).map(|c| (got[c] as i32 - want[c] as i32).abs()).max().unwrap();
+        assert!(diff <= MAX_CODE_DIFF, "eye {eye}: GPU {got:?}, CPU {want:?}");
+        let sky_only = tonemap::linear(reference::radiance(albedo, [ambient; 3]), 0.0, 2.2).map(tonemap::to_u8);
+        if eye.y < 0.0 {
+            assert_eq!(want, sky_only, "seen from below, the sun must add nothing");
+        } else {
+            assert!(want[1] as i32 - sky_only[1] as i32 > 60, "seen from above, the sun must light it: {want:?} against {sky_only:?}");
+        }
+    }
+}
+
 #[test]
 fn frame_settings_follow_the_step_sky() {
     // The time-lapse state feeds the step's sky SH and the sun step (no GPU needed).

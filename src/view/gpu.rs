@@ -31,7 +31,7 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Lighting coefficients the frame uniform holds (order 16).
 const MAX_COEFFS: usize = 256;
 /// Frame uniform: mat4 + 3 vec4 + 256 vec4.
-const FRAME_BYTES: usize = 64 + 3 * 16 + MAX_COEFFS * 16;
+const FRAME_BYTES: usize = 64 + 4 * 16 + MAX_COEFFS * 16;
 
 /// An adapter, its device and queue.
 pub struct Gpu {
@@ -149,7 +149,6 @@ pub struct Renderer {
     order: u32,
     channels: u32,
     words_per_vertex: u32,
-    two_sided_sun: bool,
     srgb_output: bool,
 }
 
@@ -548,7 +547,6 @@ impl Renderer {
             order: scene.order,
             channels: scene.channels,
             words_per_vertex: scene.words_per_vertex,
-            two_sided_sun: scene.two_sided_sun,
             srgb_output: output_format.is_srgb(),
         })
     }
@@ -675,10 +673,10 @@ impl Renderer {
             Some((k, s)) if self.words_per_vertex > 0 => (s.direction, s.sun_rgb, 1.0, k as u32),
             _ => ([0.0; 3], [0.0; 3], 0.0, 0),
         };
-        let two_sided = if self.two_sided_sun { 1.0f32 } else { 0.0 };
-        words.extend([direction[0], direction[1], direction[2], two_sided].map(f32::to_bits));
+        words.extend([direction[0], direction[1], direction[2], 0.0].map(f32::to_bits));
         words.extend([rgb[0], rgb[1], rgb[2], on].map(f32::to_bits));
         words.extend([self.order * self.order, self.channels, self.words_per_vertex, k]);
+        words.extend([camera.eye.x, camera.eye.y, camera.eye.z, 0.0].map(f32::to_bits));
         let n2 = (self.order * self.order) as usize;
         for i in 0..MAX_COEFFS {
             let c = if i < n2 { settings.lighting.get(i).copied().unwrap_or([0.0; 3]) } else { [0.0; 3] };

@@ -26,6 +26,7 @@ struct LightmapOut {
     // Position in the atlas, texels.
     @location(2) texcoord: vec2<f32>,
     @location(3) normal: vec3<f32>,
+    @location(4) position: vec3<f32>,
 };
 
 @vertex
@@ -42,6 +43,7 @@ fn vs_lightmap(v: VertexIn, @location(4) texcoord: vec2<f32>) -> LightmapOut {
     out.albedo = v.albedo;
     out.texcoord = texcoord;
     out.normal = v.normal;
+    out.position = v.position;
     return out;
 }
 
@@ -83,7 +85,7 @@ fn fs_lightmap(in: LightmapOut) -> @location(0) vec4<f32> {
         light += e;
     }
     if (TEXEL_SUN) {
-        light += visibility * sun_cosine(normalize(in.normal)) * frame.sun_rgb.xyz / PI;
+        light += visibility * sun_cosine(normalize(in.normal), in.position) * frame.sun_rgb.xyz / PI;
     }
     return vec4<f32>(in.albedo * light, 1.0);
 }

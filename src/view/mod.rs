@@ -14,8 +14,9 @@
 //! adaptive logarithmic mapping (seed 000 §5), both driven by a low-resolution
 //! log-average luminance with temporal adaptation, or gamma alone (seed 001). Transfer is per unit albedo
 //! (docs/conventions.md), the sun irradiance is in the sky module's units, so
-//! `albedo/π · E` is radiance in the same units as the sky's. In window-mode
-//! bundles the sun cosine is two-sided, `|n·s|`, like the bake's.
+//! `albedo/π · E` is radiance in the same units as the sky's. The sun's cosine
+//! is taken on the side of the surface the eye sees (the normal turned toward
+//! the eye): a single-layer wall lit on its outer face is dark from inside.
 //!
 //! Per frame only the lighting's SH vector (and the step) changes: the env map
 //! is projected once and rotated with [`crate::sh::ShRotation`]; a time-lapse

@@ -5,11 +5,12 @@ use super::scene::PreparedScene;
 use crate::bundle::SunSeries;
 
 /// Irradiance-like vertex term `E(v) = Σ_i L_i t_i(v) + bit · cos · sun_rgb / π`
-/// (before albedo), for bundle vertex `v` with unit normal `normal`.
+/// (before albedo), for bundle vertex `v` seen from the side of unit normal
+/// `normal` (the vertex normal turned toward the eye).
 ///
 /// `lighting` is truncated or zero-padded to the transfer order. `sun` is the
-/// series and the step, when the sun term is on. The cosine is `max(n·s, 0)`,
-/// or `|n·s|` when `scene.two_sided_sun`.
+/// series and the step, when the sun term is on. The cosine is `max(n·s, 0)`:
+/// the side the eye sees is lit only when it faces the sun.
 pub fn vertex_light(
     scene: &PreparedScene,
     lighting: &[[f32; 3]],
@@ -32,7 +33,7 @@ pub fn vertex_light(
         if let Some(s) = series.steps.get(step) {
             if series.bit(v, step) {
                 let cosine = normal[0] * s.direction[0] + normal[1] * s.direction[1] + normal[2] * s.direction[2];
-                let cosine = if scene.two_sided_sun { cosine.abs() } else { cosine.max(0.0) };
+                let cosine = cosine.max(0.0);
                 for (l, rgb) in light.iter_mut().zip(s.sun_rgb) {
                     *l += cosine * rgb / std::f32::consts::PI;
                 }

@@ -85,8 +85,6 @@ pub struct PreparedScene {
     /// The bundle's sun masks (empty without a sun series) and words per vertex.
     pub masks: Vec<u32>,
     pub words_per_vertex: u32,
-    /// Sun cosine `|n·s|` (window-mode bundles) instead of `max(n·s, 0)`.
-    pub two_sided_sun: bool,
     /// Bounds of the drawn geometry.
     pub bounds: (glam::Vec3, glam::Vec3),
     /// The equirect map drawn behind the geometry ([`super::backdrop::Backdrop::EnvMap`]),
@@ -340,7 +338,6 @@ pub fn prepare_scene_with_panel(
         transfer: layers.combine(transfer),
         masks,
         words_per_vertex,
-        two_sided_sun: bundle.is_window_mode(),
         bounds: (lo, hi),
         environment: None,
         panel,

@@ -1,6 +1,7 @@
 // Per-vertex PRT shading (seeds 000 §4.2, 001 §4).
 //
-// Vertex: E = Σ_i L_i t_i(v)  +  bit(v, step) · cos · sun_rgb / π   (cos = max(n·s,0), or |n·s| two-sided)
+// Vertex: E = Σ_i L_i t_i(v)  +  bit(v, step) · max(n_seen·s, 0) · sun_rgb / π
+// (n_seen: the normal turned toward the eye, the side of the surface the eye sees)
 // Fragment: radiance = albedo · E, written to an HDR target; alpha is the transmittance
 // of the glass in front (1 here; the glass pass lowers it).
 
@@ -9,13 +10,15 @@ const MAX_COEFFS: u32 = 256u;
 
 struct Frame {
     view_proj: mat4x4<f32>,
-    // xyz: unit direction toward the sun; w: 1 = two-sided cosine.
+    // xyz: unit direction toward the sun; w unused.
     sun_dir: vec4<f32>,
     // rgb: sun irradiance; w: 1 = sun term on.
     sun_rgb: vec4<f32>,
     // x: coefficients per channel (order²), y: channels (1 or 3),
     // z: mask words per vertex, w: time-lapse step.
     counts: vec4<u32>,
+    // xyz: the eye, world units; w unused.
+    eye: vec4<f32>,
     // Lighting SH, rgb per coefficient, index l(l+1)+m.
     sh: array<vec4<f32>, MAX_COEFFS>,
 };
@@ -81,20 +84,19 @@ fn sun_light(v: VertexIn) -> vec3<f32> {
     let step = frame.counts.w;
     let word = masks[v.source * frame.counts.z + step / 32u];
     let bit = (word >> (step % 32u)) & 1u;
-    return f32(bit) * sun_cosine(v.normal) * frame.sun_rgb.xyz / PI;
+    return f32(bit) * sun_cosine(v.normal, v.position) * frame.sun_rgb.xyz / PI;
 }
 
-// The sun's cosine on a surface of normal n: |n·s| for window-mode bundles
-// (two-sided, as their bake), else max(n·s, 0); 0 when no step is shown.
-fn sun_cosine(n: vec3<f32>) -> f32 {
+// The sun's cosine on the side of a surface (normal n, at p) that the eye
+// sees: a wall lit by the sun on its outer face is dark from inside, whatever
+// its normal's direction (window-mode bits are for either side); 0 when no
+// step is shown.
+fn sun_cosine(n: vec3<f32>, p: vec3<f32>) -> f32 {
     if (frame.sun_rgb.w < 0.5) {
         return 0.0;
     }
-    let cosine = dot(n, frame.sun_dir.xyz);
-    if (frame.sun_dir.w > 0.5) {
-        return abs(cosine);
-    }
-    return max(cosine, 0.0);
+    let seen = select(-n, n, dot(n, frame.eye.xyz - p) >= 0.0);
+    return max(dot(seen, frame.sun_dir.xyz), 0.0);
 }
 
 @fragment
