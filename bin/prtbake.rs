@@ -135,6 +135,12 @@ struct BakeArgs {
     /// With --texel-size: unwrap a new atlas (xatlas) even where the mesh has its own (TEXCOORD_1).
     #[arg(long, requires = "texel_size")]
     unwrap: bool,
+    /// With --texel-size L and --max-error E: a texel size per chart, from L to 2^(N-1)·L (N in
+    /// 2..=4). A pilot bake on an atlas of the coarsest texels measures each chart, and the charts
+    /// whose light changes most get finer texels until the estimated resolution error (relative L2
+    /// of the texels' DC) is within E. Unwrapped atlases only. Not with --shard.
+    #[arg(long, value_name = "N", requires_all = ["texel_size", "max_error"], conflicts_with_all = ["shard", "plan_shards"])]
+    texel_levels: Option<u32>,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
     sampling: SamplingArg,
@@ -455,6 +461,15 @@ struct SunArgs {
     /// With --texel-size: unwrap a new atlas (xatlas) even where the mesh has its own (TEXCOORD_1).
     #[arg(long, requires = "texel_size")]
     unwrap: bool,
+    /// With --texel-size L and --max-error E: a texel size per chart of the new atlas, from L to
+    /// 2^(N-1)·L (N in 2..=4). A pilot on an atlas of the coarsest texels (4 points each) measures
+    /// each chart, and the charts where shadow edges pass get finer texels until the estimated
+    /// error of the texels' lit shares (relative L2 over texels and steps) is within E. Not with --shard.
+    #[arg(long, value_name = "N", requires_all = ["texel_size", "max_error"], conflicts_with_all = ["shard", "plan_shards"])]
+    texel_levels: Option<u32>,
+    /// With --texel-levels: the budget of the texels' resolution error (e.g. 0.1 = 10%).
+    #[arg(long, value_name = "E", requires = "texel_levels")]
+    max_error: Option<f64>,
     /// Sample points per texel for its sun bits (default: a texel bundle's bake's, else 4).
     #[arg(long, value_name = "N")]
     texel_points: Option<u32>,
@@ -841,7 +856,8 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
             if matches!(a.sampling, SamplingArg::Vertex) {
                 return Err(with("--sampling vertex", "texels sample inside their triangles"));
             }
-            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points, unwrap: a.unwrap })
+            let density = texel_density(a.texel_levels, a.max_error)?;
+            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points, unwrap: a.unwrap, density })
         }
         None => None,
     };
@@ -916,6 +932,14 @@ fn clean_config(a: CleanArgs) -> anyhow::Result<cli::clean_cmd::CleanConfig> {
     })
 }
 
+/// `--texel-levels N` with the budget `--max-error E` (clap has checked that both come with --texel-size).
+fn texel_density(levels: Option<u32>, max_error: Option<f64>) -> anyhow::Result<Option<prtbake::bake::texel_density::DensityRequest>> {
+    let (Some(levels), Some(budget)) = (levels, max_error) else { return Ok(None) };
+    let request = prtbake::bake::texel_density::DensityRequest { levels, budget };
+    request.check().map_err(|e| anyhow::anyhow!("--texel-levels {levels} --max-error {budget}: {e}"))?;
+    Ok(Some(request))
+}
+
 fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
     use anyhow::{bail, Context};
     use prtbake::sky;
@@ -984,6 +1008,7 @@ fn sun_config(a: SunArgs) -> anyhow::Result<cli::sun_cmd::SunConfig> {
         bail!("--texel-points {n}: expected 1..=256");
     }
     Ok(cli::sun_cmd::SunConfig {
+        texel_density: texel_density(a.texel_levels, a.max_error)?,
         texel_size: a.texel_size,
         texel_points: a.texel_points,
         texel_fractions: a.texel_fractions,

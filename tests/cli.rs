@@ -967,6 +967,74 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     assert!(!refused.exists(), "the refused sun run wrote its output");
 }
 
+/// `--texel-levels N --max-error E`: `bake` and `sun` size each chart's
+/// texels with a pilot, the same bytes on 1 and 2 threads, and record the
+/// choice (META `texels.density`, `sun.texels.density`, the report line);
+/// the charts' texel sizes span the levels. Without the budget, with
+/// `--shard`, with N outside 2..=4, and on a mesh's own atlas without
+/// `--unwrap` it is refused (exit 2, nothing written).
+#[test]
+fn texel_levels_are_deterministic_recorded_and_refused_where_they_cannot_apply() {
+    let dir = Scratch::new("texel-levels");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &prtbake::verify::shapes::room_with_walls_running_past()).unwrap();
+    let run = |command: &str, input: &std::path::Path, out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args = vec![command, input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        if command == "bake" {
+            args.extend(["--rays", "8", "--bounces", "0"]);
+        } else {
+            args.extend(["--steps", "8"]);
+        }
+        args.extend(extra);
+        (prtbake(&args), out)
+    };
+    let levels = ["--texel-size", "0.05", "--texel-levels", "3", "--max-error", "0.02"];
+    for command in ["bake", "sun"] {
+        let (o, one) = run(command, &obj, &format!("{command}-1.prtb"), &[&levels[..], &["--threads", "1", "--quiet"]].concat());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let (o, two) = run(command, &obj, &format!("{command}-2.prtb"), &[&levels[..], &["--threads", "2"]].concat());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("texel density: 3 sizes 0.05..0.2 m"),
+            "{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+        assert!(std::fs::read(&one).unwrap() == std::fs::read(&two).unwrap(), "{command}: texel levels differ across thread counts");
+        let b = prtbake::bundle::read_bundle(&one).unwrap();
+        let density = if command == "bake" { &b.meta["texels"]["density"] } else { &b.meta["sun"]["texels"]["density"] };
+        assert_eq!(density["levels"].as_u64(), Some(3), "{density}");
+        assert_eq!(density["pilot_texel_size"].as_f64(), Some(0.2f32 as f64), "{density}");
+        let per_level: Vec<u64> = density["charts_per_level"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+        let atlas = &b.texels.as_ref().unwrap().atlas;
+        assert_eq!(per_level.iter().sum::<u64>(), u64::from(atlas.chart_count), "{density}");
+        assert!(per_level[0] > 0 && per_level[2] > 0, "{command}: no chart kept coarse or made finest: {density}");
+        // Within the budget, or as low as the finest texels go (the model halves a chart's squared error per level).
+        let (estimated, coarsest) = (density["estimated_error"].as_f64().unwrap(), density["coarsest_error"].as_f64().unwrap());
+        assert!(estimated <= 0.02 + 1e-12 || (estimated - coarsest / 2.0).abs() < 1e-9, "{density}");
+        assert_eq!(atlas.texel_size, 0.05);
+    }
+    let (mesh, _) = floor_and_board_with_lightmap();
+    let glb = dir.path("own.glb");
+    prtbake::mesh::write_glb(&glb, &mesh).unwrap();
+    for (command, input, extra, what) in [
+        ("bake", &obj, vec!["--texel-size", "0.05", "--texel-levels", "3"], "--max-error"),
+        ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "3"], "--max-error"),
+        ("bake", &obj, vec!["--texel-size", "0.05", "--texel-levels", "5", "--max-error", "0.1"], "2..=4"),
+        ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "1", "--max-error", "0.1"], "2..=4"),
+        ("bake", &obj, vec!["--texel-size", "0.05", "--texel-levels", "2", "--max-error", "0.1", "--shard", "0/2"], "--shard"),
+        ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "2", "--max-error", "0.1", "--shard", "0/2"], "--shard"),
+        ("bake", &glb, vec!["--texel-size", "0.1", "--texel-levels", "2", "--max-error", "0.1"], "--unwrap"),
+        ("sun", &glb, vec!["--texel-size", "0.1", "--texel-levels", "2", "--max-error", "0.1"], "--unwrap"),
+    ] {
+        let (o, out) = run(command, input, "refused.prtb", &extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{command} {extra:?}: {err}");
+        assert!(err.contains(what), "{command} {extra:?}: {err}");
+        assert!(!out.exists(), "{command} {extra:?} wrote its output");
+    }
+}
+
 /// A 2 m floor and a 0.8 m board above it, each one chart of its own
 /// lightmap (glTF `TEXCOORD_1`), side by side in the unit square.
 fn floor_and_board_with_lightmap() -> (prtbake::mesh::Mesh, fn(glam::Vec3) -> glam::Vec2) {

@@ -17,6 +17,7 @@
 //! is touched by one chart only ([`coverage`]).
 
 pub mod coverage;
+pub mod density;
 pub mod lightmap;
 mod xatlas_ffi;
 
@@ -249,25 +250,9 @@ impl Atlas {
             decl.indexCount = mesh.indices.len() as u32;
             decl.indexFormat = x::INDEX_FORMAT_UINT32;
             let handle = x::xatlasCreate();
-            let error = x::xatlasAddMesh(handle, &decl, 1);
-            if error != x::ADD_MESH_SUCCESS {
-                let text = std::ffi::CStr::from_ptr(x::xatlasAddMeshErrorString(error)).to_string_lossy().into_owned();
-                x::xatlasDestroy(handle);
-                return Err(AtlasError::Refused(text));
-            }
-            let mut charts = std::mem::MaybeUninit::<x::ChartOptions>::uninit();
-            x::xatlasChartOptionsInit(charts.as_mut_ptr());
-            let charts = charts.assume_init();
-            let mut pack = std::mem::MaybeUninit::<x::PackOptions>::uninit();
-            x::xatlasPackOptionsInit(pack.as_mut_ptr());
-            let mut pack = pack.assume_init();
-            pack.texelsPerUnit = 1.0 / texel_size;
-            pack.padding = PADDING;
-            pack.bilinear = true;
+            x::check_added(handle, x::xatlasAddMesh(handle, &decl, 1)).map_err(AtlasError::Refused)?;
             // One texture, however large: the bundle holds one atlas.
-            pack.resolution = 0;
-            pack.maxChartSize = 0;
-            x::xatlasGenerate(handle, &charts, &pack);
+            x::xatlasGenerate(handle, &x::chart_options(), &x::pack_options(1.0 / texel_size, PADDING));
             let atlas = &*handle;
             let result = Self::read(atlas, mesh.triangle_count(), texel_size);
             x::xatlasDestroy(handle);

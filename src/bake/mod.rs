@@ -11,6 +11,7 @@ pub mod progress;
 pub(crate) mod receivers;
 pub mod sun;
 pub mod surfaces;
+pub mod texel_density;
 pub(crate) mod texel_lookup;
 pub mod texel_sun;
 pub mod texels;

@@ -26,6 +26,7 @@ use super::sun::{checked_suns, Point, SunParams, SunScratch, SunTest};
 use super::transfer::texels::TexelPoints;
 use super::{BakeError, DirectionPattern, Surfaces};
 use crate::atlas::coverage::Coverage;
+use crate::atlas::density::ChartDetail;
 use crate::atlas::Atlas;
 use crate::mesh::Mesh;
 use crate::trace::scene::Scene;
@@ -83,6 +84,20 @@ impl TexelSunMasks {
         let w = self.fractions.len() / self.texels.len().max(1);
         ((self.fractions[i * w + step / 8] >> (4 * (step % 8))) & 0xF) as f32 / FRACTION_MAX as f32
     }
+}
+
+/// A pilot texel sun bake's measure of each chart for
+/// [`crate::atlas::density`]: the squared error of one value per texel is,
+/// at each step, the variance of the lit indicator over the texel's
+/// footprint, `f (1 − f)` for a lit share `f` (0 where the texel is wholly
+/// lit or dark); the value is the lit share (the indicator squared).
+/// `masks` are of `atlas`, over `steps` steps.
+pub fn sun_chart_detail(masks: &TexelSunMasks, atlas: &Atlas, steps: usize) -> ChartDetail {
+    let coverage = Coverage::of(atlas);
+    ChartDetail::from_texels(atlas, &coverage, |i| {
+        let Ok(k) = masks.texels.binary_search(&coverage.texels[i]) else { return (0.0, 0.0) };
+        (0..steps).map(|s| f64::from(masks.fraction(k, s))).fold((0.0, 0.0), |(e, v), f| (e + f * (1.0 - f), v + f))
+    })
 }
 
 /// Bakes a sun bit per covered texel of `atlas` (unwrapped from `mesh`) and

@@ -9,6 +9,7 @@
 use super::transfer::texels::{denoise_texels, texel_charts, TexelRowsMut, TexelState};
 use super::{BakeError, BakeParams, Surfaces, TransferResult};
 use crate::atlas::coverage::Coverage;
+use crate::atlas::density::ChartDetail;
 use crate::atlas::Atlas;
 use crate::mesh::Mesh;
 use crate::trace::scene::Scene;
@@ -78,6 +79,39 @@ pub fn bake_texels(
         atlas,
     };
     Ok((result, texel))
+}
+
+/// A pilot texel bake's measure of each chart for [`crate::atlas::density`]:
+/// per covered texel, how far its DC (the channels' mean) stands from the
+/// mean of its covered 4-neighbours in the same chart, squared, less what the
+/// noise of both explains; a texel with fewer than two such neighbours adds
+/// nothing. The value is the DC.
+pub fn transfer_chart_detail(texels: &TexelTransfer, channels: usize, coeffs: usize) -> ChartDetail {
+    let atlas = &texels.atlas;
+    let coverage = Coverage::of(atlas);
+    let chart = texel_charts(atlas, &coverage);
+    let dc = |i: usize| (0..channels).map(|c| f64::from(texels.coefficients(i, c, channels, coeffs)[0])).sum::<f64>() / channels as f64;
+    let noise = |i: usize| texels.noise.get(i).map_or(0.0, |&n| f64::from(n));
+    let width = atlas.width as i64;
+    ChartDetail::from_texels(atlas, &coverage, |i| {
+        let id = coverage.texels[i];
+        let (x, y) = (i64::from(id) % width, i64::from(id) / width);
+        let neighbours: Vec<usize> = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .map(|&(dx, dy)| (x + dx, y + dy))
+            .filter(|&(u, v)| (0..width).contains(&u) && (0..i64::from(atlas.height)).contains(&v))
+            .filter_map(|(u, v)| coverage.texels.binary_search(&((v * width + u) as u32)).ok())
+            .filter(|&j| chart[j] == chart[i])
+            .collect();
+        let value = dc(i);
+        if neighbours.len() < 2 {
+            return (0.0, value * value);
+        }
+        let m = neighbours.len() as f64;
+        let detail = value - neighbours.iter().map(|&j| dc(j)).sum::<f64>() / m;
+        let variance = noise(i).powi(2) + neighbours.iter().map(|&j| noise(j).powi(2)).sum::<f64>() / (m * m);
+        ((detail * detail - variance).max(0.0), value * value)
+    })
 }
 
 /// An atlas of `mesh`'s triangles and at least one point per texel.

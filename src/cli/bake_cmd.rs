@@ -41,13 +41,16 @@ pub struct BakeConfig {
     pub texels: Option<TexelRequest>,
 }
 
-/// `--texel-size L --texel-points N [--unwrap]`.
+/// `--texel-size L --texel-points N [--unwrap] [--texel-levels K]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TexelRequest {
+    /// The texel size; with `density`, the finest a chart may have.
     pub size: f32,
     pub points: u32,
     /// Unwrap a new atlas even where the mesh has its own (`TEXCOORD_1`).
     pub unwrap: bool,
+    /// Texel size per chart, picked by a pilot within a budget (`--texel-levels`, `--max-error`).
+    pub density: Option<bake::texel_density::DensityRequest>,
 }
 
 /// What the user asked of adaptive refinement ([`crate::refine`]); the
@@ -200,6 +203,8 @@ pub struct TexelReport {
     pub seconds_per_bounce: Vec<f64>,
     /// The texels' measure of the storage chosen for vertices and texels (META `texels.storage`).
     pub storage: Option<serde_json::Value>,
+    /// `--texel-levels`: the pilot and each chart's texel size (META `texels.density`).
+    pub density: Option<bake::texel_density::DensityReport>,
 }
 
 /// Extensions of a bundle output.
@@ -300,20 +305,44 @@ fn bake_texels_to_bundle(
     staged: &mut Staged,
 ) -> anyhow::Result<BakeReport> {
     let input = config.input.display().to_string();
+    if request.density.is_some() && atlas_source_name(mesh, request.unwrap) != "xatlas" {
+        anyhow::bail!(
+            "{input}: --texel-levels: the mesh has its own lightmap atlas (TEXCOORD_1), kept as authored; give --unwrap to unwrap one whose charts get their own texel sizes"
+        );
+    }
     let baked = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = surfaces_of(mesh, config).with_context(|| input.clone())?;
-        let clock = std::time::Instant::now();
-        let atlas = crate::atlas::Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?;
-        let atlas_seconds = clock.elapsed().as_secs_f64();
         let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).with_context(|| input.clone())?;
+        let clock = std::time::Instant::now();
+        let (atlas, density) = match &request.density {
+            None => {
+                let atlas =
+                    crate::atlas::Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?;
+                (atlas, None)
+            }
+            Some(density) => {
+                let (atlas, report) = bake::texel_density::transfer_density_atlas(
+                    mesh,
+                    &scene,
+                    &surfaces,
+                    &config.params,
+                    request.size,
+                    request.points,
+                    density,
+                )
+                .with_context(|| format!("{input}: --texel-levels"))?;
+                (atlas, Some(report))
+            }
+        };
+        let atlas_seconds = clock.elapsed().as_secs_f64();
         let (result, texels) =
             bake::texels::bake_texels(mesh, &scene, &surfaces, &config.params, atlas, request.points).with_context(|| input.clone())?;
-        Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds))
+        Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds, density))
     })??;
-    let (result, texels, surfaces, build_seconds, atlas_seconds) = baked;
+    let (result, texels, surfaces, build_seconds, atlas_seconds, density) = baked;
     let atlas_source = atlas_source_name(mesh, request.unwrap);
     let texel_report = TexelReport {
-        texel_size: request.size,
+        texel_size: texels.atlas.texel_size,
         atlas: atlas_source,
         width: texels.atlas.width,
         height: texels.atlas.height,
@@ -326,6 +355,7 @@ fn bake_texels_to_bundle(
         atlas_seconds,
         seconds_per_bounce: texels.seconds_per_bounce.clone(),
         storage: None,
+        density,
     };
     check_windows(config, &surfaces)?;
     let write_start = std::time::Instant::now();
@@ -336,6 +366,9 @@ fn bake_texels_to_bundle(
     texel_report.storage = choices.as_ref().map(|(_, on_texels)| storage_meta(on_texels, &result));
     let mut bundle = crate::bundle::make_bundle_stored(mesh, &result, &config.params, meta, choices.as_ref().map(|c| &c.0));
     crate::bundle::add_texel_transfer(&mut bundle, texels, &result, choices.as_ref(), atlas_source, request.points);
+    if let Some(density) = &texel_report.density {
+        bundle.meta["texels"]["density"] = density.meta();
+    }
     let encoded =
         crate::bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choices.as_ref().map(|c| &c.0), &config.output);
@@ -545,6 +578,9 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             seconds,
             t.rays_traced as f64 / seconds.max(1e-9) / 1e6
         );
+        if let Some(d) = &t.density {
+            println!("{}", d.summary());
+        }
     }
     if s.back_sides > 0 {
         println!(

@@ -70,6 +70,10 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
         // Texel mode: every shard unwraps the same atlas and makes the same texel points.
         let mut texels = match &config.texels {
             Some(request) => {
+                anyhow::ensure!(
+                    request.density.is_none(),
+                    "--texel-levels with --shard: the pilot that sizes the charts runs in one process"
+                );
                 let atlas = Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?;
                 let plan = TexelTransferPlan::new(mesh, &atlas, request.points, &config.params).with_context(|| input.clone())?;
                 key.texels = Some(TexelKey {
@@ -204,6 +208,7 @@ fn placeholder_stats(steps: &[SunStep]) -> SunStats {
 pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
     let mut input = load_sun_input(config, PART_FORMAT, false)?;
     check_texel_request(config, &input)?;
+    anyhow::ensure!(config.texel_density.is_none(), "--texel-levels with --shard: the pilot that sizes the charts runs in one process");
     let config = &super::sun_cmd::with_bundle_windows(config, &input)?;
     let points_per_texel = texel_points(config, &input);
     let started = std::time::Instant::now();

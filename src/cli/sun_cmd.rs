@@ -77,6 +77,9 @@ pub struct SunConfig {
     pub texel_fractions: bool,
     /// Unwrap a new atlas even where the mesh has its own (`--unwrap`; `TEXCOORD_1`).
     pub unwrap: bool,
+    /// A new atlas's texel size per chart, picked by a pilot within a budget
+    /// (`--texel-levels`, `--max-error`); `texel_size` is then the finest.
+    pub texel_density: Option<bake::texel_density::DensityRequest>,
 }
 
 /// What `sun` reports.
@@ -85,6 +88,8 @@ pub struct SunReport {
     pub masks: SunMasks,
     /// Texel mode: the texels' bits and the atlas's seconds (0 when the bundle had it).
     pub texel_masks: Option<(bake::TexelSunMasks, f64)>,
+    /// `--texel-levels`: the pilot and each chart's texel size.
+    pub texel_density: Option<bake::texel_density::DensityReport>,
     pub steps: Vec<SunStep>,
     pub input_was_bundle: bool,
     pub sky_seconds: f64,
@@ -337,6 +342,17 @@ pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Resu
     if config.texel_fractions && config.texel_size.is_none() && input.atlas.is_none() {
         anyhow::bail!("--texel-fractions: the sun is baked per vertex here; give --texel-size L, or a bundle with an atlas");
     }
+    if config.texel_density.is_some() {
+        if config.texel_size.is_none() {
+            anyhow::bail!("--texel-levels: the sun is baked per vertex here; give --texel-size L (the finest texel)");
+        }
+        if !input.mesh.lightmap_uvs.is_empty() && !config.unwrap && input.atlas.is_none() {
+            anyhow::bail!(
+                "{}: --texel-levels: the mesh has its own lightmap atlas (TEXCOORD_1), kept as authored; give --unwrap to unwrap one whose charts get their own texel sizes",
+                config.input.display()
+            );
+        }
+    }
     if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
         anyhow::bail!(
             "{}: --texel-size {size}, but the bundle has its atlas ({} m texels), whose texels the sun bits must match; leave --texel-size out",
@@ -465,28 +481,39 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             }
             let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
             let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
-            let texel_masks = match sun_atlas(config, &input)? {
+            let atlas = match (&input.atlas, config.texel_size, &config.texel_density) {
+                (None, Some(finest), Some(density)) => {
+                    let started = Instant::now();
+                    let (atlas, report) =
+                        bake::texel_density::sun_density_atlas(&input.mesh, &scene, &surfaces, &suns, &config.params, finest, density)
+                            .with_context(|| format!("{}: --texel-levels", config.input.display()))?;
+                    Some((atlas, started.elapsed().as_secs_f64(), Some(report)))
+                }
+                _ => sun_atlas(config, &input)?.map(|(atlas, seconds)| (atlas, seconds, None)),
+            };
+            let texel_masks = match atlas {
                 None => None,
-                Some((atlas, atlas_seconds)) => {
+                Some((atlas, atlas_seconds, density)) => {
                     let started = Instant::now();
                     let plan = texel_sun_plan(config, &input, &atlas, points_per_texel, &suns)?;
                     let traced = plan.trace(&input.mesh, &scene, &surfaces, 0..plan.texel_count());
                     let seconds = started.elapsed().as_secs_f64();
                     let texel_masks = plan.finish(traced, seconds);
-                    Some((texel_masks, atlas, atlas_seconds))
+                    Some((texel_masks, atlas, atlas_seconds, density))
                 }
             };
             Ok((steps, scene.build_time.as_secs_f64(), sky_seconds, masks, None, texel_masks))
         })??;
     // Whose atlas a new one is: the mesh's own (TEXCOORD_1) or xatlas's.
     let mut new_atlas_source = None;
-    if let Some((masks, atlas, _)) = &texel_masks {
+    if let Some((masks, atlas, _, _)) = &texel_masks {
         if input.atlas.is_none() {
             new_atlas_source = Some(new_atlas_source_name(config, &input));
             input.atlas = Some((atlas.clone(), masks.texels.clone()));
         }
     }
-    let texel_masks = texel_masks.map(|(masks, _, seconds)| (masks, seconds));
+    let texel_density = texel_masks.as_ref().and_then(|(_, _, _, density)| density.clone());
+    let texel_masks = texel_masks.map(|(masks, _, seconds, _)| (masks, seconds));
     warn_if_never_lit(&config.output, config.params.mode, &config.window_patterns, &masks.stats);
     let refine = refined.map(|(mesh, report)| {
         input.mesh = mesh;
@@ -504,6 +531,9 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     let mut sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
     if let (Some((t, _)), Some((atlas, _))) = (&texel_masks, &input.atlas) {
         sun_meta["texels"] = texel_sun_meta(atlas, &t.stats, config.texel_fractions, new_atlas_source);
+        if let Some(density) = &texel_density {
+            sun_meta["texels"]["density"] = density.meta();
+        }
     }
     if let Some(r) = &refine {
         sun_meta["refine"] = r.meta();
@@ -530,6 +560,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         output: output.clone(),
         masks,
         texel_masks,
+        texel_density,
         steps,
         input_was_bundle: input.was_bundle(),
         sky_seconds,
@@ -592,7 +623,7 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
             "output": super::json_path(&report.output),
             "added_to_bundle": report.input_was_bundle,
             "stats": s,
-            "texels": report.texel_masks.as_ref().map(|(t, atlas_seconds)| json!({ "stats": t.stats, "atlas_seconds": atlas_seconds })),
+            "texels": report.texel_masks.as_ref().map(|(t, atlas_seconds)| json!({ "stats": t.stats, "atlas_seconds": atlas_seconds, "density": report.texel_density })),
             "sky_seconds": report.sky_seconds,
             "bvh_build_seconds": report.build_seconds,
             "bundle_bytes": report.bundle_bytes,
@@ -644,6 +675,9 @@ pub fn print_report(report: &SunReport, as_json: bool) -> anyhow::Result<()> {
             t.stats.rays as f64 / t.stats.seconds.max(1e-9) / 1e6,
             100.0 * lit as f64 / (t.stats.texels * s.steps).max(1) as f64
         );
+        if let Some(d) = &report.texel_density {
+            println!("{}", d.summary());
+        }
     }
     // Last, as `bake` and `clean` end: where the time went.
     println!("{}", super::phase_line(&phases));
