@@ -5,7 +5,7 @@
 //!
 //! The pilot is cheap by construction: `2^(levels-1)` times coarser texels
 //! on a side, a quarter of the rays and bounce 0 only for transfer (where
-//! the light's edges are), and for the sun 4 points a texel, enough to see an
+//! the light's edges are, and no vertex), and for the sun 4 points a texel, enough to see an
 //! edge cross it.
 
 use std::time::Instant;
@@ -13,7 +13,7 @@ use std::time::Instant;
 use glam::Vec3;
 
 use super::texel_sun::sun_chart_detail;
-use super::texels::{bake_texels, transfer_chart_detail};
+use super::texels::{bake_texels_for, transfer_chart_detail};
 use super::{BakeError, BakeParams, DirectionPattern, SunParams, Surfaces, TexelSunPlan};
 use crate::atlas::density::{choose_levels, ChartDetail, DensityChoice, MAX_LEVELS};
 use crate::atlas::Atlas;
@@ -164,7 +164,10 @@ pub fn transfer_density_atlas(
         quiet: true,
         ..params.clone()
     };
-    let (vertices, pilot) = bake_texels(mesh, scene, surfaces, &pilot_params, pilot_atlas.clone(), points_per_texel)?;
+    // Bounce 0 of the texels reads no vertex: the pilot bakes none.
+    let no_vertices = vec![false; mesh.triangle_count()];
+    let (vertices, pilot) =
+        bake_texels_for(mesh, scene, surfaces, &pilot_params, pilot_atlas.clone(), points_per_texel, Some(&no_vertices))?;
     let detail = transfer_chart_detail(&pilot, vertices.channels, crate::sh::coeff_count(vertices.order));
     let (atlas, choice) = repack(&pilot_atlas, &detail, request)?;
     let report = request.report(
@@ -212,6 +215,7 @@ pub fn sun_density_atlas(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bake::texels::bake_texels;
     use crate::bake::Mode;
     use crate::trace::BuildQuality;
     use crate::verify::shapes;

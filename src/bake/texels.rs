@@ -58,10 +58,25 @@ pub fn bake_texels(
     atlas: Atlas,
     points_per_texel: u32,
 ) -> Result<(TransferResult, TexelTransfer), BakeError> {
+    bake_texels_for(mesh, scene, surfaces, params, atlas, points_per_texel, None)
+}
+
+/// [`bake_texels`] with the vertices of the triangles of `receivers` only
+/// (`Some(all false)`: the texels alone, as a pilot that reads no vertex
+/// needs them).
+pub(crate) fn bake_texels_for(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    params: &BakeParams,
+    atlas: Atlas,
+    points_per_texel: u32,
+    receivers: Option<&[bool]>,
+) -> Result<(TransferResult, TexelTransfer), BakeError> {
     check_texel_inputs(mesh, &atlas, points_per_texel)?;
     let coverage = Coverage::of(&atlas);
     let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params.pattern, params.seed);
-    let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, None, None, Some(&mut state))?;
+    let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, receivers, None, Some(&mut state))?;
     if params.denoise > 0.0 {
         state.denoise(result.channels * crate::sh::coeff_count(params.order), params.denoise);
     }
