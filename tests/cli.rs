@@ -1013,6 +1013,8 @@ fn texel_levels_are_deterministic_recorded_and_refused_where_they_cannot_apply()
         let (estimated, coarsest) = (density["estimated_error"].as_f64().unwrap(), density["coarsest_error"].as_f64().unwrap());
         assert!(estimated <= 0.02 + 1e-12 || (estimated - coarsest / 2.0).abs() < 1e-9, "{density}");
         assert_eq!(atlas.texel_size, 0.05);
+        let shown = String::from_utf8_lossy(&prtbake(&["inspect", one.to_str().unwrap()]).stdout).to_string();
+        assert!(shown.contains("texel size per chart, 3 sizes up to 0.2 (the pilot's)"), "{shown}");
     }
     let (mesh, _) = floor_and_board_with_lightmap();
     let glb = dir.path("own.glb");

@@ -102,6 +102,17 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             t.texels.len(),
             100.0 * t.texels.len() as f64 / (a.width as f64 * a.height as f64),
         );
+        // A texel size per chart (`--texel-levels`): the atlas's size above is the finest chart's.
+        if let Some(d) = ["/texels/density", "/sun/texels/density"].iter().find_map(|p| b.meta.pointer(p)) {
+            let levels = d["levels"].as_u64().unwrap_or(0);
+            let coarsest = d["pilot_texel_size"].as_f64().unwrap_or(0.0) as f32;
+            println!(
+                "    texel size per chart, {levels} sizes up to {coarsest} (the pilot's): charts per size, coarsest first {}; estimated resolution error {:.2}% (budget {:.2}%)",
+                d["charts_per_level"],
+                100.0 * d["estimated_error"].as_f64().unwrap_or(f64::NAN),
+                100.0 * d["budget"].as_f64().unwrap_or(f64::NAN)
+            );
+        }
     }
     if let Some(s) = &b.sun {
         println!("  sun: {} steps, sky order {}", s.step_count(), s.sky_order);
