@@ -162,7 +162,7 @@ pub fn transfer_density_atlas(
         adaptive: 0.0,
         denoise: 0.0,
         quiet: true,
-        ..params.clone()
+        ..*params
     };
     // Bounce 0 of the texels reads no vertex: the pilot bakes none.
     let no_vertices = vec![false; mesh.triangle_count()];
