@@ -60,7 +60,7 @@ impl ChartDetail {
 }
 
 /// Each chart's level of density and what the choice is estimated to give.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct DensityChoice {
     /// Per chart of the pilot's atlas: 0 keeps the pilot's (coarsest) texel
     /// size, k halves it k times.

@@ -294,6 +294,18 @@ pub fn atlas_source_name(mesh: &Mesh, unwrap: bool) -> &'static str {
     }
 }
 
+/// `--texel-levels` sizes the charts of an atlas it unwraps: refused on a
+/// mesh's own lightmap atlas (TEXCOORD_1, kept as authored) without `--unwrap`.
+pub fn check_density_atlas(mesh: &Mesh, unwrap: bool, input: &std::path::Path) -> anyhow::Result<()> {
+    if atlas_source_name(mesh, unwrap) != "xatlas" {
+        anyhow::bail!(
+            "{}: --texel-levels: the mesh has its own lightmap atlas (TEXCOORD_1), kept as authored; give --unwrap to unwrap one whose charts get their own texel sizes",
+            input.display()
+        );
+    }
+    Ok(())
+}
+
 /// Texel mode: unwraps the atlas, bakes vertices and texels together, and
 /// stages the bundle with its ATLS and TXFR sections (texels at the
 /// vertices' quantization, at the baked order and channels).
@@ -305,10 +317,8 @@ fn bake_texels_to_bundle(
     staged: &mut Staged,
 ) -> anyhow::Result<BakeReport> {
     let input = config.input.display().to_string();
-    if request.density.is_some() && atlas_source_name(mesh, request.unwrap) != "xatlas" {
-        anyhow::bail!(
-            "{input}: --texel-levels: the mesh has its own lightmap atlas (TEXCOORD_1), kept as authored; give --unwrap to unwrap one whose charts get their own texel sizes"
-        );
+    if request.density.is_some() {
+        check_density_atlas(mesh, request.unwrap, &config.input)?;
     }
     let baked = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = surfaces_of(mesh, config).with_context(|| input.clone())?;

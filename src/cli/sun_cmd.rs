@@ -346,11 +346,8 @@ pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Resu
         if config.texel_size.is_none() {
             anyhow::bail!("--texel-levels: the sun is baked per vertex here; give --texel-size L (the finest texel)");
         }
-        if !input.mesh.lightmap_uvs.is_empty() && !config.unwrap && input.atlas.is_none() {
-            anyhow::bail!(
-                "{}: --texel-levels: the mesh has its own lightmap atlas (TEXCOORD_1), kept as authored; give --unwrap to unwrap one whose charts get their own texel sizes",
-                config.input.display()
-            );
+        if input.atlas.is_none() {
+            super::bake_cmd::check_density_atlas(&input.mesh, config.unwrap, &config.input)?;
         }
     }
     if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
@@ -380,11 +377,7 @@ pub fn sun_atlas(config: &SunConfig, input: &SunInput) -> anyhow::Result<Option<
 
 /// Whose a new atlas is: the mesh's own lightmap UVs or xatlas's unwrap.
 pub fn new_atlas_source_name(config: &SunConfig, input: &SunInput) -> &'static str {
-    if input.mesh.lightmap_uvs.is_empty() || config.unwrap {
-        "xatlas"
-    } else {
-        "TEXCOORD_1"
-    }
+    super::bake_cmd::atlas_source_name(&input.mesh, config.unwrap)
 }
 
 /// The texels and points of a texel sun bake over `atlas`; a texel
