@@ -1026,6 +1026,8 @@ fn texel_levels_are_deterministic_recorded_and_refused_where_they_cannot_apply()
         ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "1", "--max-error", "0.1"], "2..=4"),
         ("bake", &obj, vec!["--texel-size", "0.05", "--texel-levels", "2", "--max-error", "0.1", "--shard", "0/2"], "--shard"),
         ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "2", "--max-error", "0.1", "--shard", "0/2"], "--shard"),
+        // A finest size refused as a uniform atlas would be, though the pilot's 8× coarser one fits.
+        ("bake", &obj, vec!["--texel-size", "0.0002", "--texel-levels", "4", "--max-error", "0.1"], "0.0002 would need"),
         ("bake", &glb, vec!["--texel-size", "0.1", "--texel-levels", "2", "--max-error", "0.1"], "--unwrap"),
         ("sun", &glb, vec!["--texel-size", "0.1", "--texel-levels", "2", "--max-error", "0.1"], "--unwrap"),
     ] {

@@ -209,16 +209,10 @@ impl Atlas {
         (shared, beside)
     }
 
-    /// Unwraps `mesh` with xatlas at `texel_size` world units per texel.
-    pub fn unwrap(mesh: &Mesh, texel_size: f32) -> Result<Atlas, AtlasError> {
-        if !(texel_size.is_finite() && texel_size > 0.0) {
-            return Err(AtlasError::BadTexelSize(texel_size));
-        }
-        if mesh.triangle_count() == 0 {
-            return Err(AtlasError::Empty);
-        }
-        // The charts' own area in texels: a lower bound that refuses a texel
-        // size a thousand times too small before any work.
+    /// Refuses a texel size whose texels, over the mesh's own area (a lower
+    /// bound of any atlas's), would be more than [`MAX_TEXELS`], before any
+    /// work, naming the size that fits.
+    pub fn check_texel_count(mesh: &Mesh, texel_size: f32) -> Result<(), AtlasError> {
         let area: f64 = (0..mesh.triangle_count())
             .map(|t| {
                 let [a, b, c] = mesh.triangle_positions(t).map(|p| p.as_dvec3());
@@ -230,6 +224,18 @@ impl Atlas {
             let fits = (area / MAX_TEXELS).sqrt() as f32;
             return Err(AtlasError::TooManyTexels { asked: texel_size, texels, fits });
         }
+        Ok(())
+    }
+
+    /// Unwraps `mesh` with xatlas at `texel_size` world units per texel.
+    pub fn unwrap(mesh: &Mesh, texel_size: f32) -> Result<Atlas, AtlasError> {
+        if !(texel_size.is_finite() && texel_size > 0.0) {
+            return Err(AtlasError::BadTexelSize(texel_size));
+        }
+        if mesh.triangle_count() == 0 {
+            return Err(AtlasError::Empty);
+        }
+        Self::check_texel_count(mesh, texel_size)?;
         let has_normals = mesh.normals.len() == mesh.positions.len();
         // SAFETY: the declaration points into `mesh`, which outlives the
         // calls (xatlas copies it in AddMesh); the atlas is read before it is

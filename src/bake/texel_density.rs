@@ -132,6 +132,8 @@ impl DensityRequest {
 
 fn unwrap_pilot(mesh: &Mesh, finest: f32, request: &DensityRequest) -> Result<Atlas, BakeError> {
     request.check()?;
+    // Every chart may end at the finest size: refused where a uniform atlas at it would be.
+    Atlas::check_texel_count(mesh, finest).map_err(|e| BakeError::Params(e.to_string()))?;
     Atlas::unwrap(mesh, request.pilot_size(finest)).map_err(|e| BakeError::Params(format!("pilot atlas: {e}")))
 }
 
