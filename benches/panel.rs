@@ -25,8 +25,15 @@ fn panel_gather(c: &mut Criterion) {
     let (mesh, _) = prtbake::clean::clean_mesh(&raw, &prtbake::clean::CleanParams::cad()).unwrap();
     let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
     let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
-    let interior =
-        Interior { scene: &scene, mesh: &mesh, surfaces: &surfaces, vertex_light: vec![[100.0; 3]; mesh.vertex_count()], two_sided: true };
+    let interior = Interior {
+        scene: &scene,
+        mesh: &mesh,
+        surfaces: &surfaces,
+        vertex_light: vec![[100.0; 3]; mesh.vertex_count()],
+        two_sided: true,
+        texel_light: None,
+        side_shares: Default::default(),
+    };
     let triangles = select_panel(&mesh, Some("lcd_panel"), "cabin".as_ref()).unwrap();
     let layout = PanelLayout::new(&mesh, &triangles, 400, 300, "cabin".as_ref()).unwrap();
     let eye = DRIVER_EYE;

@@ -43,7 +43,7 @@ fn first_pass(c: &mut Criterion) {
     let order = 3u32;
     let data = vec![0.05f32; mesh.vertex_count() * 3 * 9];
     let layers = vec![TransferLayer { kind: LayerKind::Total, data }];
-    let transfer = Transfer { order, channels: 3, quantization: Quantization::F32, layers };
+    let transfer = Transfer { order, channels: 3, quantization: Quantization::F32, layers, front_share: Vec::new() };
     let bundle =
         Bundle { meta: serde_json::json!({ "params": { "mode": "window" } }), mesh, transfer: Some(transfer), sun: None, texels: None };
     let mapping = PanelMapping::find(&bundle.mesh, Some("lcd_panel"), None, "cabin".as_ref()).unwrap().unwrap();

@@ -39,6 +39,7 @@ fn sample_bundle() -> Bundle {
                 TransferLayer { kind: LayerKind::Total, data: values(0.0) },
                 TransferLayer { kind: LayerKind::Bounce(0), data: values(1.0) },
             ],
+            front_share: (0..mesh.vertex_count()).map(|v| ((v * 37) % 256) as f32 / 255.0).collect(),
         }),
         sun: Some(SunSeries { sky_order: 2, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() }),
         mesh,
@@ -102,6 +103,8 @@ fn check_glb(path: &std::path::Path, b: &Bundle, expected_transfer: &[f32]) {
                     }
                 }
             }
+            let shares: Vec<f32> = read_attribute(&primitive, "_PRT_FRONT_SHARE", blob);
+            assert_eq!(shares, vertices.iter().map(|&v| t.front_share[v as usize]).collect::<Vec<_>>(), "front shares");
             for w in 0..sun.words_per_vertex as usize {
                 let words: Vec<[u8; 4]> = read_attribute(&primitive, &format!("_PRT_SUN_{w}"), blob);
                 assert_eq!(words.len(), vertices.len());

@@ -53,6 +53,7 @@ pub fn bundle_of(mesh: Mesh, order: usize, transfer: Vec<f32>, sun: Option<SunSe
             channels: 1,
             quantization: Quantization::F32,
             layers: vec![TransferLayer { kind: LayerKind::Total, data: transfer }],
+            front_share: Vec::new(),
         }),
         sun,
         texels: None,
@@ -123,7 +124,7 @@ fn sphere_matches_cpu_shading_pixel_for_pixel() {
     // CPU: per vertex E, then for every pixel centre the perspective-correct
     // interpolation (a ray hit's barycentrics), albedo, tone map, quantize.
     let vertex_light: Vec<[f32; 3]> =
-        (0..mesh.vertex_count()).map(|v| reference::vertex_light(&scene, &lighting, None, v, mesh.normals[v].to_array())).collect();
+        (0..mesh.vertex_count()).map(|v| reference::vertex_light(&scene, &lighting, None, v, mesh.normals[v].to_array(), true)).collect();
     let albedo = mesh.materials[0].albedo;
     let mut expected: Vec<Option<[u8; 3]>> = Vec::with_capacity((width * height) as usize);
     for y in 0..height {
@@ -258,7 +259,7 @@ fn time_lapse_shadow_moves_where_the_bits_say() {
                 if neighbours.iter().any(|&w| sun.bit(w, k) != sun.bit(v, k)) {
                     continue;
                 }
-                let light = reference::vertex_light(&scene, &lighting, Some((sun, k)), v, [0.0, 1.0, 0.0]);
+                let light = reference::vertex_light(&scene, &lighting, Some((sun, k)), v, [0.0, 1.0, 0.0], true);
                 let want = tonemap::linear(reference::radiance(albedo, light), 0.0, 2.2).map(tonemap::to_u8);
                 let got = images[k].pixel(px, py);
                 let diff = (0..3).map(|c| (got[c] as i32 - want[c] as i32).abs()).max().unwrap();
@@ -316,7 +317,7 @@ fn the_sun_lights_only_the_side_of_a_surface_that_faces_it() {
     for (eye, seen_normal) in [(Vec3::new(0.0, 3.0, 0.5), [0.0, 1.0, 0.0]), (Vec3::new(0.0, -3.0, 0.5), [0.0, -1.0, 0.0])] {
         let camera = Camera::look_at(eye, Vec3::ZERO, scene.bounds);
         let image = render_image(&gpu, &scene, Some(sun), &camera, &settings, 64, 64).unwrap();
-        let light = reference::vertex_light(&scene, &lighting, Some((sun, 0)), 0, seen_normal);
+        let light = reference::vertex_light(&scene, &lighting, Some((sun, 0)), 0, seen_normal, seen_normal[1] > 0.0);
         let want = tonemap::linear(reference::radiance(albedo, light), 0.0, 2.2).map(tonemap::to_u8);
         let got = image.pixel(32, 32);
         let diff = (0..3).map(|c| (got[c] as i32 - want[c] as i32).abs()).max().unwrap();
@@ -326,6 +327,62 @@ fn the_sun_lights_only_the_side_of_a_surface_that_faces_it() {
             assert_eq!(want, sky_only, "seen from below, the sun must add nothing");
         } else {
             assert!(want[1] as i32 - sky_only[1] as i32 > 60, "seen from above, the sun must light it: {want:?} against {sky_only:?}");
+        }
+    }
+}
+
+/// Window-mode side shares (SIDE, TSID): a plane facing up whose every
+/// receiver took 0.8 of its light through its front, drawn per vertex and
+/// per texel from above and below, shows 0.8 and 0.2 of its transfer's
+/// light, through an encoded and decoded bundle; the CPU formula agrees.
+#[test]
+fn each_side_of_a_surface_shows_its_share_of_the_light() {
+    let Some(gpu) = gpu_or_skip("each_side_of_a_surface_shows_its_share_of_the_light") else { return };
+    let mut mesh = shapes::plane_grid(4, 2.0);
+    mesh.materials[0].albedo = [0.5; 3];
+    let share = prtbake::bundle::quantize_share(0.8);
+    assert_eq!(share, 204.0 / 255.0);
+    let (vertex_dc, texel_dc) = (3.0f32, 2.0f32);
+    let mut vertex_bundle = bundle_of(mesh.clone(), 1, vec![vertex_dc; mesh.vertex_count()], None);
+    vertex_bundle.meta = serde_json::json!({ "params": { "mode": "window" } });
+    vertex_bundle.transfer.as_mut().unwrap().front_share = vec![share; mesh.vertex_count()];
+    // Texel mode: the texels carry the shares, the vertices none.
+    let mut texel_bundle = bundle_of(mesh.clone(), 1, vec![vertex_dc; mesh.vertex_count()], None);
+    texel_bundle.meta = vertex_bundle.meta.clone();
+    let atlas = prtbake::atlas::Atlas::unwrap(&mesh, 0.05).unwrap();
+    let texels = prtbake::atlas::coverage::Coverage::of(&atlas).texels;
+    texel_bundle.texels = Some(prtbake::bundle::TexelLayers {
+        atlas,
+        transfer: Some(Transfer {
+            order: 1,
+            channels: 1,
+            quantization: Quantization::F32,
+            layers: vec![TransferLayer { kind: LayerKind::Total, data: vec![texel_dc; texels.len()] }],
+            front_share: vec![share; texels.len()],
+        }),
+        texels,
+    });
+    let lighting = vec![[1.0f32; 3]];
+    let settings = FrameSettings { lighting: lighting.clone(), sun_step: None, backdrop: Backdrop::Black, tonemap: linear_tonemap(0.0) };
+    for (bundle, dc) in [(vertex_bundle, vertex_dc), (texel_bundle, texel_dc)] {
+        let bytes = prtbake::bundle::encode_bundle(&bundle).unwrap();
+        let sections: Vec<String> = prtbake::bundle::list_sections(&bytes).unwrap().iter().map(|s| s.tag_name()).collect();
+        let decoded = prtbake::bundle::decode_bundle(&bytes).unwrap();
+        assert_eq!(decoded, bundle, "shares round-trip ({sections:?})");
+        let texel_mode = decoded.texels.is_some();
+        assert!(sections.contains(&(if texel_mode { "TSID" } else { "SIDE" }).to_string()), "{sections:?}");
+        let scene = prepare_scene(&decoded, &LayerSelection::Total, &[]).unwrap();
+        for (eye, side_share) in [(Vec3::new(0.0, 2.5, 0.01), share), (Vec3::new(0.0, -2.5, 0.01), 1.0 - share)] {
+            let camera = Camera::look_at(eye, Vec3::ZERO, scene.bounds);
+            let image = prtbake::view::render_linear(&gpu, &scene, None, &camera, &settings, 32, 32).unwrap();
+            let got = image.pixel(16, 16)[0];
+            let want = 0.5 * dc * side_share;
+            assert!((got / want - 1.0).abs() < 0.01, "texels {texel_mode}, eye {eye}: {got} against {want}");
+            if !texel_mode {
+                let normal = if eye.y > 0.0 { [0.0, 1.0, 0.0] } else { [0.0, -1.0, 0.0] };
+                let light = reference::vertex_light(&scene, &lighting, None, 0, normal, eye.y > 0.0);
+                assert!((light[0] / (dc * side_share) - 1.0).abs() < 1e-6, "CPU formula: {light:?}");
+            }
         }
     }
 }
@@ -495,7 +552,7 @@ fn panel_pixels(
             let corners = mesh.triangle(t);
             let texcoord = corners.iter().zip(w).map(|(&c, w)| glam::Vec2::from(mapping.texcoord(mesh, c)) * w).sum();
             let light = corners.iter().zip(w).fold([0.0f32; 3], |acc, (&c, w)| {
-                let e = reference::vertex_light(&scene, lighting, None, c as usize, mesh.normals[c as usize].to_array());
+                let e = reference::vertex_light(&scene, lighting, None, c as usize, mesh.normals[c as usize].to_array(), true);
                 std::array::from_fn(|k| acc[k] + e[k] * w)
             });
             Some((texcoord, light))
@@ -870,6 +927,7 @@ fn texel_bundles_are_shaded_per_pixel_from_their_texels() {
             channels: 1,
             quantization: Quantization::F32,
             layers: vec![TransferLayer { kind: LayerKind::Total, data: values }],
+            front_share: Vec::new(),
         }),
     });
     let scene = prepare_scene(&bundle, &LayerSelection::Total, &[]).unwrap();

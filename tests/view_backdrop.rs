@@ -182,8 +182,9 @@ fn glass_lets_its_transmittance_of_the_env_and_the_body_through_once() {
         m.indices.truncate(3 * sphere_triangles);
         m
     };
-    let light: Vec<[f32; 3]> =
-        (0..sphere.vertex_count()).map(|v| reference::vertex_light(&scene, &lighting, None, v, sphere.normals[v].to_array())).collect();
+    let light: Vec<[f32; 3]> = (0..sphere.vertex_count())
+        .map(|v| reference::vertex_light(&scene, &lighting, None, v, sphere.normals[v].to_array(), true))
+        .collect();
     let ray = |x: u32, y: u32| camera.pixel_ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
     // Class: (through the glass, sphere triangle hit or none).
     let class = |x: u32, y: u32| {

@@ -23,6 +23,11 @@ const AHEAD_ROWS: usize = 8;
 /// A cached ray result: no light comes back along this ray in bounces ≥ 1.
 pub(crate) const NO_HIT: u64 = u64::MAX;
 
+/// Set in a window-mode record whose ray left its point through the back of
+/// the point's face: the gather keeps that side's light apart
+/// (`bake::side_share`). Triangle indices stay below 2³¹.
+pub(crate) const BACK_SIDE: u64 = 1 << 63;
+
 /// Packs a hit on `triangle` at barycentrics (u, v) into one word (16-bit barycentrics).
 #[inline]
 pub(crate) fn encode_hit(triangle: u32, u: f32, v: f32) -> u64 {
@@ -33,7 +38,13 @@ pub(crate) fn encode_hit(triangle: u32, u: f32, v: f32) -> u64 {
 #[inline(always)]
 pub(crate) fn decode_hit(record: u64) -> (usize, f32, f32) {
     let q = |x: u64| (x & 0xffff) as f32 / 65535.0;
-    ((record >> 32) as usize, q(record >> 16), q(record))
+    (((record & !BACK_SIDE) >> 32) as usize, q(record >> 16), q(record))
+}
+
+/// 1 for a record of a ray that left through the back of its point's face, else 0.
+#[inline(always)]
+pub(crate) fn back_side(record: u64) -> f32 {
+    (record >> 63) as f32
 }
 
 /// One cache line of floats.
@@ -113,8 +124,9 @@ impl<'a> Gather<'a> {
 impl Gather<'_> {
     /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` over the first `count` records of
     /// `records` into `result` (`[channel][coeff]`), in record order. Records
-    /// after `count` (the next points') are only prefetched.
-    pub(crate) fn point(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32]) {
+    /// after `count` (the next points') are only prefetched. Returns the DC
+    /// summed over channels that the records marked [`BACK_SIDE`] added.
+    pub(crate) fn point(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32]) -> f32 {
         if self.texels.is_some() {
             return self.general(records, count, weight, result);
         }
@@ -129,13 +141,13 @@ impl Gather<'_> {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn point_avx2(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32], mono: bool) {
+    unsafe fn point_avx2(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32], mono: bool) -> f32 {
         self.dispatch(records, count, weight, result, mono)
     }
 
     /// Picks a kernel whose sums fit in registers, or the general one.
     #[inline(always)]
-    fn dispatch(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32], mono: bool) {
+    fn dispatch(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32], mono: bool) -> f32 {
         macro_rules! fixed {
             ($n:literal) => {
                 match (self.channels, mono) {
@@ -194,8 +206,15 @@ impl Gather<'_> {
     /// `N` coefficients, `CH` channels, `MONO`: one source row for every
     /// channel. The sums stay in registers over the point's records.
     #[inline(always)]
-    fn fixed<const N: usize, const CH: usize, const MONO: bool>(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32]) {
+    fn fixed<const N: usize, const CH: usize, const MONO: bool>(
+        &self,
+        records: &[u64],
+        count: usize,
+        weight: f32,
+        result: &mut [f32],
+    ) -> f32 {
         let mut sums = [[0.0f32; N]; CH];
+        let mut back = 0.0f32;
         for (c, sum) in sums.iter_mut().enumerate() {
             sum.copy_from_slice(&result[c * N..(c + 1) * N]);
         }
@@ -213,13 +232,17 @@ impl Gather<'_> {
                 for k in 0..N {
                     blend[k] = b0 * x0[k] + b1 * x1[k] + b2 * x2[k];
                 }
+                let mut dc = 0.0f32;
                 for (c, sum) in sums.iter_mut().enumerate() {
                     let w = weight * albedo[c];
                     for k in 0..N {
                         sum[k] += w * blend[k];
                     }
+                    dc += w * blend[0];
                 }
+                back += back_side(record) * dc;
             } else {
+                let mut dc = 0.0f32;
                 for (c, sum) in sums.iter_mut().enumerate() {
                     let w = weight * albedo[c];
                     let span = c * N..(c + 1) * N;
@@ -227,35 +250,43 @@ impl Gather<'_> {
                     for k in 0..N {
                         sum[k] += w * (b0 * x0[k] + b1 * x1[k] + b2 * x2[k]);
                     }
+                    dc += w * (b0 * x0[0] + b1 * x1[0] + b2 * x2[0]);
                 }
+                back += back_side(record) * dc;
             }
         }
         for (c, sum) in sums.iter().enumerate() {
             result[c * N..(c + 1) * N].copy_from_slice(sum);
         }
+        back
     }
 
     /// Any order and channel count, summing in `result`. Same operations in
     /// the same order as [`Gather::fixed`], so the same bits.
     #[inline(always)]
-    fn general(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32]) {
+    fn general(&self, records: &[u64], count: usize, weight: f32, result: &mut [f32]) -> f32 {
+        let mut back = 0.0f32;
         for i in 0..count {
             self.prefetch(records, i);
             let record = records[i];
             if record != NO_HIT {
                 let (triangle, u, v) = decode_hit(record);
-                self.add_hit(triangle, u, v, weight, result);
+                back += back_side(record) * self.add_hit(triangle, u, v, weight, result);
             }
         }
+        back
     }
 
-    /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` for one hit at barycentrics (u, v) of `triangle`.
+    /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` for one hit at barycentrics (u, v) of
+    /// `triangle`; returns the DC it added, summed over channels (the fixed
+    /// kernels' operations, so the same bits).
     #[inline]
-    pub(crate) fn add_hit(&self, triangle: usize, u: f32, v: f32, weight: f32, result: &mut [f32]) {
+    pub(crate) fn add_hit(&self, triangle: usize, u: f32, v: f32, weight: f32, result: &mut [f32]) -> f32 {
         let n = self.coeffs;
         if let Some((lookup, rows)) = self.texels {
             if let Some((ids, texel_weights)) = lookup.bilinear(triangle, u, v) {
                 let stride = self.source_channels * n;
+                let mut dc = 0.0f32;
                 for (c, &reflect) in self.albedo[triangle].iter().enumerate().take(self.channels) {
                     let source = if self.source_channels == 1 { 0..n } else { c * n..(c + 1) * n };
                     for (&id, &share) in ids.iter().zip(&texel_weights) {
@@ -263,13 +294,15 @@ impl Gather<'_> {
                             let w = weight * reflect * share;
                             let row = &rows[id as usize * stride..][source.clone()];
                             result[c * n..(c + 1) * n].iter_mut().zip(row).for_each(|(d, x)| *d += w * x);
+                            dc += w * row[0];
                         }
                     }
                 }
-                return;
+                return dc;
             }
         }
         let ([s0, s1, s2], [b0, b1, b2], albedo) = self.corners(triangle, u, v);
+        let mut dc = 0.0f32;
         for (c, &reflect) in albedo.iter().enumerate().take(self.channels) {
             let w = weight * reflect;
             let source = if self.source_channels == 1 { 0..n } else { c * n..(c + 1) * n };
@@ -277,7 +310,9 @@ impl Gather<'_> {
             for (k, d) in result[c * n..(c + 1) * n].iter_mut().enumerate() {
                 *d += w * (b0 * x0[k] + b1 * x1[k] + b2 * x2[k]);
             }
+            dc += w * (b0 * x0[0] + b1 * x1[0] + b2 * x2[0]);
         }
+        dc
     }
 }
 
@@ -309,6 +344,8 @@ mod tests {
                 let (u, v) = ((next() % 1000) as f32 / 2000.0, (next() % 1000) as f32 / 2000.0);
                 if next() % 5 == 0 {
                     NO_HIT
+                } else if next() % 3 == 0 {
+                    encode_hit(next() % triangles as u32, u, v) | BACK_SIDE
                 } else {
                     encode_hit(next() % triangles as u32, u, v)
                 }
@@ -317,10 +354,12 @@ mod tests {
         Fixture { indices, albedo, rows, records }
     }
 
-    /// The plain formula, record by record, in f64 (the oracle).
-    fn expected(f: &Fixture, g: &Gather, count: usize, weight: f32) -> Vec<f64> {
+    /// The plain formula, record by record, in f64 (the oracle): the sums,
+    /// and the DC over channels of the records marked back side.
+    fn expected(f: &Fixture, g: &Gather, count: usize, weight: f32) -> (Vec<f64>, f64) {
         let n = g.coeffs;
         let mut out = vec![0.0f64; g.channels * n];
+        let mut back = 0.0f64;
         for &record in f.records.iter().take(count).filter(|&&r| r != NO_HIT) {
             let (t, u, v) = decode_hit(record);
             let b = [1.0 - u - v, u, v];
@@ -333,10 +372,13 @@ mod tests {
                         })
                         .sum();
                     out[c * n + k] += (weight * f.albedo[t][c]) as f64 * value;
+                    if k == 0 && record & BACK_SIDE != 0 {
+                        back += (weight * f.albedo[t][c]) as f64 * value;
+                    }
                 }
             }
         }
-        out
+        (out, back)
     }
 
     #[test]
@@ -351,21 +393,24 @@ mod tests {
                     let weight = 2.0 / 64.0;
                     // Fixed kernel (orders 1-5) or general, then the general one on its own.
                     let mut fast = vec![0.0f32; channels * coeffs];
-                    g.point(&f.records, count, weight, &mut fast);
+                    let fast_back = g.point(&f.records, count, weight, &mut fast);
                     let mut general = vec![0.0f32; channels * coeffs];
-                    g.general(&f.records, count, weight, &mut general);
+                    let general_back = g.general(&f.records, count, weight, &mut general);
                     assert_eq!(
                         fast.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
                         general.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
                     );
-                    let oracle = expected(&f, &g, count, weight);
+                    assert_eq!(fast_back.to_bits(), general_back.to_bits());
+                    let (oracle, oracle_back) = expected(&f, &g, count, weight);
                     for (got, want) in fast.iter().zip(&oracle) {
                         assert!(
                             (*got as f64 - want).abs() <= 1e-5 * (1.0 + want.abs()),
                             "{coeffs} coeffs, {channels}/{source_channels}: {got} vs {want}"
                         );
                     }
-                    outputs.push(fast.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+                    assert!(oracle_back.abs() > 1e-3, "the fixture marks some hits back side");
+                    assert!((fast_back as f64 - oracle_back).abs() <= 1e-5 * (1.0 + oracle_back.abs()), "{fast_back} vs {oracle_back}");
+                    outputs.push((fast.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), fast_back.to_bits()));
                 }
                 assert_eq!(outputs[0], outputs[1], "AVX2 and scalar kernels differ");
             }
@@ -379,6 +424,8 @@ mod tests {
         assert_eq!(rows.as_slice().len(), 100);
         let (t, u, v) = decode_hit(encode_hit(123_456, 0.25, 0.5));
         assert_eq!(t, 123_456);
+        assert_eq!(decode_hit(encode_hit(123_456, 0.25, 0.5) | BACK_SIDE).0, 123_456);
+        assert_eq!((back_side(encode_hit(7, 0.0, 0.0)), back_side(encode_hit(7, 0.0, 0.0) | BACK_SIDE)), (0.0, 1.0));
         assert!((u - 0.25).abs() < 1.0 / 65535.0 && (v - 0.5).abs() < 1.0 / 65535.0);
     }
 }

@@ -9,6 +9,7 @@ pub(crate) mod gather;
 pub(crate) mod noise;
 pub mod progress;
 pub(crate) mod receivers;
+pub(crate) mod side_share;
 pub mod sun;
 pub mod surfaces;
 pub mod texel_density;
@@ -302,6 +303,10 @@ pub struct TransferResult {
     /// `store_bounces` and the bake had back sides: what a partial re-bake
     /// keeps (`crate::refine`). Not stored in bundles.
     pub back: Vec<Vec<f32>>,
+    /// Window mode with interior sampling: per vertex, the share of its
+    /// light that reached it through the front of its face
+    /// (`bake::side_share`); empty otherwise (open mode: all of it).
+    pub front_share: Vec<f32>,
     pub stats: BakeStats,
 }
 

@@ -7,21 +7,26 @@
 
 /// Sums over a vertex's (or an item corner's) points of the moments of
 /// their DC `x` under their weights `w`: what the noise estimate needs
-/// besides Σ w and Σ w·x.
+/// besides Σ w and Σ w·x; and Σ w·b, b the part of a point's DC (mean over
+/// channels) that reached it through the back of its face, which the
+/// front-side share is made of (`bake::side_share`; 0 outside window mode).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Moments {
     pub(crate) w2: f64,
     pub(crate) w2x: f64,
     pub(crate) w2x2: f64,
+    pub(crate) wb: f64,
 }
 
 impl Moments {
+    /// Adds a point of weight `w`, DC `x` and back-side DC `back`.
     #[inline]
-    pub(crate) fn add(&mut self, w: f32, x: f32) {
+    pub(crate) fn add(&mut self, w: f32, x: f32, back: f32) {
         let (w2, x) = (f64::from(w) * f64::from(w), f64::from(x));
         self.w2 += w2;
         self.w2x += w2 * x;
         self.w2x2 += w2 * x * x;
+        self.wb += f64::from(w) * f64::from(back);
     }
 
     #[inline]
@@ -29,21 +34,22 @@ impl Moments {
         self.w2 += other.w2;
         self.w2x += other.w2x;
         self.w2x2 += other.w2x2;
+        self.wb += other.wb;
     }
 
-    /// `[Σ w², Σ w²x, Σ w²x²]`, as shard files store them.
-    pub(crate) fn to_array(self) -> [f64; 3] {
-        [self.w2, self.w2x, self.w2x2]
+    /// `[Σ w², Σ w²x, Σ w²x², Σ w·b]`, as shard files store them.
+    pub(crate) fn to_array(self) -> [f64; 4] {
+        [self.w2, self.w2x, self.w2x2, self.wb]
     }
 
-    pub(crate) fn from_array([w2, w2x, w2x2]: [f64; 3]) -> Moments {
-        Moments { w2, w2x, w2x2 }
+    pub(crate) fn from_array([w2, w2x, w2x2, wb]: [f64; 4]) -> Moments {
+        Moments { w2, w2x, w2x2, wb }
     }
 
     /// The moments had every weight been multiplied by `k`.
     pub(crate) fn scaled(&self, k: f64) -> Moments {
         let k2 = k * k;
-        Moments { w2: self.w2 * k2, w2x: self.w2x * k2, w2x2: self.w2x2 * k2 }
+        Moments { w2: self.w2 * k2, w2x: self.w2x * k2, w2x2: self.w2x2 * k2, wb: self.wb * k }
     }
 
     /// `Σ w² (x − mean)²`.

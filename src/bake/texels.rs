@@ -32,6 +32,9 @@ pub struct TexelTransfer {
     pub covered_area: Vec<f32>,
     /// Per texel, the standard error of its DC (channel 0), after `--denoise`.
     pub noise: Vec<f32>,
+    /// Window mode: per texel, the share of its light that reached it
+    /// through the front of its face (`bake::side_share`); else empty.
+    pub front_share: Vec<f32>,
     pub points: u64,
     pub points_rejected: u64,
     /// Rays evaluated and traced for the texels (the vertices' are in the vertex result).
@@ -77,6 +80,11 @@ pub(crate) fn bake_texels_for(
     let coverage = Coverage::of(&atlas);
     let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params.pattern, params.seed);
     let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, receivers, None, Some(&mut state))?;
+    let front_share = if params.mode == super::Mode::Window {
+        super::side_share::front_shares(&state.back_dc, &state.total, result.channels, crate::sh::coeff_count(params.order))
+    } else {
+        Vec::new()
+    };
     if params.denoise > 0.0 {
         state.denoise(result.channels * crate::sh::coeff_count(params.order), params.denoise);
     }
@@ -86,6 +94,7 @@ pub(crate) fn bake_texels_for(
         bounces: state.bounces,
         covered_area: state.weights,
         noise: state.noise,
+        front_share,
         points: state.points.len() as u64,
         points_rejected: state.rejected.iter().filter(|&&r| r).count() as u64,
         rays: state.rays,

@@ -82,6 +82,7 @@ pub fn make_bundle_stored(
             channels: storage.channels as u32,
             quantization: storage.quantization,
             layers,
+            front_share: result.front_share.iter().map(|&share| super::sections::quantize_share(share)).collect(),
         }),
         sun: None,
         texels: None,
@@ -121,6 +122,7 @@ pub fn add_texel_transfer(
             on_vertices.chosen.storage
         });
     let stored = |data: Vec<f32>| budget::reduce(&data, result.order, result.channels, &storage);
+    let front_share = texels.front_share.iter().map(|&share| super::sections::quantize_share(share)).collect();
     let mut layers = vec![TransferLayer { kind: LayerKind::Total, data: stored(texels.total) }];
     layers.extend(
         texels.bounces.into_iter().enumerate().map(|(b, data)| TransferLayer { kind: LayerKind::Bounce(b as u32), data: stored(data) }),
@@ -132,6 +134,7 @@ pub fn add_texel_transfer(
             channels: storage.channels as u32,
             quantization: storage.quantization,
             layers,
+            front_share,
         }),
         atlas: texels.atlas,
     });

@@ -48,6 +48,8 @@ pub(crate) const ATLS: [u8; 4] = *b"ATLS";
 pub(crate) const TXFR: [u8; 4] = *b"TXFR";
 pub(crate) const TSUN: [u8; 4] = *b"TSUN";
 pub(crate) const TSUF: [u8; 4] = *b"TSUF";
+pub(crate) const SIDE: [u8; 4] = *b"SIDE";
+pub(crate) const TSID: [u8; 4] = *b"TSID";
 /// Offset of the header CRC field; the CRC covers bytes `0..HEADER_CRC_AT` and the table.
 const HEADER_CRC_AT: usize = 28;
 

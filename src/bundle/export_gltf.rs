@@ -27,6 +27,8 @@ use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, GlbAdditions
 pub const GLTF_EXPORT_FORMAT: &str = "prtbake-gltf-1";
 /// Prefix of the transfer attributes (`_PRT_TRANSFER_0`, …).
 pub const TRANSFER_ATTRIBUTE_PREFIX: &str = "_PRT_TRANSFER_";
+/// Window mode: each vertex's front-side share (section SIDE), one float.
+pub const FRONT_SHARE_ATTRIBUTE: &str = "_PRT_FRONT_SHARE";
 /// Prefix of the sun-mask attributes (`_PRT_SUN_0`, …).
 pub const SUN_ATTRIBUTE_PREFIX: &str = "_PRT_SUN_";
 
@@ -110,10 +112,19 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
             "order": t.order, "channels": t.channels, "values_per_vertex": per_vertex, "layer": layer_name,
             "attributes": per_vertex.div_ceil(4), "prefix": TRANSFER_ATTRIBUTE_PREFIX,
         });
+        if !t.front_share.is_empty() {
+            let data = source.iter().map(|&v| t.front_share[v]).collect();
+            attributes
+                .push(CustomAttribute { semantic: FRONT_SHARE_ATTRIBUTE.into(), values: AttributeValues::F32 { components: 1, data } });
+            transfer_meta["front_share"] = json!({
+                "attribute": FRONT_SHARE_ATTRIBUTE,
+                "meaning": "share of the vertex's light that reached the front of its face (the side its winding faces); draw the back side with 1 - share",
+            });
+        }
     } else if layer.is_some() {
         return Err(invalid("the bundle has no transfer".into()));
     }
-    let transfer_count = attributes.len();
+    let transfer_count = attributes.iter().filter(|a| a.semantic.starts_with(TRANSFER_ATTRIBUTE_PREFIX)).count();
 
     let mut sun_meta = Value::Null;
     if let Some(sun) = &bundle.sun {
@@ -136,7 +147,7 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
             "steps": steps, "sky_order": sun.sky_order, "words_per_vertex": words, "attributes": words, "prefix": SUN_ATTRIBUTE_PREFIX,
         });
     }
-    let sun_count = attributes.len() - transfer_count;
+    let sun_count = attributes.iter().filter(|a| a.semantic.starts_with(SUN_ATTRIBUTE_PREFIX)).count();
     let mut images = Vec::new();
     let mut texel_meta = Value::Null;
     if let Some(t) = &bundle.texels {

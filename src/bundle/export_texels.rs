@@ -128,6 +128,14 @@ pub(super) fn texel_images(
             "layer": layer, "values_per_texel": per_texel, "textures": textures, "offset": offsets, "scale": scales,
             "decode": "value[4k + c] = offset[k][c] + scale[k][c] * q / 65535, q the 16-bit sample of channel c of texture k",
         });
+        // Window mode: each texel's front-side share (TSID), its stored byte.
+        if let Some(shares) = texels.transfer.as_ref().map(|t| &t.front_share).filter(|s| s.len() == texels.texels.len()) {
+            let data: Vec<u8> = rows.iter().map(|row| row.map_or(255, |r| (shares[r as usize] * 255.0).round() as u8)).collect();
+            let png = encode_png(width, height, png::ColorType::Grayscale, png::BitDepth::Eight, &data)?;
+            transfer_meta["front_share"] = json!({ "texture": images.len(),
+                "decode": "share = q / 255 of the light reached the front of the face (the side its winding faces); draw the back side with 1 - share" });
+            images.push(EmbeddedImage { name: "prtbake_front_share".into(), png, nearest: false });
+        }
     }
 
     let mut sun_meta = Value::Null;

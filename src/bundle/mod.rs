@@ -48,11 +48,12 @@ pub use export_gltf::{
     export_glb, transfer_attributes, GltfExportReport, GLTF_EXPORT_FORMAT, SUN_ATTRIBUTE_PREFIX, TRANSFER_ATTRIBUTE_PREFIX,
 };
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
+pub use sections::quantize_share;
 pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Transfer, TransferLayer};
 pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};
-use sections::{ReadRules, ATLS, MATL, MESH, META, SUND, SUNM, TSUF, TSUN, TXFR, XFER};
+use sections::{ReadRules, ATLS, MATL, MESH, META, SIDE, SUND, SUNM, TSID, TSUF, TSUN, TXFR, XFER};
 
 /// Encodes a bundle with the default options (zstd level 9 per section).
 ///
@@ -81,6 +82,9 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
     ];
     if let Some(t) = &b.transfer {
         parts.push((XFER, sections::encode_transfer(t, vertex_count)?));
+        if !t.front_share.is_empty() {
+            parts.push((SIDE, sections::encode_side_shares(&t.front_share, vertex_count, SIDE)?));
+        }
     }
     if let Some(sun) = &b.sun {
         parts.push((SUNM, sections::encode_sun_masks(sun, vertex_count)?));
@@ -90,6 +94,9 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
         parts.push((ATLS, sections::encode_atlas(t, &b.mesh)?));
         if let Some(transfer) = &t.transfer {
             parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), transfer, TXFR)?));
+            if !transfer.front_share.is_empty() {
+                parts.push((TSID, sections::encode_side_shares(&transfer.front_share, t.texels.len(), TSID)?));
+            }
         }
     }
     if let Some(sun) = b.sun.as_ref().filter(|s| !s.texel_masks.is_empty()) {
@@ -132,9 +139,16 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
     mesh.validate().map_err(|e| BundleError::malformed(MESH, e))?;
     let vertex_count = mesh.vertex_count();
 
-    let transfer = match section(XFER)? {
-        Some(raw) => Some(sections::decode_transfer(&raw, vertex_count, rules)?),
-        None => None,
+    let transfer = match (section(XFER)?, section(SIDE)?) {
+        (Some(raw), side) => {
+            let mut transfer = sections::decode_transfer(&raw, vertex_count, rules)?;
+            if let Some(side) = side {
+                transfer.front_share = sections::decode_side_shares(&side, vertex_count, SIDE)?;
+            }
+            Some(transfer)
+        }
+        (None, Some(_)) => return Err(BundleError::MissingSection(Tag(XFER))),
+        (None, None) => None,
     };
     let sun = match (section(SUNM)?, section(SUND)?) {
         (None, None) => None,
@@ -150,6 +164,10 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
         }
     };
     let (atlas_raw, texel_transfer_raw, texel_sun_raw) = (section(ATLS)?, section(TXFR)?, section(TSUN)?);
+    let texel_side_raw = section(TSID)?;
+    if texel_side_raw.is_some() && texel_transfer_raw.is_none() {
+        return Err(BundleError::MissingSection(Tag(TXFR)));
+    }
     let texel_fractions_raw = section(TSUF)?;
     if texel_fractions_raw.is_some() && texel_sun_raw.is_none() {
         return Err(BundleError::MissingSection(Tag(TSUN)));
@@ -160,7 +178,13 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
         Some(atlas_raw) => {
             let (atlas, texels) = sections::decode_atlas(&atlas_raw, &mesh, rules)?;
             let transfer = match texel_transfer_raw {
-                Some(raw) => Some(sections::decode_transfer_of(&raw, texels.len(), rules, TXFR)?),
+                Some(raw) => {
+                    let mut transfer = sections::decode_transfer_of(&raw, texels.len(), rules, TXFR)?;
+                    if let Some(side) = texel_side_raw {
+                        transfer.front_share = sections::decode_side_shares(&side, texels.len(), TSID)?;
+                    }
+                    Some(transfer)
+                }
                 None if texel_sun_raw.is_none() => return Err(BundleError::MissingSection(Tag(TXFR))),
                 None => None,
             };
@@ -244,7 +268,7 @@ pub fn encode_with_sun_on(
         match info.tag {
             META => parts.push((META, sections::encode_meta(meta)?)),
             SUNM | SUND | TSUN | TSUF => {}
-            ATLS | TXFR => texel_sections.push((info.tag, container.payload(info)?.into_owned())),
+            ATLS | TXFR | TSID => texel_sections.push((info.tag, container.payload(info)?.into_owned())),
             MESH if legacy_values => parts.push((MESH, sections::encode_mesh(&decoded.mesh)?)),
             MATL if legacy_values => parts.push((MATL, sections::encode_materials(&decoded.mesh.materials, &decoded.mesh.groups)?)),
             tag => parts.push((tag, container.payload(info)?.into_owned())),

@@ -14,7 +14,7 @@ use super::types::{LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Tra
 use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
-pub(crate) use super::container::{ATLS, MATL, MESH, META, SUND, SUNM, TSUF, TSUN, TXFR, XFER};
+pub(crate) use super::container::{ATLS, MATL, MESH, META, SIDE, SUND, SUNM, TSID, TSUF, TSUN, TXFR, XFER};
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;
@@ -328,7 +328,7 @@ pub(crate) fn decode_transfer_of(raw: &[u8], vertex_count: usize, rules: ReadRul
         layers.push(TransferLayer { kind, data });
     }
     cur.finish()?;
-    Ok(Transfer { order, channels, quantization, layers })
+    Ok(Transfer { order, channels, quantization, layers, front_share: Vec::new() })
 }
 
 // ---------------------------------------------------------------- SUNM
@@ -378,6 +378,55 @@ pub(crate) fn decode_sun_masks(raw: &[u8], vertex_count: usize, rules: ReadRules
     }
     cur.finish()?;
     Ok((steps, words_per_vertex, masks))
+}
+
+// ---------------------------------------------------------------- SIDE, TSID
+
+/// Levels of a stored front-side share (`v / SHARE_LEVELS`).
+pub(crate) const SHARE_LEVELS: f32 = 255.0;
+
+/// A share as stored: the nearest of the 256 levels.
+pub fn quantize_share(share: f32) -> f32 {
+    share_code(share) as f32 / SHARE_LEVELS
+}
+
+fn share_code(share: f32) -> u8 {
+    (share.clamp(0.0, 1.0) * SHARE_LEVELS).round() as u8
+}
+
+/// SIDE (per vertex) and TSID (per covered texel): u32 receiver count, u32
+/// bits per value (8), then one byte per receiver, `v / 255` the share of
+/// its light that reached it through the front of its face; zero pad to 4.
+pub(crate) fn encode_side_shares(shares: &[f32], count: usize, tag: [u8; 4]) -> Result<Vec<u8>, BundleError> {
+    if shares.len() != count {
+        return Err(invalid(format!("{} side shares for {count} receivers ({})", shares.len(), String::from_utf8_lossy(&tag))));
+    }
+    if let Some(i) = shares.iter().position(|s| !(0.0..=1.0).contains(s)) {
+        return Err(invalid(format!("side share {} of receiver {i} is not in [0, 1] ({})", shares[i], String::from_utf8_lossy(&tag))));
+    }
+    let mut out = Vec::with_capacity(8 + round_up4(count as u64) as usize);
+    put_u32(&mut out, count_u32(count, "side share count")?);
+    put_u32(&mut out, 8);
+    out.extend(shares.iter().map(|&s| share_code(s)));
+    out.resize(round_up4(out.len() as u64) as usize, 0);
+    Ok(out)
+}
+
+pub(crate) fn decode_side_shares(raw: &[u8], count: usize, tag: [u8; 4]) -> Result<Vec<f32>, BundleError> {
+    let mut cur = Cursor::new(raw, tag);
+    let declared = cur.u32("receiver count")?;
+    let bits = cur.u32("bits per value")?;
+    if bits != 8 {
+        return Err(cur.error(format!("{bits} bits per value, expected 8")));
+    }
+    if declared as usize != count {
+        return Err(cur.error(format!("shares of {declared} receivers, the bundle has {count}")));
+    }
+    check_exact_len(&cur, Some(round_up4(declared as u64)), || format!("{declared} one-byte shares"))?;
+    let shares = cur.take(declared as u64, "shares")?.iter().map(|&v| v as f32 / SHARE_LEVELS).collect();
+    cur.padding(4, "padding")?;
+    cur.finish()?;
+    Ok(shares)
 }
 
 // ---------------------------------------------------------------- TSUN, TSUF

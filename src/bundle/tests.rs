@@ -53,7 +53,13 @@ pub(super) fn random_transfer(rng: &mut Rng, vertices: usize, quantization: Quan
     let (order, channels) = (3u32, 3u32);
     let n = vertices * (channels * order * order) as usize;
     let layer = |rng: &mut Rng, kind| TransferLayer { kind, data: (0..n).map(|_| rng.signed() * 0.9).collect() };
-    Transfer { order, channels, quantization, layers: vec![layer(rng, LayerKind::Bounce(0)), layer(rng, LayerKind::Total)] }
+    Transfer {
+        order,
+        channels,
+        quantization,
+        layers: vec![layer(rng, LayerKind::Bounce(0)), layer(rng, LayerKind::Total)],
+        front_share: Vec::new(),
+    }
 }
 
 pub(super) fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> SunSeries {
@@ -130,6 +136,7 @@ pub(super) fn small_regular_bundle() -> Bundle {
         channels: 1,
         quantization: Quantization::F16,
         layers: vec![TransferLayer { kind: LayerKind::Total, data: (0..32).map(|i| [0.5, 0.25, 0.0, -0.25][i % 4]).collect() }],
+        front_share: Vec::new(),
     };
     let step = |k: usize| SunStep {
         unix_time_utc: 1_782_000_000.0 + 3600.0 * k as f64,
@@ -1034,12 +1041,18 @@ fn texel_bundle() -> Bundle {
         channels: 1,
         quantization: Quantization::F32,
         layers: vec![TransferLayer { kind: LayerKind::Total, data: vertex_values }],
+        front_share: Vec::new(),
     });
     let atlas = crate::atlas::Atlas::unwrap(&bundle.mesh, 0.05).unwrap();
     let texels = crate::atlas::coverage::Coverage::of(&atlas).texels;
     let data = (0..texels.len() * coeffs).map(|i| (i as f32 * 0.37).cos()).collect();
-    let transfer =
-        Transfer { order: 2, channels: 1, quantization: Quantization::F32, layers: vec![TransferLayer { kind: LayerKind::Total, data }] };
+    let transfer = Transfer {
+        order: 2,
+        channels: 1,
+        quantization: Quantization::F32,
+        layers: vec![TransferLayer { kind: LayerKind::Total, data }],
+        front_share: Vec::new(),
+    };
     bundle.texels = Some(TexelLayers { atlas, texels, transfer: Some(transfer) });
     bundle
 }

@@ -63,6 +63,10 @@ pub struct Transfer {
     pub quantization: Quantization,
     /// Distinct kinds, in the order written.
     pub layers: Vec<TransferLayer>,
+    /// Window mode: per receiver, the share of its light that reached it
+    /// through the front of its face, in steps of 1/255 (sections SIDE and
+    /// TSID); empty: both sides show all of it.
+    pub front_share: Vec<f32>,
 }
 
 impl Transfer {
@@ -74,6 +78,7 @@ impl Transfer {
             channels: 1,
             quantization: Quantization::F32,
             layers: vec![TransferLayer { kind: LayerKind::Total, data: vec![0.0; vertex_count] }],
+            front_share: Vec::new(),
         }
     }
 

@@ -256,6 +256,11 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
                 } else {
                     bake::cull::compact_vertex_data(&result.noise, 1, &map, kept.vertex_count())
                 },
+                front_share: if result.front_share.is_empty() {
+                    Vec::new()
+                } else {
+                    bake::cull::compact_vertex_data(&result.front_share, 1, &map, kept.vertex_count())
+                },
                 ..result
             };
             (std::borrow::Cow::Owned(kept), compacted)

@@ -49,6 +49,7 @@ pub fn run(
             channels: result.channels as u32,
             quantization: Quantization::F32,
             layers: vec![TransferLayer { kind: LayerKind::Total, data: result.total.clone() }],
+            front_share: Vec::new(),
         }),
         sun: None,
         texels: None,
@@ -59,7 +60,7 @@ pub fn run(
     let probes = PanelLayout::new(mesh, &triangles, PROBES.0, PROBES.1, &report.output)?;
     let surfaces = Surfaces::resolve(mesh, &[])?;
     let scene = Scene::build(mesh, BuildQuality::Sah)?;
-    let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: Vec::new(), two_sided: true, texel_light: None };
+    let interior = Interior::unlit(&scene, mesh, &surfaces);
     let glare = glare_heading(&interior, &probes, &brdf, DRIVER_EYE)
         .ok_or_else(|| anyhow::anyhow!("demo: no morning sun reaches the panel through a window at any heading"))?;
     let Glare { minutes, sun_world, elevation_deg: elevation, yaw, score } = glare;

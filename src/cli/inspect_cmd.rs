@@ -24,6 +24,7 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         json!({
             "order": t.order, "channels": t.channels, "quantization": t.quantization.name(),
             "layers": t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
+            "sides": side_summary(&t.front_share),
         })
     });
     let covered = b.texels.as_ref().map_or(0, |t| t.texels.len());
@@ -52,6 +53,7 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             "transfer": t.transfer.as_ref().map(|x| json!({
                 "order": x.order, "channels": x.channels, "quantization": x.quantization.name(),
                 "layers": x.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>(),
+                "sides": side_summary(&x.front_share),
             })),
             "sun_bits": b.sun.as_ref().is_some_and(|s| !s.texel_masks.is_empty()),
             "sun_fractions": b.sun.as_ref().is_some_and(|s| !s.texel_fractions.is_empty()),
@@ -75,6 +77,10 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             t.quantization.name(),
             t.layers.iter().map(|l| l.kind.to_string()).collect::<Vec<_>>().join(", ")
         );
+        print_sides("vertices", &t.front_share);
+    }
+    if let Some(x) = b.texels.as_ref().and_then(|t| t.transfer.as_ref()) {
+        print_sides("texels", &x.front_share);
     }
     if let Some(t) = &b.texels {
         let a = &t.atlas;
@@ -234,4 +240,28 @@ fn time_lapse(sun: &bundle::SunSeries, vertex_count: usize, covered: usize, meta
             sun_rgb: s.sun_rgb,
         })
         .collect()
+}
+
+/// How a window-mode bundle's receivers split their light between the two
+/// sides of their faces (SIDE, TSID): the fractions lit mostly from behind
+/// and lit on both sides (each side at least a tenth); `null` without shares.
+fn side_summary(shares: &[f32]) -> serde_json::Value {
+    if shares.is_empty() {
+        return serde_json::Value::Null;
+    }
+    let n = shares.len() as f64;
+    let back = shares.iter().filter(|&&s| s < 0.5).count() as f64 / n;
+    let both = shares.iter().filter(|&&s| (0.1..=0.9).contains(&s)).count() as f64 / n;
+    json!({ "receivers": shares.len(), "mostly_back": back, "both_sides": both })
+}
+
+fn print_sides(what: &str, shares: &[f32]) {
+    if let Some(s) = side_summary(shares).as_object() {
+        let pct = |k: &str| 100.0 * s[k].as_f64().unwrap_or(0.0);
+        println!(
+            "  sides ({what}): light per side of the face kept; {:.1}% lit mostly from behind, {:.1}% lit on both sides (the viewer draws each side's share)",
+            pct("mostly_back"),
+            pct("both_sides")
+        );
+    }
 }

@@ -144,7 +144,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             let texels = match (texels, b.texels.take(), &key.texels) {
                 (None, None, None) => None,
                 (Some(merged), Some(frame_texels), Some(texel_key)) => {
-                    Some(shards::merged_texel_transfer(merged, frame_texels, texel_key).map_err(frame_error)?)
+                    Some(shards::merged_texel_transfer(merged, frame_texels, texel_key, &key.params).map_err(frame_error)?)
                 }
                 _ => return Err(frame_error("its bundle frame's atlas does not go with the parts' texel mode".into()).into()),
             };

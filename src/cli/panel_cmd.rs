@@ -143,7 +143,9 @@ pub fn gather_panel(
         Some(interior::texel_light(&t.atlas, &t.texels, &transfer.total(), order, transfer.channels as usize, &env.sh_lighting(order)))
     });
     let interior_light = if texel_light.is_some() { "texels" } else { "vertices" };
-    let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: light, two_sided, texel_light };
+    let side_shares =
+        crate::panel::SideShares::of(transfer, bundle.texels.as_ref().and_then(|t| Some((&t.atlas, &t.texels[..], t.transfer.as_ref()?))));
+    let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: light, two_sided, texel_light, side_shares };
     let mut gather = PanelGather::new(&interior, env, brdf, &layout, eye, GatherOptions { seed, ..GatherOptions::default() });
     if !quiet {
         eprintln!(

@@ -106,6 +106,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
                     channels: output.part.channels,
                     quantization: bundle::Quantization::F32,
                     layers,
+                    front_share: Vec::new(),
                 };
                 Some(bundle::TexelLayers { atlas, texels: plan.texels().to_vec(), transfer: Some(transfer) })
             }

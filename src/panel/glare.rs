@@ -105,7 +105,7 @@ mod tests {
         let probes = PanelLayout::new(mesh, &triangles, PROBES.0, PROBES.1, "cabin".as_ref()).unwrap();
         let surfaces = Surfaces::resolve(mesh, &[]).unwrap();
         let scene = Scene::build(mesh, BuildQuality::Sah).unwrap();
-        let interior = Interior { scene: &scene, mesh, surfaces: &surfaces, vertex_light: Vec::new(), two_sided: true, texel_light: None };
+        let interior = Interior::unlit(&scene, mesh, &surfaces);
         glare_heading(&interior, &probes, &PanelBrdf::default(), DRIVER_EYE).map(|glare| (glare, probes))
     }
 

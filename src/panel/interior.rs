@@ -42,13 +42,53 @@ pub struct Interior<'a> {
     pub surfaces: &'a Surfaces,
     /// `E(v) = Σ_i L_i t_i(v)` per vertex, RGB.
     pub vertex_light: Vec<[f32; 3]>,
-    /// Both sides of a surface carry its PRT light (a window-mode bake, whose
-    /// transfer is side-blind); otherwise, as the open-mode bake gathers, a
-    /// surface's back is black.
+    /// Both sides of a surface carry PRT light (a window-mode bake: each
+    /// its share, [`Interior::side_shares`]); otherwise, as the open-mode
+    /// bake gathers, a surface's back is black.
     pub two_sided: bool,
     /// A texel bundle: its texels' light (`Σ_i L_i t_i`), read at a hit as
     /// the viewer reads it; the vertices' serves triangles in no chart.
     pub texel_light: Option<crate::atlas::lightmap::LightmapLight>,
+    /// A window-mode bundle's front-side shares: the side a ray meets shows
+    /// its share of the PRT light, as the viewer draws it.
+    pub side_shares: SideShares,
+}
+
+/// Front-side shares of a bundle's receivers (`bake::side_share`; sections
+/// SIDE and TSID). Empty: both sides show all of a receiver's light.
+#[derive(Clone, Debug, Default)]
+pub struct SideShares {
+    /// Per vertex.
+    pub vertices: Vec<f32>,
+    /// Per texel, read where the texels' light is read (the share in every channel).
+    pub texels: Option<crate::atlas::lightmap::LightmapLight>,
+}
+
+impl SideShares {
+    /// The shares of a bundle's vertex transfer and, in texel mode, of its texels'.
+    pub fn of(vertices: &crate::bundle::Transfer, texels: Option<(&crate::atlas::Atlas, &[u32], &crate::bundle::Transfer)>) -> SideShares {
+        let texels = texels.filter(|(_, ids, t)| t.front_share.len() == ids.len()).map(|(atlas, ids, transfer)| {
+            let stride = (transfer.order * transfer.order * transfer.channels).max(1) as usize;
+            let holds: Vec<bool> = transfer.total().chunks_exact(stride).map(|row| row.iter().any(|&x| x != 0.0)).collect();
+            let shares: Vec<[f32; 3]> = transfer.front_share.iter().map(|&s| [s; 3]).collect();
+            crate::atlas::lightmap::LightmapLight::new(atlas, ids, &shares, &holds)
+        });
+        SideShares { vertices: vertices.front_share.clone(), texels }
+    }
+
+    /// The share of the light of triangle `t` at barycentrics (u, v) on the
+    /// side a ray meets (`back_face`: the back of the triangle's face).
+    fn seen(&self, mesh: &Mesh, t: usize, u: f32, v: f32, back_face: bool) -> f32 {
+        let front = match self.texels.as_ref().and_then(|l| l.at(t, u, v)) {
+            Some(share) => Some(share[0]),
+            None if self.vertices.is_empty() => None,
+            None => {
+                let [a, b, c] = mesh.triangle(t).map(|i| self.vertices[i as usize]);
+                Some((1.0 - u - v) * a + u * b + v * c)
+            }
+        };
+        crate::view::reference::seen_side_share(front, !back_face)
+    }
 }
 
 /// `Σ_i L_i t_i(v)` for every vertex of a `[vertex][channel][coeff]` transfer
@@ -82,6 +122,14 @@ pub fn texel_light(
     let irradiance = vertex_light(rows, order, channels, lighting);
     let holds: Vec<bool> = rows.chunks_exact((order * order * channels).max(1)).map(|row| row.iter().any(|&x| x != 0.0)).collect();
     crate::atlas::lightmap::LightmapLight::new(atlas, texels, &irradiance, &holds)
+}
+
+impl<'a> Interior<'a> {
+    /// An interior for visibility alone (glass, glare searches): no PRT
+    /// light, both sides of a surface alike.
+    pub fn unlit(scene: &'a Scene, mesh: &'a Mesh, surfaces: &'a Surfaces) -> Interior<'a> {
+        Interior { scene, mesh, surfaces, vertex_light: Vec::new(), two_sided: true, texel_light: None, side_shares: SideShares::default() }
+    }
 }
 
 impl Interior<'_> {
@@ -126,7 +174,8 @@ impl Interior<'_> {
                     return Arrival { radiance: [0.0; 3], sky_transmittance: 0.0, through_window: layer > 0, queries };
                 }
                 None => {
-                    let (mut radiance, shadow_queries) = self.surface_radiance(env, hit.triangle, hit.u, hit.v, point, normal, dir);
+                    let share = self.side_shares.seen(self.mesh, hit.triangle as usize, hit.u, hit.v, hit.back_face);
+                    let (mut radiance, shadow_queries) = self.surface_radiance(env, hit.triangle, hit.u, hit.v, point, normal, dir, share);
                     radiance.iter_mut().for_each(|c| *c *= transmittance);
                     return Arrival { radiance, sky_transmittance: 0.0, through_window: layer > 0, queries: queries + shadow_queries };
                 }
@@ -136,9 +185,20 @@ impl Interior<'_> {
     }
 
     /// Radiance leaving opaque triangle `t` at barycentrics (u, v) toward
-    /// the ray's origin, and the queries its shadow rays toward the sun took.
+    /// the ray's origin, and the queries its shadow rays toward the sun took;
+    /// `share` of the PRT light is the seen side's.
     #[allow(clippy::too_many_arguments)] // one hit's fields
-    fn surface_radiance(&self, env: &Environment, t: u32, u: f32, v: f32, point: Vec3, face_normal: Vec3, dir: Vec3) -> ([f32; 3], u32) {
+    fn surface_radiance(
+        &self,
+        env: &Environment,
+        t: u32,
+        u: f32,
+        v: f32,
+        point: Vec3,
+        face_normal: Vec3,
+        dir: Vec3,
+        share: f32,
+    ) -> ([f32; 3], u32) {
         let albedo = self.surfaces.albedo[t as usize];
         let mut light = match self.texel_light.as_ref().and_then(|l| l.at(t as usize, u, v)) {
             Some(light) => light,
@@ -148,6 +208,7 @@ impl Interior<'_> {
                 [0, 1, 2].map(|k| w0 * a[k] + u * b[k] + v * c[k])
             }
         };
+        light.iter_mut().for_each(|l| *l *= share);
         let mut queries = 0;
         if let Some(sun) = &env.sun {
             // The side the ray sees.
@@ -238,6 +299,7 @@ mod tests {
             vertex_light: vertex_light(&vertices.total, 2, vertices.channels, &lighting),
             two_sided: false,
             texel_light,
+            side_shares: SideShares::default(),
         };
         let read = texel_light(&texels.atlas, &texels.texels, &texels.total, 2, vertices.channels, &lighting);
         let (from_texels, from_vertices) = (interior(Some(read)), interior(None));

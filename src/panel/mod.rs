@@ -25,7 +25,7 @@ mod tests;
 
 pub use environment::{Environment, Light, Sun, SUN_ANGULAR_RADIUS_DEG};
 pub use gather::{GatherOptions, PanelGather, TexelResult};
-pub use interior::{Arrival, Interior, MAX_GLASS_LAYERS};
+pub use interior::{Arrival, Interior, SideShares, MAX_GLASS_LAYERS};
 pub use layout::{select_panel, Mapping, PanelLayout};
 pub use readability::{contrast_ratio, luminance, Display, Readability};
 

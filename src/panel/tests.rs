@@ -93,7 +93,15 @@ impl Setup {
         Setup { mesh, scene, surfaces }
     }
     fn interior(&self, vertex_light: Vec<[f32; 3]>) -> Interior<'_> {
-        Interior { scene: &self.scene, mesh: &self.mesh, surfaces: &self.surfaces, vertex_light, two_sided: false, texel_light: None }
+        Interior {
+            scene: &self.scene,
+            mesh: &self.mesh,
+            surfaces: &self.surfaces,
+            vertex_light,
+            two_sided: false,
+            texel_light: None,
+            side_shares: Default::default(),
+        }
     }
     fn layout(&self, w: u32, h: u32) -> PanelLayout {
         let triangles = select_panel(&self.mesh, Some("panel"), "test".as_ref()).unwrap();

@@ -250,11 +250,14 @@ pub fn refine_transfer(
         let kept_back: Vec<Vec<f32>> = result.back.iter().map(|l| extend_rows(l, vertices_before, mesh.vertex_count())).collect();
         let kept = bake::transfer::Kept { layers: &kept_layers, back: &kept_back, vertices: &rebake.kept_vertices };
         let kept_noise = extend_rows(&result.noise, vertices_before, mesh.vertex_count());
+        let kept_share = extend_rows(&result.front_share, vertices_before, mesh.vertex_count());
         result = bake::transfer::bake_transfer_update(&mesh, &scene, &surfaces, &layered, &rebake.receivers, &kept)?;
-        // A kept vertex keeps its value, so it keeps its noise too.
-        if result.noise.len() == kept_noise.len() {
-            for (v, noise) in result.noise.iter_mut().enumerate().filter(|(v, _)| rebake.kept_vertices[*v]) {
-                *noise = kept_noise[v];
+        // A kept vertex keeps its value, so it keeps its noise and side share too.
+        for (values, kept_values) in [(&mut result.noise, &kept_noise), (&mut result.front_share, &kept_share)] {
+            if values.len() == kept_values.len() {
+                for (v, value) in values.iter_mut().enumerate().filter(|(v, _)| rebake.kept_vertices[*v]) {
+                    *value = kept_values[v];
+                }
             }
         }
         baked = rebake.kept_vertices.iter().filter(|&&k| !k).count();

@@ -79,19 +79,19 @@ pub struct VertexRows {
     pub rows: Vec<f32>,
     /// One per vertex in round 0, else empty.
     pub weights: Vec<f32>,
-    /// One `[Σ w², Σ w²x, Σ w²x²]` per vertex in round 0 of a bake that
+    /// One `[Σ w², Σ w²x, Σ w²x², Σ w·b]` per vertex in a bake that
     /// tracks noise (`bake::noise::Moments`), else empty.
-    pub moments: Vec<[f64; 3]>,
+    pub moments: Vec<[f64; 4]>,
 }
 
-fn write_moments<W: Write>(w: &mut Writer<W>, moments: &[[f64; 3]]) -> std::io::Result<()> {
+fn write_moments<W: Write>(w: &mut Writer<W>, moments: &[[f64; 4]]) -> std::io::Result<()> {
     let bits: Vec<u64> = moments.iter().flat_map(|m| m.map(f64::to_bits)).collect();
     w.u64s(&bits)
 }
 
-fn read_moments(r: &mut Reader, count: u64, what: &str) -> Result<Vec<[f64; 3]>, String> {
-    let bits = r.u64s(count.saturating_mul(3), what)?;
-    let moments: Vec<[f64; 3]> = bits.chunks_exact(3).map(|m| [0, 1, 2].map(|k| f64::from_bits(m[k]))).collect();
+fn read_moments(r: &mut Reader, count: u64, what: &str) -> Result<Vec<[f64; 4]>, String> {
+    let bits = r.u64s(count.saturating_mul(4), what)?;
+    let moments: Vec<[f64; 4]> = bits.chunks_exact(4).map(|m| [0, 1, 2, 3].map(|k| f64::from_bits(m[k]))).collect();
     if moments.iter().any(|m| !m.iter().all(|x| x.is_finite()) || m[0] < 0.0 || m[2] < 0.0) {
         return Err(format!("{what}: a moment is negative or not finite"));
     }
@@ -220,7 +220,7 @@ pub struct TexelRoundPart {
     /// Per texel in round 0, the footprint its kept points stand for; else empty.
     pub weights: Vec<f32>,
     /// Per texel, the moments of its points' DC (`bake::noise::Moments`).
-    pub moments: Vec<[f64; 3]>,
+    pub moments: Vec<[f64; 4]>,
 }
 
 impl TexelRoundPart {
@@ -471,8 +471,10 @@ impl HitFile {
         // The gather indexes the hit triangle's corners: a record past the mesh would read out of bounds.
         let triangles = identity.plan_triangles;
         let all = records.iter().chain(texels.iter().flat_map(|t| &t.records));
-        if let Some((i, h)) = all.enumerate().find(|&(_, &h)| h != crate::bake::gather::NO_HIT && h >> 32 >= triangles) {
-            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", h >> 32));
+        if let Some((i, h)) =
+            all.enumerate().find(|&(_, &h)| h != crate::bake::gather::NO_HIT && (h & !crate::bake::gather::BACK_SIDE) >> 32 >= triangles)
+        {
+            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", (h & !crate::bake::gather::BACK_SIDE) >> 32));
         }
         Ok(HitFile { identity, shard, items, points, rays, rejected, records, texels })
     }
@@ -500,6 +502,9 @@ pub struct LayerFile {
     /// Per vertex: the DC standard error of the rounds so far in quadrature
     /// (`TransferResult::noise`), from their moments; empty when not tracked.
     pub noise: Vec<f32>,
+    /// Per vertex: the DC of the rounds so far that came through the back
+    /// of its face (`bake::side_share`), from their moments; empty as `noise`.
+    pub back_dc: Vec<f32>,
     /// Per vertex `[source channel][coeff]`: this bounce normalised, what the next round gathers.
     pub source: Vec<f32>,
     /// Per vertex `[channel][coeff]`: bounces 0..=round summed in order.
@@ -521,6 +526,7 @@ pub struct TexelLayer {
     /// Per texel: the footprint its kept points stand for (from round 0).
     pub weights: Vec<f32>,
     pub noise: Vec<f32>,
+    pub back_dc: Vec<f32>,
     pub source: Vec<f32>,
     pub total: Vec<f32>,
     pub layers: Vec<Vec<f32>>,
@@ -541,6 +547,7 @@ impl LayerFile {
         w.f32s(&self.weights)?;
         w.u32(!self.noise.is_empty() as u32)?;
         w.f32s(&self.noise)?;
+        w.f32s(&self.back_dc)?;
         w.f32s(&self.source)?;
         w.f32s(&self.total)?;
         w.u32(self.layers.len() as u32)?;
@@ -555,7 +562,7 @@ impl LayerFile {
                 for v in [t.points, t.points_rejected, t.rays, t.rays_traced] {
                     w.u64(v)?;
                 }
-                for rows in [&t.weights, &t.noise, &t.source, &t.total] {
+                for rows in [&t.weights, &t.noise, &t.back_dc, &t.source, &t.total] {
                     w.f32s(rows)?;
                 }
                 for layer in &t.layers {
@@ -585,13 +592,16 @@ impl LayerFile {
         let rays_per_bounce = r.u64s(bounces as u64, "rays per bounce")?;
         let v = identity.plan_vertices;
         let weights = r.f32s(v, "weights")?;
-        let noise = match r.u32("noise flag")? {
-            0 => Vec::new(),
-            1 => r.f32s(v, "noise")?,
+        let (noise, back_dc) = match r.u32("noise flag")? {
+            0 => (Vec::new(), Vec::new()),
+            1 => (r.f32s(v, "noise")?, r.f32s(v, "back-side DC")?),
             f => return Err(format!("noise flag {f} is not 0 or 1")),
         };
         if noise.iter().any(|n| !(n.is_finite() && *n >= 0.0)) {
             return Err("a vertex's noise is negative or not finite".into());
+        }
+        if back_dc.iter().any(|n| !n.is_finite()) {
+            return Err("a vertex's back-side DC is not finite".into());
         }
         let source = r.f32s(v.saturating_mul((source_channels * coeffs) as u64), "source rows")?;
         let layer_len = v.saturating_mul((channels * coeffs) as u64);
@@ -613,11 +623,15 @@ impl LayerFile {
                 if noise.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
                     return Err("a texel's noise is negative or not finite".into());
                 }
+                let back_dc = r.f32s(n, "texel back-side DC")?;
+                if back_dc.iter().any(|x| !x.is_finite()) {
+                    return Err("a texel's back-side DC is not finite".into());
+                }
                 let source = r.f32s(n.saturating_mul((source_channels * coeffs) as u64), "texel source rows")?;
                 let layer_len = n.saturating_mul((channels * coeffs) as u64);
                 let total = r.f32s(layer_len, "texel total")?;
                 let layers = (0..stored).map(|_| r.f32s(layer_len, "stored texel layer")).collect::<Result<_, _>>()?;
-                Some(TexelLayer { texel_count, points, points_rejected, rays, rays_traced, weights, noise, source, total, layers })
+                Some(TexelLayer { texel_count, points, points_rejected, rays, rays_traced, weights, noise, back_dc, source, total, layers })
             }
         };
         r.finish()?;
@@ -634,6 +648,7 @@ impl LayerFile {
             rays_per_bounce,
             weights,
             noise,
+            back_dc,
             source,
             total,
             layers,
@@ -655,7 +670,7 @@ pub struct PilotFile {
     /// Per vertex: summed sample weight, Σ w·DC and the DC moments.
     pub weights: Vec<f32>,
     pub dc_sums: Vec<f32>,
-    pub moments: Vec<[f64; 3]>,
+    pub moments: Vec<[f64; 4]>,
 }
 
 impl PilotFile {
@@ -848,13 +863,13 @@ mod tests {
                 vertices: vec![3],
                 rows: vec![0.5, -0.25, 0.0, 1.0],
                 weights: vec![0.75],
-                moments: vec![[0.5, 0.25, 0.125]],
+                moments: vec![[0.5, 0.25, 0.125, 0.0625]],
             },
             late: VertexRows {
                 vertices: vec![0, 2],
                 rows: vec![1.0; 8],
                 weights: vec![0.5, 0.25],
-                moments: vec![[0.25, 0.0, 0.0], [0.0625, -0.5, 4.0]],
+                moments: vec![[0.25, 0.0, 0.0, 0.125], [0.0625, -0.5, 4.0, 0.0]],
             },
             texels: Some(TexelRoundPart {
                 texels: 3..5,
@@ -866,7 +881,7 @@ mod tests {
                 rejected: 1,
                 sums: vec![0.125; 8],
                 weights: vec![0.5, 0.75],
-                moments: vec![[0.25, 0.5, 1.0], [0.0, 0.0, 0.0]],
+                moments: vec![[0.25, 0.5, 1.0, -0.25], [0.0, 0.0, 0.0, 0.0]],
             }),
             frame: b"frame".to_vec(),
         }
@@ -883,7 +898,7 @@ mod tests {
             points: 6..9,
             rays: 2,
             rejected: vec![0b010],
-            records: vec![1, 2, 3, 4, u64::MAX, u64::MAX],
+            records: vec![1, 2, 3 | crate::bake::gather::BACK_SIDE, 4, u64::MAX, u64::MAX],
             texels: Some(TexelHits { texels: 1..2, points: 4..6, rejected: vec![0b01], records: vec![7, 8, 2 << 32, u64::MAX] }),
         };
         let layer = LayerFile {
@@ -899,6 +914,7 @@ mod tests {
             rays_per_bounce: vec![288, 256],
             weights: vec![1.0; 5],
             noise: vec![0.0, 0.5, 0.25, 0.0, 1.0],
+            back_dc: vec![0.0, 0.125, 0.0, 0.0, 0.5],
             source: vec![0.25; 15],
             total: vec![0.5; 15],
             layers: vec![vec![0.25; 15], vec![0.25; 15]],
@@ -910,6 +926,7 @@ mod tests {
                 rays_traced: 260,
                 weights: vec![1.0, 0.0],
                 noise: vec![0.125, 0.0],
+                back_dc: vec![0.25, 0.0],
                 source: vec![0.5; 6],
                 total: vec![0.75; 6],
                 layers: vec![vec![0.25; 6], vec![0.5; 6]],

@@ -10,6 +10,7 @@ use super::files::{Identity, LayerFile, PilotFile, SunPart, TexelLayer, Transfer
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
+use crate::bake::side_share::{add_back_dc, front_shares};
 use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
 use crate::bake::{BakeStats, TexelSunRange, TransferResult};
 
@@ -303,8 +304,10 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     let texels = merge_texel_round(parts, &order, &key, reference, previous.as_mut().map(|p| (p.texels.take(), layer_path)))?;
     // As a whole bake computes it: the rounds so far, in quadrature.
     let mut noise = previous.as_ref().map_or_else(Vec::new, |layer| layer.noise.clone());
+    let mut back_dc = previous.as_ref().map_or_else(Vec::new, |layer| layer.back_dc.clone());
     if tracks_noise {
         add_noise_in_quadrature(&mut noise, &VertexDc::new(&weights, &sums, stride, &moments).standard_errors());
+        add_back_dc(&mut back_dc, &weights, &moments);
     }
 
     let layer = normalised_layer(&sums, &weights, pass_channels, channels, coeffs);
@@ -334,6 +337,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             rays_per_bounce,
             weights,
             noise,
+            back_dc,
             source,
             total,
             layers,
@@ -350,6 +354,8 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     total.truncate(mesh_vertices * stride);
     layers.iter_mut().for_each(|l| l.truncate(mesh_vertices * stride));
     noise.truncate(mesh_vertices);
+    back_dc.truncate(mesh_vertices);
+    let front_share = if params.mode == crate::bake::Mode::Window { front_shares(&back_dc, &total, channels, coeffs) } else { Vec::new() };
     let stats = BakeStats {
         triangles: first.identity.mesh.triangles,
         vertices: mesh_vertices as u64,
@@ -365,7 +371,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         rays_traced,
         ..BakeStats::default()
     };
-    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, back: Vec::new(), stats };
+    let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, back: Vec::new(), front_share, stats };
     let texels = texels.map(|t| TexelLayer { source: Vec::new(), ..t });
     Ok(TransferMerge::Final { result, frame: frame_part.1.frame.clone(), key, texels })
 }
@@ -377,6 +383,7 @@ pub fn merged_texel_transfer(
     merged: TexelLayer,
     frame: crate::bundle::TexelLayers,
     key: &super::TexelKey,
+    params: &crate::bake::BakeParams,
 ) -> Result<crate::bake::texels::TexelTransfer, String> {
     if super::atlas_crc(&frame.atlas) != key.atlas_crc || frame.texels.len() != merged.texel_count as usize {
         return Err(format!(
@@ -387,6 +394,12 @@ pub fn merged_texel_transfer(
             key.atlas_crc
         ));
     }
+    let front_share = if params.mode == crate::bake::Mode::Window {
+        let channels = merged.total.len() / (merged.texel_count as usize * crate::sh::coeff_count(params.order)).max(1);
+        front_shares(&merged.back_dc, &merged.total, channels, crate::sh::coeff_count(params.order))
+    } else {
+        Vec::new()
+    };
     Ok(crate::bake::texels::TexelTransfer {
         atlas: frame.atlas,
         texels: frame.texels,
@@ -394,6 +407,7 @@ pub fn merged_texel_transfer(
         bounces: merged.layers,
         covered_area: merged.weights,
         noise: merged.noise,
+        front_share,
         points: merged.points,
         points_rejected: merged.points_rejected,
         rays: merged.rays,
@@ -476,6 +490,7 @@ fn merge_texel_round(
             rays_traced: traced,
             weights,
             noise: Vec::new(),
+            back_dc: Vec::new(),
             source: Vec::new(),
             total: zeroed(covered as usize * channels * coeffs, first_path)?,
             layers: Vec::new(),
@@ -483,6 +498,7 @@ fn merge_texel_round(
     };
     let sigma = VertexDc::new(&merged.weights, &sums, stride, &moments).standard_errors();
     add_noise_in_quadrature(&mut merged.noise, &sigma);
+    add_back_dc(&mut merged.back_dc, &merged.weights, &moments);
     let layer = normalised_layer(&sums, &merged.weights, pass_channels, channels, coeffs);
     add_layer(&mut merged.total, &layer);
     if params.store_bounces {

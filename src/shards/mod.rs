@@ -326,17 +326,24 @@ mod tests {
         use crate::verify::shapes;
         use glam::Vec3;
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        let mut mesh = shapes::plane_grid(4, 2.0);
+        let mut open_mesh = shapes::plane_grid(4, 2.0);
         let mut sphere = shapes::icosphere(2);
         shapes::transform(&mut sphere, 0.3, Vec3::new(0.2, 0.45, 0.0));
-        shapes::append(&mut mesh, &sphere);
-        mesh.materials[0].albedo = [0.7, 0.5, 0.3];
-        let atlas = crate::atlas::Atlas::unwrap(&mesh, 0.1).unwrap();
-        let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
-        let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
-        for (adaptive, counts) in [(0.0f32, [1u32, 2, 5].as_slice()), (1.0, &[3])] {
-            let params =
-                BakeParams { rays: 16, seed: 4, bounces: 2, mode: Mode::Open, store_bounces: true, adaptive, ..BakeParams::default() };
+        shapes::append(&mut open_mesh, &sphere);
+        open_mesh.materials[0].albedo = [0.7, 0.5, 0.3];
+        let (mut window_mesh, _) = shapes::integrating_sphere(1, 0.6, 0.7, shapes::Opening::Window);
+        window_mesh.materials[0].albedo = [0.7, 0.5, 0.3];
+        let cases = [
+            (&open_mesh, Mode::Open, 0.0f32, [1u32, 2, 5].as_slice()),
+            (&open_mesh, Mode::Open, 1.0, &[3]),
+            (&window_mesh, Mode::Window, 0.0, &[2]),
+        ];
+        for (mesh, mode, adaptive, counts) in cases {
+            let mesh = mesh.clone();
+            let atlas = crate::atlas::Atlas::unwrap(&mesh, 0.1).unwrap();
+            let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
+            let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
+            let params = BakeParams { rays: 16, seed: 4, bounces: 2, mode, store_bounces: true, adaptive, ..BakeParams::default() };
             let (whole, whole_texels) = crate::bake::texels::bake_texels(&mesh, &scene, &surfaces, &params, atlas.clone(), 3).unwrap();
             let texel_key = TexelKey {
                 texel_size: atlas.texel_size,
@@ -347,9 +354,10 @@ mod tests {
             };
             let key = key_of(params, Some(texel_key));
             for &count in counts {
-                let what = format!("adaptive {adaptive}, {count} shards");
+                let what = format!("{mode:?}, adaptive {adaptive}, {count} shards");
                 let (merged, texels) = sharded_with(&mesh, &key, count, Some(&atlas));
                 assert_eq!(bits(&merged.total), bits(&whole.total), "{what}: vertex total");
+                assert_eq!(bits(&merged.front_share), bits(&whole.front_share), "{what}: vertex side shares");
                 let t = texels.expect("texel mode merges texels");
                 assert!(t.total.iter().any(|&x| x != 0.0), "{what}: the texels hold light");
                 assert_eq!(bits(&t.total), bits(&whole_texels.total), "{what}: texel total");
@@ -358,6 +366,14 @@ mod tests {
                     assert_eq!(bits(a), bits(b), "{what}: a texel bounce");
                 }
                 assert_eq!(bits(&t.noise), bits(&whole_texels.noise), "{what}: texel noise");
+                let coeffs = crate::sh::coeff_count(params.order);
+                let shares = if mode == Mode::Window {
+                    crate::bake::side_share::front_shares(&t.back_dc, &t.total, whole.channels, coeffs)
+                } else {
+                    Vec::new()
+                };
+                assert_eq!(bits(&shares), bits(&whole_texels.front_share), "{what}: texel side shares");
+                assert_eq!(shares.is_empty(), mode == Mode::Open, "{what}: texel sides kept");
                 assert_eq!(bits(&t.weights), bits(&whole_texels.covered_area), "{what}: texel weights");
                 assert_eq!(
                     (t.points, t.points_rejected, t.rays, t.rays_traced),
@@ -409,6 +425,8 @@ mod tests {
                 // The noise estimate too (what `--max-error` budgets with), measured with interior sampling.
                 assert_eq!(bits(&merged.noise), bits(&whole.noise), "{what}: noise");
                 assert_eq!(merged.noise.is_empty(), sampling == Sampling::Vertex, "{what}: noise measured");
+                assert_eq!(bits(&merged.front_share), bits(&whole.front_share), "{what}: side shares");
+                assert_eq!(merged.front_share.is_empty(), mode == Mode::Open || sampling == Sampling::Vertex, "{what}: sides kept");
                 let (m, w) = (&merged.stats, &whole.stats);
                 assert_eq!(
                     (

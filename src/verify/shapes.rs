@@ -198,6 +198,17 @@ pub fn covered_floor(overhang: f32) -> (Mesh, Vec<usize>) {
     (mesh, covered)
 }
 
+/// Appends the flat quad `corners` (two triangles, facing `(c1 − c0) × (c2 − c0)`).
+pub fn push_quad(mesh: &mut Mesh, corners: [Vec3; 4], material: u16, group: u32) {
+    let base = mesh.positions.len() as u32;
+    let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
+    mesh.positions.extend(corners);
+    mesh.normals.extend([normal; 4]);
+    mesh.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    mesh.tri_material.extend([material; 2]);
+    mesh.tri_group.extend([group; 2]);
+}
+
 /// A closed 4 × 3 × 4 m room (x, y, z from 0; a floor of 0.25 m cells, the
 /// ceiling and the other walls one quad each) whose
 /// front wall (z = 0) is one sheet of 0.25 m cells with shared vertices and a
@@ -207,15 +218,7 @@ pub fn covered_floor(overhang: f32) -> (Mesh, Vec<usize>) {
 /// sides"). Returns the mesh and the front wall's vertex range.
 pub fn room_with_pane_outside_opening() -> (Mesh, std::ops::Range<usize>) {
     let mut mesh = Mesh::default();
-    let quad = |mesh: &mut Mesh, corners: [Vec3; 4], material: u16| {
-        let base = mesh.positions.len() as u32;
-        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
-        mesh.positions.extend(corners);
-        mesh.normals.extend([normal; 4]);
-        mesh.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        mesh.tri_material.extend([material; 2]);
-        mesh.tri_group.extend([material as u32; 2]);
-    };
+    let quad = |mesh: &mut Mesh, corners: [Vec3; 4], material: u16| push_quad(mesh, corners, material, material as u32);
     let v = Vec3::new;
     // The floor: 16 × 16 cells of 0.25 m (so a sun patch shows in vertex bits).
     let floor = plane_grid(16, 4.0);

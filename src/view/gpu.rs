@@ -142,6 +142,10 @@ pub struct Renderer {
     index_buffer: wgpu::Buffer,
     transfer_buffer: wgpu::Buffer,
     mask_buffer: wgpu::Buffer,
+    /// Per bundle vertex its front-side share (a 16-byte placeholder without).
+    share_buffer: wgpu::Buffer,
+    /// Whether the bundle has side shares (frame `eye.w`).
+    has_shares: bool,
     adapt_state: wgpu::Buffer,
     adapt_params: wgpu::Buffer,
     tone_buffer: wgpu::Buffer,
@@ -227,6 +231,8 @@ impl Renderer {
         let transfer_buffer =
             init("transfer", &words_to_bytes(&transfer_words), wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
         let mask_buffer = init("sun masks", &words_to_bytes(&scene.masks), wgpu::BufferUsages::STORAGE);
+        let share_words: Vec<u32> = scene.front_share.iter().map(|x| x.to_bits()).collect();
+        let share_buffer = init("side shares", &words_to_bytes(&share_words), wgpu::BufferUsages::STORAGE);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
             size: FRAME_BYTES as u64,
@@ -253,6 +259,7 @@ impl Renderer {
                 buffer_entry(0, vs_fs, wgpu::BufferBindingType::Uniform),
                 buffer_entry(1, wgpu::ShaderStages::VERTEX, wgpu::BufferBindingType::Storage { read_only: true }),
                 buffer_entry(2, wgpu::ShaderStages::VERTEX, wgpu::BufferBindingType::Storage { read_only: true }),
+                buffer_entry(3, wgpu::ShaderStages::VERTEX, wgpu::BufferBindingType::Storage { read_only: true }),
             ],
         });
         let scene_bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -262,6 +269,7 @@ impl Renderer {
                 wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: transfer_buffer.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: mask_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: share_buffer.as_entire_binding() },
             ],
         });
         let shading = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -315,11 +323,9 @@ impl Renderer {
             hdr_pipeline("scene", &scene_pipeline_layout, &shading, ("vs_main", "fs_main"), &vertex_layout, opaque, HDR_FORMAT.into());
         // A textured variant of the scene's shading (same bindings in group 0): a texture
         // in group 1 and texture coordinates in vertex buffer 1 (the panel, texel mode).
-        let textured = |label: &str, source: String, entry_points: (&str, &str)| {
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(label),
-                entries: &[hdr_texture_entry(0, wgpu::ShaderStages::FRAGMENT)],
-            });
+        let textured = |label: &str, source: String, entry_points: (&str, &str), textures: u32| {
+            let entries: Vec<_> = (0..textures).map(|b| hdr_texture_entry(b, wgpu::ShaderStages::FRAGMENT)).collect();
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
             let module = device
                 .create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -340,7 +346,7 @@ impl Renderer {
         };
         let panel = scene.panel.as_ref().map(|draws| {
             let source = concat!(include_str!("shading.wgsl"), include_str!("panel.wgsl")).to_string();
-            let (pipeline, layout) = textured("panel", source, ("vs_panel", "fs_panel"));
+            let (pipeline, layout) = textured("panel", source, ("vs_panel", "fs_panel"), 1);
             let texcoord_words: Vec<u32> = draws.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
             let texcoords = init("panel texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
             let mut panel = PanelGpu { pipeline, layout, texcoords, texture: None };
@@ -361,17 +367,43 @@ impl Renderer {
                 }
                 // Whether the texels carry their own sun bits and sky light, as constants of the shader.
                 let source = format!(
-                    "{}{}const TEXEL_SUN: bool = {};\nconst TEXEL_SKY: bool = {};\n",
+                    "{}{}const TEXEL_SUN: bool = {};\nconst TEXEL_SKY: bool = {};\nconst TEXEL_SIDES: bool = {};\n",
                     include_str!("shading.wgsl"),
                     include_str!("lightmap.wgsl"),
                     lm.has_sun_bits(),
-                    lm.has_sky()
+                    lm.has_sky(),
+                    lm.has_side_shares()
                 );
-                let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"));
+                let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"), 2);
                 let texcoord_words: Vec<u32> = lm.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
                 let texcoords = init("lightmap texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
                 let size = wgpu::Extent3d { width: lm.width, height: lm.height, depth_or_array_layers: 1 };
-                let (texture, bind) = rgba32f_texture(device, &layout, "lightmap", size);
+                // The texels' front shares do not change with the lighting: written once.
+                let share_size = if lm.has_side_shares() { size } else { wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 } };
+                let shares = device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("texel side shares"),
+                    size: share_size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::R32Float,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                });
+                let share_image = if lm.has_side_shares() { lm.side_share_image() } else { vec![1.0] };
+                let share_words: Vec<u32> = share_image.iter().map(|x| x.to_bits()).collect();
+                gpu.queue.write_texture(
+                    shares.as_image_copy(),
+                    &words_to_bytes(&share_words),
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(4 * share_size.width),
+                        rows_per_image: Some(share_size.height),
+                    },
+                    share_size,
+                );
+                let share_view = shares.create_view(&Default::default());
+                let (texture, bind) = rgba32f_texture(device, &layout, "lightmap", size, Some(&share_view));
                 Some(LightmapGpu { pipeline, texcoords, texture, bind, scene: lm.clone() })
             }
         };
@@ -534,6 +566,8 @@ impl Renderer {
             index_buffer,
             transfer_buffer,
             mask_buffer,
+            share_buffer,
+            has_shares: !scene.front_share.is_empty(),
             adapt_state,
             adapt_params,
             tone_buffer,
@@ -648,6 +682,7 @@ impl Renderer {
             &self.index_buffer,
             &self.transfer_buffer,
             &self.mask_buffer,
+            &self.share_buffer,
             &self.frame_buffer,
             &self.adapt_state,
             &self.adapt_params,
@@ -658,7 +693,10 @@ impl Renderer {
         .map(|b| b.size())
         .sum::<u64>()
             + self.panel.as_ref().map_or(0, |p| p.texcoords.size())
-            + self.lightmap.as_ref().map_or(0, |l| l.texcoords.size() + 16 * l.scene.width as u64 * l.scene.height as u64);
+            + self.lightmap.as_ref().map_or(0, |l| {
+                let texels = l.scene.width as u64 * l.scene.height as u64;
+                l.texcoords.size() + 16 * texels + if l.scene.has_side_shares() { 4 * texels } else { 4 }
+            });
         let pixels = self.targets.width as u64 * self.targets.height as u64;
         let environment = self.env_size.0 as u64 * self.env_size.1 as u64 * 16;
         GpuMemory { buffers, environment, transfer: self.transfer_buffer.size(), targets: pixels * (8 + 4) }
@@ -676,7 +714,7 @@ impl Renderer {
         words.extend([direction[0], direction[1], direction[2], 0.0].map(f32::to_bits));
         words.extend([rgb[0], rgb[1], rgb[2], on].map(f32::to_bits));
         words.extend([self.order * self.order, self.channels, self.words_per_vertex, k]);
-        words.extend([camera.eye.x, camera.eye.y, camera.eye.z, 0.0].map(f32::to_bits));
+        words.extend([camera.eye.x, camera.eye.y, camera.eye.z, if self.has_shares { 1.0 } else { 0.0 }].map(f32::to_bits));
         let n2 = (self.order * self.order) as usize;
         for i in 0..MAX_COEFFS {
             let c = if i < n2 { settings.lighting.get(i).copied().unwrap_or([0.0; 3]) } else { [0.0; 3] };
@@ -813,7 +851,7 @@ impl PanelGpu {
     fn set_texture(&mut self, gpu: &Gpu, texture: &PanelTexture) {
         let size = wgpu::Extent3d { width: texture.width.max(1), height: texture.height.max(1), depth_or_array_layers: 1 };
         if self.texture.as_ref().is_none_or(|(t, _)| t.size() != size) {
-            self.texture = Some(rgba32f_texture(&gpu.device, &self.layout, "panel", size));
+            self.texture = Some(rgba32f_texture(&gpu.device, &self.layout, "panel", size, None));
         }
         let Some((gpu_texture, _)) = &self.texture else { return };
         let texels: Vec<u32> = texture.rgb.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]).map(f32::to_bits).collect();
@@ -823,11 +861,13 @@ impl PanelGpu {
 
 /// An RGBA32F texture the fragment stage reads (`textureLoad`), bound alone
 /// in a group of `layout` (the panel's and texel mode's group 1).
+/// An RGBA32F texture and its bind group (binding 0; `second`, when given, at binding 1).
 fn rgba32f_texture(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     label: &str,
     size: wgpu::Extent3d,
+    second: Option<&wgpu::TextureView>,
 ) -> (wgpu::Texture, wgpu::BindGroup) {
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
@@ -840,11 +880,11 @@ fn rgba32f_texture(
         view_formats: &[],
     });
     let view = texture.create_view(&Default::default());
-    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout,
-        entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }],
-    });
+    let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }];
+    if let Some(second) = second {
+        entries.push(wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(second) });
+    }
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries });
     (texture, bind)
 }
 

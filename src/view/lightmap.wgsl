@@ -11,17 +11,22 @@
 // fragment's sun visibility, times its own cosine, so a slat's shadow edge
 // is drawn at the texel size, not the triangle's (inside a texel, with
 // fractions).
+// With side shares per texel (TEXEL_SIDES, also appended), the sky light is
+// scaled by the seen side's share, read bilinearly over the same texels.
 // Without them the sun term is per vertex, as in shading.wgsl. A bundle with
 // texel sun bits but no texel transfer (TEXEL_SKY false, also a constant the
 // renderer appends) keeps the sky term per vertex.
 
 @group(1) @binding(0) var lightmap: texture_2d<f32>;
+// R: each texel's front share (1 without TEXEL_SIDES).
+@group(1) @binding(1) var side_shares: texture_2d<f32>;
 
 struct LightmapOut {
     @builtin(position) clip: vec4<f32>,
     // The per-vertex sun term (without texel sun bits) plus the per-vertex
-    // sky term (without texel transfer).
+    // sky term (without texel transfer), of the triangle's front and back.
     @location(0) vertex_light: vec3<f32>,
+    @location(5) vertex_light_back: vec3<f32>,
     @location(1) albedo: vec3<f32>,
     // Position in the atlas, texels.
     @location(2) texcoord: vec2<f32>,
@@ -34,11 +39,16 @@ fn vs_lightmap(v: VertexIn, @location(4) texcoord: vec2<f32>) -> LightmapOut {
     var out: LightmapOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
     out.vertex_light = vec3<f32>(0.0);
+    out.vertex_light_back = vec3<f32>(0.0);
     if (!TEXEL_SUN) {
         out.vertex_light += sun_light(v);
+        out.vertex_light_back += sun_light(v);
     }
     if (!TEXEL_SKY) {
-        out.vertex_light += sky_light(v);
+        let sky = sky_dot(v);
+        let share = vertex_front_share(v);
+        out.vertex_light += side_share(share, true) * sky;
+        out.vertex_light_back += side_share(share, false) * sky;
     }
     out.albedo = v.albedo;
     out.texcoord = texcoord;
@@ -48,7 +58,7 @@ fn vs_lightmap(v: VertexIn, @location(4) texcoord: vec2<f32>) -> LightmapOut {
 }
 
 @fragment
-fn fs_lightmap(in: LightmapOut) -> @location(0) vec4<f32> {
+fn fs_lightmap(in: LightmapOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     let size = vec2<i32>(textureDimensions(lightmap));
     // Texel (x, y) covers [x, x+1) × [y, y+1): its centre is at +0.5.
     let p = in.texcoord - vec2<f32>(0.5);
@@ -56,6 +66,7 @@ fn fs_lightmap(in: LightmapOut) -> @location(0) vec4<f32> {
     let f = p - floor(p);
     var sum = vec3<f32>(0.0);
     var sun_sum = 0.0;
+    var share_sum = 0.0;
     var weight = 0.0;
     for (var dy = 0; dy < 2; dy++) {
         for (var dx = 0; dx < 2; dx++) {
@@ -65,23 +76,30 @@ fn fs_lightmap(in: LightmapOut) -> @location(0) vec4<f32> {
             let holds = min(s.a, 1.0);
             sum += w * holds * s.rgb;
             sun_sum += w * max(s.a - 1.0, 0.0);
+            share_sum += w * holds * textureLoad(side_shares, texel, 0).r;
             weight += w * holds;
         }
     }
     var e = vec3<f32>(0.0);
     var visibility = 0.0;
+    var share = 1.0;
     if (weight > 1e-6) {
         e = sum / weight;
         visibility = sun_sum / weight;
+        share = share_sum / weight;
     } else {
         // No neighbour holds light: the texel under the fragment, whatever it holds.
         let texel = clamp(vec2<i32>(floor(in.texcoord)), vec2<i32>(0), size - vec2<i32>(1));
         let s = textureLoad(lightmap, texel, 0);
         e = s.rgb;
         visibility = max(s.a - 1.0, 0.0);
+        share = textureLoad(side_shares, texel, 0).r;
     }
-    var light = in.vertex_light;
+    var light = select(in.vertex_light_back, in.vertex_light, front);
     if (TEXEL_SKY) {
+        if (TEXEL_SIDES) {
+            e *= select(1.0 - share, share, front);
+        }
         light += e;
     }
     if (TEXEL_SUN) {

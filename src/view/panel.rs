@@ -263,6 +263,7 @@ impl PanelSource {
             vertex_light,
             two_sided: self.two_sided,
             texel_light,
+            side_shares: crate::panel::SideShares::of(&self.transfer, self.texels.as_ref().map(|(a, ids, t)| (a, &ids[..], t))),
         };
         let options = GatherOptions { seed: self.seed, ..GatherOptions::default() };
         let mut gather = PanelGather::new(&interior, env, &self.brdf, &self.layout, request.eye, options);

@@ -4,19 +4,23 @@
 use super::scene::PreparedScene;
 use crate::bundle::SunSeries;
 
-/// Irradiance-like vertex term `E(v) = Σ_i L_i t_i(v) + bit · cos · sun_rgb / π`
+/// Irradiance-like vertex term `E(v) = k · Σ_i L_i t_i(v) + bit · cos · sun_rgb / π`
 /// (before albedo), for bundle vertex `v` seen from the side of unit normal
-/// `normal` (the vertex normal turned toward the eye).
+/// `normal` (the vertex normal turned toward the eye), on the front of its
+/// triangle when `seen_front` (the side the winding faces, as the bake
+/// tells sides).
 ///
 /// `lighting` is truncated or zero-padded to the transfer order. `sun` is the
 /// series and the step, when the sun term is on. The cosine is `max(n·s, 0)`:
-/// the side the eye sees is lit only when it faces the sun.
+/// the side the eye sees is lit only when it faces the sun. `k` is the seen
+/// side's share of the transfer ([`seen_side_share`]).
 pub fn vertex_light(
     scene: &PreparedScene,
     lighting: &[[f32; 3]],
     sun: Option<(&SunSeries, usize)>,
     v: usize,
     normal: [f32; 3],
+    seen_front: bool,
 ) -> [f32; 3] {
     let n2 = (scene.order * scene.order) as usize;
     let channels = scene.channels as usize;
@@ -29,6 +33,8 @@ pub fn vertex_light(
             light[c] += scene.transfer[base + channel * n2 + i] * l[c];
         }
     }
+    let k = seen_side_share(scene.front_share.get(v).copied(), seen_front);
+    light.iter_mut().for_each(|l| *l *= k);
     if let Some((series, step)) = sun {
         if let Some(s) = series.steps.get(step) {
             if series.bit(v, step) {
@@ -41,6 +47,16 @@ pub fn vertex_light(
         }
     }
     light
+}
+
+/// The part of a receiver's transfer the side the eye sees shows: its front
+/// share from the front, the rest from behind; all of it without a share.
+pub fn seen_side_share(front_share: Option<f32>, seen_front: bool) -> f32 {
+    match front_share {
+        Some(share) if seen_front => share,
+        Some(share) => 1.0 - share,
+        None => 1.0,
+    }
 }
 
 /// Outgoing radiance `albedo · E`.

@@ -82,6 +82,10 @@ pub struct PreparedScene {
     pub channels: u32,
     /// Selected transfer, `[bundle vertex][channel][coeff]`.
     pub transfer: Vec<f32>,
+    /// Window mode: per bundle vertex, the share of its light that reached
+    /// its front side (section SIDE); the side the eye sees is drawn with
+    /// its share of the transfer. Empty: both sides show all of it.
+    pub front_share: Vec<f32>,
     /// The bundle's sun masks (empty without a sun series) and words per vertex.
     pub masks: Vec<u32>,
     pub words_per_vertex: u32,
@@ -111,6 +115,9 @@ pub struct LightmapScene {
     /// The selected layers summed, `[texel][channel][coeff]`; empty when
     /// the bundle has texel sun bits only (the sky light is then per vertex).
     pub transfer: Vec<f32>,
+    /// Per covered texel, the front side's share of its light (section
+    /// TSID), as [`PreparedScene::front_share`]; empty without.
+    pub front_share: Vec<f32>,
     /// The bundle's time lapse when it has sun bits per texel (its
     /// per-vertex masks left out: the vertex buffers carry them); `None`:
     /// the sun stays per vertex.
@@ -126,6 +133,20 @@ impl LightmapScene {
     /// Whether the texels carry the sky light (else it is per vertex).
     pub fn has_sky(&self) -> bool {
         !self.transfer.is_empty()
+    }
+
+    /// Whether the texels carry their front-side shares.
+    pub fn has_side_shares(&self) -> bool {
+        self.has_sky() && self.front_share.len() == self.texels.len()
+    }
+
+    /// Each texel's front share over the whole texture (1 off the covered texels).
+    pub fn side_share_image(&self) -> Vec<f32> {
+        let mut image = vec![1.0f32; self.width as usize * self.height as usize];
+        for (&texel, &share) in self.texels.iter().zip(&self.front_share) {
+            image[texel as usize] = share;
+        }
+        image
     }
 
     /// Irradiance per texel of the whole texture for `lighting` (the SH dot
@@ -290,6 +311,7 @@ pub fn prepare_scene_with_panel(
     let lightmap = match &bundle.texels {
         Some(t) => {
             let stride = (transfer.order * transfer.order * transfer.channels) as usize;
+            let texel_front_share = t.transfer.as_ref().map_or_else(Vec::new, |tt| tt.front_share.clone());
             let (texel_transfer, valid) = match &t.transfer {
                 Some(tt) => {
                     if tt.order != transfer.order || tt.channels != transfer.channels {
@@ -320,6 +342,7 @@ pub fn prepare_scene_with_panel(
                 texels: t.texels.clone(),
                 valid,
                 transfer: texel_transfer,
+                front_share: texel_front_share,
                 texel_sun,
             })
         }
@@ -336,6 +359,7 @@ pub fn prepare_scene_with_panel(
         order: transfer.order,
         channels: transfer.channels,
         transfer: layers.combine(transfer),
+        front_share: transfer.front_share.clone(),
         masks,
         words_per_vertex,
         bounds: (lo, hi),

@@ -1,7 +1,10 @@
 // Per-vertex PRT shading (seeds 000 §4.2, 001 §4).
 //
-// Vertex: E = Σ_i L_i t_i(v)  +  bit(v, step) · max(n_seen·s, 0) · sun_rgb / π
-// (n_seen: the normal turned toward the eye, the side of the surface the eye sees)
+// Vertex: E = k · Σ_i L_i t_i(v)  +  bit(v, step) · max(n_seen·s, 0) · sun_rgb / π
+// (n_seen: the normal turned toward the eye, the side of the surface the eye sees;
+// k: the share of the transfer of the side the fragment shows, by its
+// triangle's winding as the bake tells sides: the vertex's front share or
+// the rest; 1 without shares)
 // Fragment: radiance = albedo · E, written to an HDR target; alpha is the transmittance
 // of the glass in front (1 here; the glass pass lowers it).
 
@@ -17,7 +20,7 @@ struct Frame {
     // x: coefficients per channel (order²), y: channels (1 or 3),
     // z: mask words per vertex, w: time-lapse step.
     counts: vec4<u32>,
-    // xyz: the eye, world units; w unused.
+    // xyz: the eye, world units; w: 1 = `front_shares` holds each vertex's front share.
     eye: vec4<f32>,
     // Lighting SH, rgb per coefficient, index l(l+1)+m.
     sh: array<vec4<f32>, MAX_COEFFS>,
@@ -28,6 +31,8 @@ struct Frame {
 @group(0) @binding(1) var<storage, read> transfer: array<f32>;
 // Sun bits: step k of vertex v is bit k%32 of word v·W + k/32.
 @group(0) @binding(2) var<storage, read> masks: array<u32>;
+// Window mode: per vertex, the share of its light that reached its front side.
+@group(0) @binding(3) var<storage, read> front_shares: array<f32>;
 
 struct VertexIn {
     @location(0) position: vec3<f32>,
@@ -38,8 +43,10 @@ struct VertexIn {
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
+    // E of the triangle's front (the side its winding faces) and of its back.
     @location(0) light: vec3<f32>,
     @location(1) albedo: vec3<f32>,
+    @location(2) light_back: vec3<f32>,
 };
 
 @vertex
@@ -51,13 +58,35 @@ fn vs_main(v: VertexIn) -> VertexOut {
 fn shade_vertex(v: VertexIn) -> VertexOut {
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
-    out.light = sky_light(v) + sun_light(v);
+    let sky = sky_dot(v);
+    let sun = sun_light(v);
+    let share = vertex_front_share(v);
+    out.light = side_share(share, true) * sky + sun;
+    out.light_back = side_share(share, false) * sky + sun;
     out.albedo = v.albedo;
     return out;
 }
 
-// The sky term of a vertex: its transfer dotted with the lighting SH.
-fn sky_light(v: VertexIn) -> vec3<f32> {
+// A vertex's front share (1 when the bundle has none: frame.eye.w = 0).
+fn vertex_front_share(v: VertexIn) -> f32 {
+    if (frame.eye.w > 0.5) {
+        return front_shares[v.source];
+    }
+    return 1.0;
+}
+
+// The share of a receiver's light on one side of its surface: the front
+// share on the front (the side the winding faces), the rest on the back;
+// all of it when the bundle keeps no sides.
+fn side_share(front_share: f32, front: bool) -> f32 {
+    if (frame.eye.w < 0.5) {
+        return 1.0;
+    }
+    return select(1.0 - front_share, front_share, front);
+}
+
+// A vertex's transfer dotted with the lighting SH.
+fn sky_dot(v: VertexIn) -> vec3<f32> {
     let n2 = frame.counts.x;
     let channels = frame.counts.y;
     let base = v.source * channels * n2;
@@ -100,8 +129,8 @@ fn sun_cosine(n: vec3<f32>, p: vec3<f32>) -> f32 {
 }
 
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    return vec4<f32>(in.albedo * in.light, 1.0);
+fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    return vec4<f32>(in.albedo * select(in.light_back, in.light, front), 1.0);
 }
 
 // Window glass (drawn after the backdrop, depth test "less", no depth write):

@@ -143,7 +143,7 @@ mod tests {
         let points = [(0.5f32, 1.0f32), (1.0, 3.0), (0.25, 2.0), (2.0, 0.5)];
         let mut m = Moments::default();
         for &(w, x) in &points {
-            m.add(w, x);
+            m.add(w, x, 0.0);
         }
         let weight: f64 = points.iter().map(|&(w, _)| w as f64).sum();
         let mean = points.iter().map(|&(w, x)| w as f64 * x as f64).sum::<f64>() / weight;
@@ -154,7 +154,7 @@ mod tests {
         assert!((m.effective_count(weight) - weight * weight / points.iter().map(|&(w, _)| (w * w) as f64).sum::<f64>()).abs() < 1e-12);
         // Equal values: no spread, no error; no weight: none either.
         let mut flat = Moments::default();
-        (0..4).for_each(|_| flat.add(1.0, 2.0));
+        (0..4).for_each(|_| flat.add(1.0, 2.0, 0.0));
         assert_eq!(flat.standard_error(4.0, 2.0), 0.0);
         assert_eq!(Moments::default().standard_error(0.0, 0.0), 0.0);
     }
@@ -174,7 +174,7 @@ mod tests {
             // Six points of weight 1/6 around the mean 0.5; spread only at `noisy`.
             let half_range = if v == noisy { 0.4 } else { 0.0 };
             for k in 0..6 {
-                m.add(1.0 / 6.0, 0.5 + if k % 2 == 0 { half_range } else { -half_range });
+                m.add(1.0 / 6.0, 0.5 + if k % 2 == 0 { half_range } else { -half_range }, 0.0);
             }
         }
         (mesh, items, weights, dc_sums, moments)
@@ -226,7 +226,7 @@ mod tests {
         for (v, m) in moments.iter_mut().enumerate() {
             if v != dark {
                 // The same small spread everywhere else.
-                (0..6).for_each(|k| m.add(1.0 / 6.0, 0.5 + if k % 2 == 0 { 0.1 } else { -0.1 }));
+                (0..6).for_each(|k| m.add(1.0 / 6.0, 0.5 + if k % 2 == 0 { 0.1 } else { -0.1 }, 0.0));
             }
         }
         weights[dark] = 0.0;

@@ -8,6 +8,7 @@ use super::plan::*;
 use super::run::*;
 use crate::bake::noise::{add_noise_in_quadrature, VertexDc};
 use crate::bake::progress::Progress;
+use crate::bake::side_share::{add_back_dc, front_shares};
 use crate::bake::surfaces::Surfaces;
 use crate::bake::twins::Twins;
 use crate::bake::{BakeError, BakeParams, TransferResult};
@@ -75,6 +76,8 @@ pub(crate) fn bake_layers_with_texels(
     let mut hit_cache: Vec<u64> = Vec::new();
     let mut vertex_weight: Vec<f32> = Vec::new();
     let mut noise: Vec<f32> = Vec::new();
+    // Per receiver, the DC that came through the back of its face (window mode).
+    let mut back_dc: Vec<f32> = Vec::new();
     let mut source = SourceRows::empty();
     let mut layers: Vec<Vec<f32>> = Vec::new();
     let mut back_layers: Vec<Vec<f32>> = Vec::new();
@@ -118,6 +121,7 @@ pub(crate) fn bake_layers_with_texels(
         if !sums.moments.is_empty() {
             let sigma = VertexDc::new(&vertex_weight, &sums.sums, pass_channels * coeffs, &sums.moments).standard_errors();
             add_noise_in_quadrature(&mut noise, &sigma);
+            add_back_dc(&mut back_dc, &vertex_weight, &sums.moments);
         }
         for index in sums.rejected {
             rejected[index as usize] = true;
@@ -184,6 +188,9 @@ pub(crate) fn bake_layers_with_texels(
         }
     }
     noise.truncate(vertex_count);
+    back_dc.truncate(vertex_count);
+    // The share of the light as baked: the denoiser smooths values, not sides.
+    let front_share = if params.mode == crate::bake::Mode::Window { front_shares(&back_dc, &total, channels, coeffs) } else { Vec::new() };
     if params.denoise > 0.0 && kept.is_none() {
         crate::bake::denoise::denoise(mesh, &mut total, &mut layers, &mut noise, stride, params.denoise);
     }
@@ -199,7 +206,7 @@ pub(crate) fn bake_layers_with_texels(
     let vertex_seconds = (stats.seconds - texel_seconds).max(1e-9);
     stats.rays_per_second = stats.rays_traced as f64 / vertex_seconds;
     stats.evaluations_per_second = stats.rays as f64 / vertex_seconds;
-    Ok(TransferResult { order: params.order, channels, total, bounces: layers, noise, back: back_layers, stats })
+    Ok(TransferResult { order: params.order, channels, total, bounces: layers, noise, back: back_layers, front_share, stats })
 }
 
 /// The back sides' rows of a layer of the plan's mesh, one row per mesh

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::items::*;
 use super::normalise::*;
 use crate::bake::enclosure::Sides;
-use crate::bake::gather::{decode_hit, encode_hit, Gather, NO_HIT};
+use crate::bake::gather::{back_side, decode_hit, encode_hit, Gather, BACK_SIDE, NO_HIT};
 use crate::bake::noise::Moments;
 use crate::bake::progress::Progress;
 use crate::bake::receivers::{point_weights, Receivers};
@@ -45,6 +45,18 @@ pub(crate) struct Scratch {
     /// Window mode, bounce 0: the light through glass of each side of the
     /// point (front, back of its face), kept apart until [`Sides`] decides.
     pub(crate) side_light: [Vec<f32>; 2],
+}
+
+/// What tracing one point gave besides its estimate.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Traced {
+    /// Rays traced through the BVH.
+    pub(crate) rays: u64,
+    /// The point lies inside geometry (bounce 0 with the check; its estimate is then meaningless).
+    pub(crate) inside: bool,
+    /// The part of the estimate's DC (mean over channels) that arrived
+    /// through the back of the point's face (window mode, else 0).
+    pub(crate) back_dc: f32,
 }
 
 /// One point rays leave from.
@@ -363,7 +375,7 @@ impl Pass<'_> {
                 Items::Vertex { vertices } => {
                     let v = vertices[item] as usize;
                     point_result.fill(0.0);
-                    if !self.gather_cached(item as u64, &mut point_result) {
+                    if self.gather_cached(item as u64, &mut point_result).is_none() {
                         let normal = self.mesh.normals[v];
                         let point = Point {
                             position: self.mesh.positions[v],
@@ -372,7 +384,7 @@ impl Pass<'_> {
                             seed: hash_seed(&[self.params.seed, TAG_DIRECTION, v as u32, u32::MAX]),
                         };
                         let traced = self.trace_point(&point, bounce, false, &mut point_result, &mut scratch, &mut out.hits);
-                        out.traced += traced.0;
+                        out.traced += traced.rays;
                     }
                     out.rays += self.params.rays as u64;
                     out.weights[local] = 1.0;
@@ -395,8 +407,8 @@ impl Pass<'_> {
                         let seed = self.params.point_seed.unwrap_or(self.params.seed);
                         let b = triangle_sample(self.params.pattern, seed, t, [ia, ib, ic], first_index + s);
                         point_result.fill(0.0);
-                        let (traced, inside) = if self.gather_cached(global as u64, &mut point_result) {
-                            (0, false)
+                        let traced = if let Some(back_dc) = self.gather_cached(global as u64, &mut point_result) {
+                            Traced { back_dc, ..Traced::default() }
                         } else {
                             let point = Point {
                                 position: pa * b[0] + pb * b[1] + pc * b[2],
@@ -407,8 +419,8 @@ impl Pass<'_> {
                             self.trace_point(&point, bounce, bounce == 0, &mut point_result, &mut scratch, &mut out.hits)
                         };
                         out.rays += self.params.rays as u64;
-                        out.traced += traced;
-                        if inside {
+                        out.traced += traced.rays;
+                        if traced.inside {
                             out.rejected.push(global);
                             continue;
                         }
@@ -416,7 +428,7 @@ impl Pass<'_> {
                         for (corner, w) in point_weights(b, area, weight_count).into_iter().enumerate() {
                             out.weights[local * 3 + corner] += w;
                             if let Some(moments) = out.moments.get_mut(local * 3 + corner) {
-                                moments.add(w, dc);
+                                moments.add(w, dc, traced.back_dc);
                             }
                             let dst = &mut out.sums[(local * 3 + corner) * stride..][..stride];
                             dst.iter_mut().zip(&point_result).for_each(|(d, r)| *d += w * r);
@@ -445,25 +457,28 @@ impl Pass<'_> {
     }
 
     /// Bounces ≥ 1 with a hit cache: adds point `point_index`'s estimate from
-    /// its cached hits to `result` and returns true; false when this pass
-    /// traces rays instead (then the point's position and seed are needed).
+    /// its cached hits to `result` and returns its back-side DC (as
+    /// [`Traced::back_dc`]); `None` when this pass traces rays instead (then
+    /// the point's position and seed are needed).
     #[inline]
-    pub(crate) fn gather_cached(&self, point_index: u64, result: &mut [f32]) -> bool {
-        let (Some(cache), Some(gather)) = (self.hit_cache, &self.gather) else { return false };
+    pub(crate) fn gather_cached(&self, point_index: u64, result: &mut [f32]) -> Option<f32> {
+        let (Some(cache), Some(gather)) = (self.hit_cache, &self.gather) else { return None };
         let rays = self.params.rays as usize;
         let local = (point_index - cache.first_point) as usize;
         // This point's records, then the next points' (usually gathered
         // next), which the gather prefetches into.
-        gather.point(&cache.records[local * rays..], rays, self.ray_weight(), result);
-        true
+        let back = gather.point(&cache.records[local * rays..], rays, self.ray_weight(), result);
+        Some(back / self.channels as f32)
     }
 
     /// Traces the rays of one point for `bounce` (those of bounces ≥ 1 when
     /// nothing is cached), adding the estimate to
     /// `result` (`[channel][coeff]`). In bounce 0 with caching, appends one
-    /// hit record per ray to `hits`. Returns the rays traced through the BVH
-    /// and, when `check_inside`, whether the point lies inside geometry (then
-    /// `result` is meaningless).
+    /// hit record per ray to `hits` (marked [`BACK_SIDE`] in window mode
+    /// where the ray leaves through the back of the face). Returns the rays
+    /// traced through the BVH, when `check_inside` whether the point lies
+    /// inside geometry (then `result` is meaningless), and the estimate's
+    /// back-side DC.
     pub(crate) fn trace_point(
         &self,
         point: &Point,
@@ -472,7 +487,7 @@ impl Pass<'_> {
         result: &mut [f32],
         scratch: &mut Scratch,
         hits: &mut Vec<u64>,
-    ) -> (u64, bool) {
+    ) -> Traced {
         let params = self.params;
         let window_mode = params.mode == Mode::Window;
         let ray_count = params.rays;
@@ -489,8 +504,11 @@ impl Pass<'_> {
         // combined by MIS (`window_light`).
         let sample_windows = if bounce == 0 { self.windows } else { None };
         // Window mode keeps bounce 0's light of the point's two sides apart,
-        // to drop that of a side outside the enclosure (`Sides::outside`).
-        let split_sides = window_mode && bounce == 0 && !params.keep_outside_sides;
+        // to drop that of a side outside the enclosure (`Sides::outside`)
+        // and to tell the back side's share.
+        let split_sides = window_mode && bounce == 0;
+        // Bounces ≥ 1 in window mode: the DC the back side's rays gather.
+        let mut back_dc = 0.0f32;
         let mut sides = Sides::default();
         if split_sides {
             for light in &mut scratch.side_light {
@@ -529,10 +547,10 @@ impl Pass<'_> {
                 if bounce > 0 {
                     if let (Some(hit), Some(gather)) = (scratch.hits[i], &self.gather) {
                         // Through the cache's encoding, so the bytes do not depend on whether the cache fit.
-                        let record = self.record_of(&hit);
+                        let record = self.side_record(self.record_of(&hit), point, query.direction);
                         if record != NO_HIT {
                             let (triangle, u, v) = decode_hit(record);
-                            gather.add_hit(triangle, u, v, ray_weight, result);
+                            back_dc += back_side(record) * gather.add_hit(triangle, u, v, ray_weight, result);
                         }
                     }
                     continue;
@@ -546,7 +564,7 @@ impl Pass<'_> {
                         continue;
                     }
                     if self.record_hits {
-                        hits.push(hit.map_or(NO_HIT, |h| self.record_of(&h)));
+                        hits.push(hit.map_or(NO_HIT, |h| self.side_record(self.record_of(&h), point, query.direction)));
                     }
                     if split_sides {
                         let side = Sides::of(point.face_normal, query.direction);
@@ -578,7 +596,7 @@ impl Pass<'_> {
                 }
             }
             if check_inside && batch.start < probe && self.reject_inside(inside_hits, probe, hits) {
-                return (traced, true);
+                return Traced { rays: traced, inside: true, back_dc: 0.0 };
             }
         }
         if let Some(windows) = sample_windows {
@@ -587,12 +605,26 @@ impl Pass<'_> {
         if split_sides {
             // Only the sides inside the enclosure keep their light through glass.
             for side in 0..2 {
-                if !sides.outside(side) {
+                if params.keep_outside_sides || !sides.outside(side) {
                     result.iter_mut().zip(&scratch.side_light[side]).for_each(|(r, l)| *r += l);
+                    if side == 1 {
+                        back_dc = scratch.side_light[1][0];
+                    }
                 }
             }
         }
-        (traced, false)
+        Traced { rays: traced, inside: false, back_dc: back_dc / self.channels as f32 }
+    }
+
+    /// `record` marked [`BACK_SIDE`] when, in window mode, its ray toward
+    /// `direction` leaves through the back of the point's face.
+    #[inline]
+    pub(crate) fn side_record(&self, record: u64, point: &Point, direction: Vec3) -> u64 {
+        if record == NO_HIT || self.params.mode != Mode::Window || Sides::of(point.face_normal, direction) == 0 {
+            record
+        } else {
+            record | BACK_SIDE
+        }
     }
 
     /// The light through the glass per unit transmittance and SH basis value

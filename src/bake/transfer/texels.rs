@@ -197,10 +197,10 @@ pub(crate) fn run_texel_pass(
                     }
                     result.fill(0.0);
                     let tp = points.points[p as usize];
-                    if pass.gather_cached(p as u64, &mut result) {
+                    if let Some(back_dc) = pass.gather_cached(p as u64, &mut result) {
                         rays += pass.params.rays as u64;
                         weights[local] += tp.weight;
-                        moments[local].add(tp.weight, result[0]);
+                        moments[local].add(tp.weight, result[0], back_dc);
                         sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
                         continue;
                     }
@@ -216,15 +216,15 @@ pub(crate) fn run_texel_pass(
                         seed: hash_seed(&[pass.params.seed, TAG_TEXEL_DIRECTION, texel_ids[texel], k as u32]),
                     };
                     result.fill(0.0);
-                    let (n, is_inside) = pass.trace_point(&point, bounce, bounce == 0, &mut result, &mut scratch, &mut hits);
+                    let point_traced = pass.trace_point(&point, bounce, bounce == 0, &mut result, &mut scratch, &mut hits);
                     rays += pass.params.rays as u64;
-                    traced += n;
-                    if is_inside {
+                    traced += point_traced.rays;
+                    if point_traced.inside {
                         inside.push(p);
                         continue;
                     }
                     weights[local] += tp.weight;
-                    moments[local].add(tp.weight, result[0]);
+                    moments[local].add(tp.weight, result[0], point_traced.back_dc);
                     sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
                 }
             }
@@ -263,6 +263,8 @@ pub(crate) struct TexelState {
     pub(crate) bounces: Vec<Vec<f32>>,
     /// Per texel, the standard error of its DC (channel 0), bounces added in quadrature.
     pub(crate) noise: Vec<f32>,
+    /// Per texel, the DC that came through the back of its face (`bake::side_share`).
+    pub(crate) back_dc: Vec<f32>,
     /// Per texel, its chart (that of its first triangle).
     pub(crate) chart: Vec<u32>,
     pub(crate) width: u32,
@@ -295,6 +297,7 @@ impl TexelState {
             total: Vec::new(),
             bounces: Vec::new(),
             noise: Vec::new(),
+            back_dc: Vec::new(),
             chart,
             width: atlas.width,
             rays: 0,
@@ -352,6 +355,7 @@ impl TexelState {
         }
         let sigma = VertexDc::new(&self.weights, &sums.sums, pass.channels * pass.coeffs, &sums.moments).standard_errors();
         add_noise_in_quadrature(&mut self.noise, &sigma);
+        crate::bake::side_share::add_back_dc(&mut self.back_dc, &self.weights, &sums.moments);
         let layer = super::normalise::normalised_layer(&sums.sums, &self.weights, pass.channels, channels, pass.coeffs);
         if self.total.is_empty() {
             self.total = vec![0.0; layer.len()];
@@ -473,6 +477,7 @@ mod tests {
             total,
             bounces: Vec::new(),
             noise,
+            back_dc: Vec::new(),
             chart,
             width: w,
             rays: 0,
