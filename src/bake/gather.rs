@@ -25,8 +25,16 @@ pub(crate) const NO_HIT: u64 = u64::MAX;
 
 /// Set in a window-mode record whose ray left its point through the back of
 /// the point's face: the gather keeps that side's light apart
-/// (`bake::side_share`). Triangle indices stay below 2³¹.
+/// (`bake::side_share`).
 pub(crate) const BACK_SIDE: u64 = 1 << 63;
+
+/// Set in a window-mode record whose ray met the back face of the hit
+/// triangle: the gather reads the light of that side of it. Triangle
+/// indices stay below 2³⁰ (`check_triangle_count`).
+pub(crate) const HIT_BACK: u64 = 1 << 62;
+
+/// Triangles a record can name.
+pub(crate) const MAX_RECORD_TRIANGLES: u64 = 1 << 30;
 
 /// Packs a hit on `triangle` at barycentrics (u, v) into one word (16-bit barycentrics).
 #[inline]
@@ -38,7 +46,13 @@ pub(crate) fn encode_hit(triangle: u32, u: f32, v: f32) -> u64 {
 #[inline(always)]
 pub(crate) fn decode_hit(record: u64) -> (usize, f32, f32) {
     let q = |x: u64| (x & 0xffff) as f32 / 65535.0;
-    (((record & !BACK_SIDE) >> 32) as usize, q(record >> 16), q(record))
+    (((record & !(BACK_SIDE | HIT_BACK)) >> 32) as usize, q(record >> 16), q(record))
+}
+
+/// Whether a record's ray met the back face of the triangle it hit.
+#[inline(always)]
+pub(crate) fn hit_back(record: u64) -> bool {
+    record & HIT_BACK != 0
 }
 
 /// 1 for a record of a ray that left through the back of its point's face, else 0.
@@ -98,6 +112,11 @@ pub(crate) struct Gather<'a> {
     /// on an atlas triangle ([`Gather::with_texels`]); `rows` then serve the
     /// rest (back sides, triangles outside the atlas).
     texels: Option<(&'a TexelLookup, &'a [f32])>,
+    /// Window mode with the sides split ([`Gather::with_sides`]): the rows
+    /// (receivers) past which each receiver's back side's rows lie, read by
+    /// a hit on a back face; 0: both faces read the same rows.
+    back_offset: usize,
+    texel_back_offset: usize,
 }
 
 impl<'a> Gather<'a> {
@@ -111,13 +130,31 @@ impl<'a> Gather<'a> {
         source_channels: usize,
         channels: usize,
     ) -> Gather<'a> {
-        Gather { indices, albedo, rows, coeffs, source_channels, channels, avx2: crate::trace::bvh8::avx2_available(), texels: None }
+        Gather {
+            indices,
+            albedo,
+            rows,
+            coeffs,
+            source_channels,
+            channels,
+            avx2: crate::trace::bvh8::avx2_available(),
+            texels: None,
+            back_offset: 0,
+            texel_back_offset: 0,
+        }
     }
 
     /// Reads hits on atlas triangles from `rows` per texel of `lookup`
     /// (`source_channels` per texel, as the vertex rows).
     pub(crate) fn with_texels(self, lookup: &'a TexelLookup, rows: &'a [f32]) -> Gather<'a> {
         Gather { texels: Some((lookup, rows)), ..self }
+    }
+
+    /// Rows split by side ([`crate::bake::transfer::split_sides`]): a hit on
+    /// a back face reads the receiver's row `back_offset` rows on (texels:
+    /// `texel_back_offset`); 0 reads the same row from either face.
+    pub(crate) fn with_sides(self, back_offset: usize, texel_back_offset: usize) -> Gather<'a> {
+        Gather { back_offset, texel_back_offset, ..self }
     }
 }
 
@@ -189,17 +226,29 @@ impl Gather<'_> {
         if let Some(&ahead) = records.get(i + AHEAD_ROWS).filter(|&&r| r != NO_HIT) {
             let stride = self.source_channels * self.coeffs;
             let triangle = decode_hit(ahead).0;
+            let offset = self.row_offset(hit_back(ahead));
             for &vertex in &self.indices[3 * triangle..3 * triangle + 3] {
-                prefetch_bytes(self.rows.as_ptr().wrapping_add(vertex as usize * stride), stride * 4);
+                prefetch_bytes(self.rows.as_ptr().wrapping_add((vertex as usize + offset) * stride), stride * 4);
             }
         }
     }
 
-    /// A hit's corner rows, barycentric weights and albedo.
+    /// The rows a hit on a back face (`back`) or a front face reads from.
     #[inline(always)]
-    fn corners(&self, triangle: usize, u: f32, v: f32) -> ([&[f32]; 3], [f32; 3], [f32; 3]) {
+    fn row_offset(&self, back: bool) -> usize {
+        if back {
+            self.back_offset
+        } else {
+            0
+        }
+    }
+
+    /// A hit's corner rows (those of the side hit), barycentric weights and albedo.
+    #[inline(always)]
+    fn corners(&self, triangle: usize, u: f32, v: f32, back: bool) -> ([&[f32]; 3], [f32; 3], [f32; 3]) {
         let stride = self.source_channels * self.coeffs;
-        let corner = |k: usize| &self.rows[self.indices[3 * triangle + k] as usize * stride..][..stride];
+        let offset = self.row_offset(back);
+        let corner = |k: usize| &self.rows[(self.indices[3 * triangle + k] as usize + offset) * stride..][..stride];
         ([corner(0), corner(1), corner(2)], [1.0 - u - v, u, v], self.albedo[triangle])
     }
 
@@ -225,7 +274,7 @@ impl Gather<'_> {
                 continue;
             }
             let (triangle, u, v) = decode_hit(record);
-            let ([s0, s1, s2], [b0, b1, b2], albedo) = self.corners(triangle, u, v);
+            let ([s0, s1, s2], [b0, b1, b2], albedo) = self.corners(triangle, u, v, hit_back(record));
             if MONO {
                 let (x0, x1, x2) = (&s0[..N], &s1[..N], &s2[..N]);
                 let mut blend = [0.0f32; N];
@@ -271,28 +320,29 @@ impl Gather<'_> {
             let record = records[i];
             if record != NO_HIT {
                 let (triangle, u, v) = decode_hit(record);
-                back += back_side(record) * self.add_hit(triangle, u, v, weight, result);
+                back += back_side(record) * self.add_hit(triangle, u, v, hit_back(record), weight, result);
             }
         }
         back
     }
 
     /// Adds `weight · ρ(h) · t⁽ᵇ⁻¹⁾(h)` for one hit at barycentrics (u, v) of
-    /// `triangle`; returns the DC it added, summed over channels (the fixed
-    /// kernels' operations, so the same bits).
+    /// `triangle`, on its back face when `back`; returns the DC it added,
+    /// summed over channels (the fixed kernels' operations, so the same bits).
     #[inline]
-    pub(crate) fn add_hit(&self, triangle: usize, u: f32, v: f32, weight: f32, result: &mut [f32]) -> f32 {
+    pub(crate) fn add_hit(&self, triangle: usize, u: f32, v: f32, back: bool, weight: f32, result: &mut [f32]) -> f32 {
         let n = self.coeffs;
         if let Some((lookup, rows)) = self.texels {
             if let Some((ids, texel_weights)) = lookup.bilinear(triangle, u, v) {
                 let stride = self.source_channels * n;
+                let offset = if back { self.texel_back_offset } else { 0 };
                 let mut dc = 0.0f32;
                 for (c, &reflect) in self.albedo[triangle].iter().enumerate().take(self.channels) {
                     let source = if self.source_channels == 1 { 0..n } else { c * n..(c + 1) * n };
                     for (&id, &share) in ids.iter().zip(&texel_weights) {
                         if share > 0.0 {
                             let w = weight * reflect * share;
-                            let row = &rows[id as usize * stride..][source.clone()];
+                            let row = &rows[(id as usize + offset) * stride..][source.clone()];
                             result[c * n..(c + 1) * n].iter_mut().zip(row).for_each(|(d, x)| *d += w * x);
                             dc += w * row[0];
                         }
@@ -301,7 +351,7 @@ impl Gather<'_> {
                 return dc;
             }
         }
-        let ([s0, s1, s2], [b0, b1, b2], albedo) = self.corners(triangle, u, v);
+        let ([s0, s1, s2], [b0, b1, b2], albedo) = self.corners(triangle, u, v, back);
         let mut dc = 0.0f32;
         for (c, &reflect) in albedo.iter().enumerate().take(self.channels) {
             let w = weight * reflect;
@@ -337,17 +387,18 @@ mod tests {
         let (vertices, triangles) = (50u32, 40usize);
         let indices = (0..3 * triangles).map(|_| next() % vertices).collect();
         let albedo = (0..triangles).map(|_| [0, 1, 2].map(|_| (next() % 1000) as f32 / 1000.0)).collect();
-        let mut rows = RowBuffer::zeroed(vertices as usize * source_channels * coeffs);
+        // Front rows, then back rows (the sides split, `Gather::with_sides`).
+        let mut rows = RowBuffer::zeroed(2 * vertices as usize * source_channels * coeffs);
         rows.as_mut_slice().iter_mut().for_each(|x| *x = (next() % 20001) as f32 / 10000.0 - 1.0);
         let records = (0..300)
             .map(|_| {
                 let (u, v) = ((next() % 1000) as f32 / 2000.0, (next() % 1000) as f32 / 2000.0);
                 if next() % 5 == 0 {
                     NO_HIT
-                } else if next() % 3 == 0 {
-                    encode_hit(next() % triangles as u32, u, v) | BACK_SIDE
                 } else {
-                    encode_hit(next() % triangles as u32, u, v)
+                    let side = if next() % 3 == 0 { BACK_SIDE } else { 0 };
+                    let face = if next() % 4 == 0 { HIT_BACK } else { 0 };
+                    encode_hit(next() % triangles as u32, u, v) | side | face
                 }
             })
             .collect();
@@ -360,15 +411,19 @@ mod tests {
         let n = g.coeffs;
         let mut out = vec![0.0f64; g.channels * n];
         let mut back = 0.0f64;
+        let vertices = f.rows.len() / (2 * g.source_channels * n);
         for &record in f.records.iter().take(count).filter(|&&r| r != NO_HIT) {
             let (t, u, v) = decode_hit(record);
             let b = [1.0 - u - v, u, v];
+            let offset = if hit_back(record) { vertices } else { 0 };
             for c in 0..g.channels {
                 let source = if g.source_channels == 1 { 0 } else { c };
                 for k in 0..n {
                     let value: f64 = (0..3)
                         .map(|j| {
-                            b[j] as f64 * f.rows.as_slice()[f.indices[3 * t + j] as usize * g.source_channels * n + source * n + k] as f64
+                            b[j] as f64
+                                * f.rows.as_slice()[(f.indices[3 * t + j] as usize + offset) * g.source_channels * n + source * n + k]
+                                    as f64
                         })
                         .sum();
                     out[c * n + k] += (weight * f.albedo[t][c]) as f64 * value;
@@ -388,7 +443,9 @@ mod tests {
                 let f = fixture(coeffs, source_channels, (coeffs * 10 + channels + source_channels) as u64);
                 let mut outputs = Vec::new();
                 for avx2 in [false, crate::trace::bvh8::avx2_available()] {
-                    let g = Gather { avx2, ..Gather::new(&f.indices, &f.albedo, f.rows.as_slice(), coeffs, source_channels, channels) };
+                    let vertices = f.rows.len() / (2 * source_channels * coeffs);
+                    let g = Gather { avx2, ..Gather::new(&f.indices, &f.albedo, f.rows.as_slice(), coeffs, source_channels, channels) }
+                        .with_sides(vertices, 0);
                     let count = 64;
                     let weight = 2.0 / 64.0;
                     // Fixed kernel (orders 1-5) or general, then the general one on its own.

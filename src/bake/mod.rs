@@ -342,6 +342,10 @@ pub fn check_mesh(mesh: &crate::mesh::Mesh) -> Result<(), BakeError> {
         return bad(format!("index {i} is {} but there are {} vertices", mesh.indices[i], mesh.positions.len()));
     }
     let triangles = mesh.triangle_count();
+    // Hit records name a triangle in 30 bits (and twins double the count in open mode).
+    if triangles as u64 >= gather::MAX_RECORD_TRIANGLES / 2 {
+        return bad(format!("{triangles} triangles: a bake takes fewer than {}", gather::MAX_RECORD_TRIANGLES / 2));
+    }
     if mesh.tri_material.len() != triangles || mesh.tri_material.iter().any(|&m| m as usize >= mesh.materials.len()) {
         return bad("a triangle has no material or one out of range".into());
     }

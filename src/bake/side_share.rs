@@ -129,6 +129,44 @@ mod tests {
         assert!(open.front_share.is_empty());
     }
 
+    /// A closed sphere in the box of panes, baked with bounces: a bounce's
+    /// ray that leaves a point on the sphere through its back meets the
+    /// sphere's inside, a back face, whose side holds no light (the bounce
+    /// before lit only the outside). So no light comes through the back in
+    /// any bounce: front share 1 at every lit vertex. Gathering the hit
+    /// triangle's light of both sides instead, the inside returns the
+    /// outside's light: vertices then took up to 26% of theirs through the back.
+    #[test]
+    fn a_closed_solid_takes_no_light_through_its_inside_in_any_bounce() {
+        let mut mesh = sheet_between_panes();
+        // The sheet's 32 triangles out, a closed sphere (outward faces) in.
+        let sheet_vertices = 25;
+        mesh.indices.drain(..32 * 3);
+        mesh.tri_material.drain(..32);
+        mesh.tri_group.drain(..32);
+        mesh.indices.iter_mut().for_each(|i| *i -= sheet_vertices);
+        mesh.positions.drain(..sheet_vertices as usize);
+        mesh.normals.drain(..sheet_vertices as usize);
+        let mut sphere = shapes::icosphere(2);
+        shapes::transform(&mut sphere, 0.4, Vec3::ZERO);
+        sphere.materials[0].albedo = [0.8; 3];
+        let first = mesh.vertex_count();
+        shapes::append(&mut mesh, &sphere);
+        let sphere_vertices = first..mesh.vertex_count();
+        let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+        let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+        let params = BakeParams { rays: 64, bounces: 2, mode: Mode::Window, store_bounces: true, ..BakeParams::default() };
+        let result = crate::bake::bake_transfer(&mesh, &scene, &surfaces, &params).unwrap();
+        let stride = result.channels * crate::sh::coeff_count(params.order);
+        let mut checked = 0;
+        for v in sphere_vertices {
+            assert!(result.bounces[1][v * stride] > 0.0, "vertex {v} takes bounce light");
+            assert!(result.front_share[v] > 1.0 - 1e-5, "sphere vertex {v}: front share {}", result.front_share[v]);
+            checked += 1;
+        }
+        assert!(checked > 100);
+    }
+
     /// The window-halo room with the outer sides kept: the front wall's
     /// outer face, between the wall and the pane outside its opening, is
     /// lit through the pane; its inner face sees only the room. In bounce 0

@@ -472,9 +472,9 @@ impl HitFile {
         let triangles = identity.plan_triangles;
         let all = records.iter().chain(texels.iter().flat_map(|t| &t.records));
         if let Some((i, h)) =
-            all.enumerate().find(|&(_, &h)| h != crate::bake::gather::NO_HIT && (h & !crate::bake::gather::BACK_SIDE) >> 32 >= triangles)
+            all.enumerate().find(|&(_, &h)| h != crate::bake::gather::NO_HIT && crate::bake::gather::decode_hit(h).0 as u64 >= triangles)
         {
-            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", (h & !crate::bake::gather::BACK_SIDE) >> 32));
+            return Err(format!("hit record {i} names triangle {} of a mesh of {triangles}", crate::bake::gather::decode_hit(*h).0 as u64));
         }
         Ok(HitFile { identity, shard, items, points, rays, rejected, records, texels })
     }
@@ -505,6 +505,9 @@ pub struct LayerFile {
     /// Per vertex: the DC of the rounds so far that came through the back
     /// of its face (`bake::side_share`), from their moments; empty as `noise`.
     pub back_dc: Vec<f32>,
+    /// Window mode: `source` (and the texels') holds every receiver's front
+    /// side's rows, then every receiver's back side's (`bake::transfer::split_sides`).
+    pub source_sides: bool,
     /// Per vertex `[source channel][coeff]`: this bounce normalised, what the next round gathers.
     pub source: Vec<f32>,
     /// Per vertex `[channel][coeff]`: bounces 0..=round summed in order.
@@ -527,6 +530,8 @@ pub struct TexelLayer {
     pub weights: Vec<f32>,
     pub noise: Vec<f32>,
     pub back_dc: Vec<f32>,
+    /// `source` split by side (window mode), as [`LayerFile::source_sides`].
+    pub source_sides: bool,
     pub source: Vec<f32>,
     pub total: Vec<f32>,
     pub layers: Vec<Vec<f32>>,
@@ -548,6 +553,7 @@ impl LayerFile {
         w.u32(!self.noise.is_empty() as u32)?;
         w.f32s(&self.noise)?;
         w.f32s(&self.back_dc)?;
+        w.u32(self.source_sides as u32)?;
         w.f32s(&self.source)?;
         w.f32s(&self.total)?;
         w.u32(self.layers.len() as u32)?;
@@ -562,7 +568,11 @@ impl LayerFile {
                 for v in [t.points, t.points_rejected, t.rays, t.rays_traced] {
                     w.u64(v)?;
                 }
-                for rows in [&t.weights, &t.noise, &t.back_dc, &t.source, &t.total] {
+                for rows in [&t.weights, &t.noise, &t.back_dc] {
+                    w.f32s(rows)?;
+                }
+                w.u32(t.source_sides as u32)?;
+                for rows in [&t.source, &t.total] {
                     w.f32s(rows)?;
                 }
                 for layer in &t.layers {
@@ -603,7 +613,9 @@ impl LayerFile {
         if back_dc.iter().any(|n| !n.is_finite()) {
             return Err("a vertex's back-side DC is not finite".into());
         }
-        let source = r.f32s(v.saturating_mul((source_channels * coeffs) as u64), "source rows")?;
+        let source_sides = flag_u32(r.u32("source sides flag")?, "source sides")?;
+        let sides = if source_sides { 2 } else { 1 };
+        let source = r.f32s(v.saturating_mul((source_channels * coeffs) as u64).saturating_mul(sides), "source rows")?;
         let layer_len = v.saturating_mul((channels * coeffs) as u64);
         let total = r.f32s(layer_len, "total")?;
         let stored = r.u32("stored layers")?;
@@ -627,11 +639,28 @@ impl LayerFile {
                 if back_dc.iter().any(|x| !x.is_finite()) {
                     return Err("a texel's back-side DC is not finite".into());
                 }
-                let source = r.f32s(n.saturating_mul((source_channels * coeffs) as u64), "texel source rows")?;
+                let texel_sides = flag_u32(r.u32("texel source sides flag")?, "texel source sides")?;
+                let source = r.f32s(
+                    n.saturating_mul((source_channels * coeffs) as u64).saturating_mul(if texel_sides { 2 } else { 1 }),
+                    "texel source rows",
+                )?;
                 let layer_len = n.saturating_mul((channels * coeffs) as u64);
                 let total = r.f32s(layer_len, "texel total")?;
                 let layers = (0..stored).map(|_| r.f32s(layer_len, "stored texel layer")).collect::<Result<_, _>>()?;
-                Some(TexelLayer { texel_count, points, points_rejected, rays, rays_traced, weights, noise, back_dc, source, total, layers })
+                Some(TexelLayer {
+                    texel_count,
+                    points,
+                    points_rejected,
+                    rays,
+                    rays_traced,
+                    weights,
+                    noise,
+                    back_dc,
+                    source_sides: texel_sides,
+                    source,
+                    total,
+                    layers,
+                })
             }
         };
         r.finish()?;
@@ -649,6 +678,7 @@ impl LayerFile {
             weights,
             noise,
             back_dc,
+            source_sides,
             source,
             total,
             layers,
@@ -915,7 +945,8 @@ mod tests {
             weights: vec![1.0; 5],
             noise: vec![0.0, 0.5, 0.25, 0.0, 1.0],
             back_dc: vec![0.0, 0.125, 0.0, 0.0, 0.5],
-            source: vec![0.25; 15],
+            source_sides: true,
+            source: vec![0.25; 30],
             total: vec![0.5; 15],
             layers: vec![vec![0.25; 15], vec![0.25; 15]],
             texels: Some(TexelLayer {
@@ -927,7 +958,8 @@ mod tests {
                 weights: vec![1.0, 0.0],
                 noise: vec![0.125, 0.0],
                 back_dc: vec![0.25, 0.0],
-                source: vec![0.5; 6],
+                source_sides: true,
+                source: vec![0.5; 12],
                 total: vec![0.75; 6],
                 layers: vec![vec![0.25; 6], vec![0.5; 6]],
             }),

@@ -11,7 +11,7 @@ use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::bake::side_share::{add_back_dc, front_shares};
-use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer};
+use crate::bake::transfer::{add_layer, add_row, normalise_rows, normalised_layer, split_sides};
 use crate::bake::{BakeStats, TexelSunRange, TransferResult};
 
 /// What two identities differ in, as "rays 32 here, 64 in" (the caller names
@@ -324,6 +324,11 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     if round < params.bounces {
         let mut source = vec![0.0f32; vertex_count * stride];
         normalise_rows(&mut source, &sums, &weights, stride);
+        // Window mode: split by side, as a whole bake splits the rows its next bounce gathers.
+        let source_sides = params.mode == crate::bake::Mode::Window && tracks_noise;
+        if source_sides {
+            source = split_sides(&source, &weights, &moments, pass_channels, coeffs).as_slice().to_vec();
+        }
         return Ok(TransferMerge::Layer(LayerFile {
             identity: first.identity.clone(),
             round,
@@ -338,6 +343,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             weights,
             noise,
             back_dc,
+            source_sides,
             source,
             total,
             layers,
@@ -491,6 +497,7 @@ fn merge_texel_round(
             weights,
             noise: Vec::new(),
             back_dc: Vec::new(),
+            source_sides: false,
             source: Vec::new(),
             total: zeroed(covered as usize * channels * coeffs, first_path)?,
             layers: Vec::new(),
@@ -507,6 +514,10 @@ fn merge_texel_round(
     merged.source = vec![0.0f32; if round < params.bounces { covered as usize * stride } else { 0 }];
     if round < params.bounces {
         normalise_rows(&mut merged.source, &sums, &merged.weights, stride);
+        merged.source_sides = params.mode == crate::bake::Mode::Window;
+        if merged.source_sides {
+            merged.source = split_sides(&merged.source, &merged.weights, &moments, pass_channels, coeffs).as_slice().to_vec();
+        }
     }
     Ok(Some(merged))
 }

@@ -163,6 +163,7 @@ pub fn bake_transfer_shard(
         source.rows = RowBuffer::zeroed(input.layer.source.len());
         source.rows.as_mut_slice().copy_from_slice(&input.layer.source);
         source.channels = input.layer.source_channels as usize;
+        source.sides = input.layer.source_sides;
     }
     // Texel mode: the shard's covered texels, and in later rounds what
     // their points found inside geometry and the texels' previous bounce,
@@ -178,7 +179,7 @@ pub fn bake_transfer_shard(
         for local in 0..points.end - points.start {
             texel_plan.state.rejected[(points.start + local) as usize] = hits.is_rejected(local);
         }
-        source.texels = Some(texel_plan.state.source_from_merged(&layer.weights, &layer.source));
+        source.texels = Some(texel_plan.state.source_from_merged(&layer.weights, &layer.source, layer.source_sides));
     }
     let record = stage == Stage::Round(0) && params.bounces > 0;
     let label = match stage {

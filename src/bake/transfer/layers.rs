@@ -150,6 +150,11 @@ pub(crate) fn bake_layers_with_texels(
             }
             None if bounce < params.bounces => {
                 normalise_source_into(&mut source, &sums.sums, &vertex_weight, pass_channels, coeffs);
+                if params.mode == crate::bake::Mode::Window && !sums.moments.is_empty() && sums.item_sums.is_empty() {
+                    // The next bounce reads the light of the side of a face its ray meets.
+                    source.rows = split_sides(source.rows.as_slice(), &vertex_weight, &sums.moments, pass_channels, coeffs);
+                    source.sides = true;
+                }
                 if !sums.item_sums.is_empty() {
                     // The next bounce reads each hit triangle's own fit (`--gather-fit`).
                     let fit = fit.get_or_insert_with(|| super::fit::fit_matrices(&plan.mesh, &plan.items, params, &rejected));

@@ -6,6 +6,7 @@ use rayon::prelude::*;
 use std::sync::Arc;
 
 use crate::bake::gather::RowBuffer;
+use crate::bake::noise::Moments;
 use crate::bake::texel_lookup::TexelLookup;
 
 /// The previous bounce per vertex in line-aligned rows, what the next
@@ -21,18 +22,72 @@ pub(crate) struct SourceRows {
     /// Texel mode: the previous bounce per texel, which hits on atlas
     /// triangles read instead of `rows`.
     pub(crate) texels: Option<TexelRows>,
+    /// Window mode: `rows` holds each receiver's front side's rows, then
+    /// every receiver's back side's ([`split_sides`]).
+    pub(crate) sides: bool,
 }
 
 /// The previous bounce per covered texel, `channels` rows each as [`SourceRows`].
 pub(crate) struct TexelRows {
     pub(crate) lookup: Arc<TexelLookup>,
     pub(crate) rows: RowBuffer,
+    /// Split by side, as [`SourceRows::sides`].
+    pub(crate) sides: bool,
+}
+
+impl TexelRows {
+    /// Rows past which the texels' back sides lie (0 without the split).
+    pub(crate) fn back_offset(&self, stride: usize) -> usize {
+        if self.sides {
+            self.rows.len() / (2 * stride).max(1)
+        } else {
+            0
+        }
+    }
 }
 
 impl SourceRows {
     pub(crate) fn empty() -> SourceRows {
-        SourceRows { rows: RowBuffer::zeroed(0), channels: 1, corner_indices: Vec::new(), texels: None }
+        SourceRows { rows: RowBuffer::zeroed(0), channels: 1, corner_indices: Vec::new(), texels: None, sides: false }
     }
+
+    /// Rows past which the receivers' back sides lie (0 without the split).
+    pub(crate) fn back_offset(&self, stride: usize) -> usize {
+        if self.sides {
+            self.rows.len() / (2 * stride).max(1)
+        } else {
+            0
+        }
+    }
+}
+
+/// Window mode: a bounce's normalised rows (`stride` = `channels` ×
+/// `coeffs` per receiver) split by side, what the next bounce gathers: a
+/// hit on a face reads that side's light. Each receiver's back share is its
+/// back-side DC (Σ w·b / Σ w of `moments` and `weights`) over the row's DC
+/// (mean over channels), clamped to [0, 1]; returns every receiver's front
+/// rows (the row × (1 − back share)), then every receiver's back rows.
+pub(crate) fn split_sides(rows: &[f32], weights: &[f32], moments: &[Moments], channels: usize, coeffs: usize) -> RowBuffer {
+    let stride = channels * coeffs;
+    let receivers = rows.len() / stride.max(1);
+    let mut out = RowBuffer::zeroed(2 * rows.len());
+    let (front, back) = out.as_mut_slice().split_at_mut(rows.len());
+    front.par_chunks_mut(stride).zip(back.par_chunks_mut(stride)).enumerate().for_each(|(r, (f, b))| {
+        let row = &rows[r * stride..(r + 1) * stride];
+        let dc = (0..channels).map(|c| f64::from(row[c * coeffs])).sum::<f64>() / channels as f64;
+        let w = f64::from(weights.get(r).copied().unwrap_or(0.0));
+        let back_dc = match moments.get(r) {
+            Some(m) if w > 0.0 => m.wb / w,
+            _ => 0.0,
+        };
+        let back_share = if dc > 0.0 { (back_dc / dc).clamp(0.0, 1.0) as f32 } else { 0.0 };
+        for ((f, b), &x) in f.iter_mut().zip(b.iter_mut()).zip(row) {
+            *b = back_share * x;
+            *f = x - *b;
+        }
+    });
+    debug_assert_eq!(receivers * 2 * stride, out.len());
+    out
 }
 
 /// Adds `row` to `target`, element by element: the one place per-item sums
@@ -67,6 +122,7 @@ pub(crate) fn normalise_source_into(source: &mut SourceRows, sums: &[f32], weigh
     }
     source.channels = pass_channels;
     source.corner_indices.clear();
+    source.sides = false;
     normalise_rows(source.rows.as_mut_slice(), sums, weights, stride);
 }
 
@@ -80,6 +136,7 @@ pub(crate) fn source_from_layer(source: &mut SourceRows, layer: &[f32], pass_cha
     }
     source.channels = pass_channels;
     source.corner_indices.clear();
+    source.sides = false;
     source
         .rows
         .as_mut_slice()

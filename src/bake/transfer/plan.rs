@@ -99,6 +99,9 @@ impl<'a> Plan<'a> {
         let gather = (bounce > 0).then(|| {
             let corners = if source.corner_indices.is_empty() { self.receivers().hit_table() } else { &source.corner_indices };
             let gather = Gather::new(corners, &self.bounce_albedo, source.rows.as_slice(), self.coeffs, source.channels, self.channels);
+            let stride = source.channels * self.coeffs;
+            let texel_back_offset = source.texels.as_ref().map_or(0, |t| t.back_offset(stride));
+            let gather = gather.with_sides(source.back_offset(stride), texel_back_offset);
             match &source.texels {
                 Some(texels) => gather.with_texels(&texels.lookup, texels.rows.as_slice()),
                 None => gather,

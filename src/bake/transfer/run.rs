@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::items::*;
 use super::normalise::*;
 use crate::bake::enclosure::Sides;
-use crate::bake::gather::{back_side, decode_hit, encode_hit, Gather, BACK_SIDE, NO_HIT};
+use crate::bake::gather::{back_side, decode_hit, encode_hit, hit_back, Gather, BACK_SIDE, HIT_BACK, NO_HIT};
 use crate::bake::noise::Moments;
 use crate::bake::progress::Progress;
 use crate::bake::receivers::{point_weights, Receivers};
@@ -550,7 +550,7 @@ impl Pass<'_> {
                         let record = self.side_record(self.record_of(&hit), point, query.direction);
                         if record != NO_HIT {
                             let (triangle, u, v) = decode_hit(record);
-                            back_dc += back_side(record) * gather.add_hit(triangle, u, v, ray_weight, result);
+                            back_dc += back_side(record) * gather.add_hit(triangle, u, v, hit_back(record), ray_weight, result);
                         }
                     }
                     continue;
@@ -706,16 +706,20 @@ impl Pass<'_> {
         true
     }
 
-    /// What later bounces gather at `hit`: the hit triangle's rows, or in
-    /// open mode, on a back face, its twin's (the twin's corners run the
-    /// other way: its barycentrics are (v, u)); `NO_HIT` where no light
-    /// comes back (a window, a back face without a twin).
+    /// What later bounces gather at `hit`: the hit triangle's rows, in
+    /// window mode those of the side hit (marked [`HIT_BACK`] on a back
+    /// face), or in open mode, on a back face, its twin's (the twin's
+    /// corners run the other way: its barycentrics are (v, u)); `NO_HIT`
+    /// where no light comes back (a window, a back face without a twin).
     #[inline]
     pub(crate) fn record_of(&self, hit: &crate::trace::Hit) -> u64 {
         if self.surfaces.window_transmittance[hit.triangle as usize].is_some() {
             return NO_HIT;
         }
-        if self.params.mode == Mode::Window || !hit.back_face {
+        if self.params.mode == Mode::Window {
+            return encode_hit(hit.triangle, hit.u, hit.v) | if hit.back_face { HIT_BACK } else { 0 };
+        }
+        if !hit.back_face {
             return encode_hit(hit.triangle, hit.u, hit.v);
         }
         match self.twins.twin_of[hit.triangle as usize] {

@@ -277,8 +277,10 @@ pub(crate) struct TexelState {
     hits: Vec<u64>,
     /// Where hits read the texels; texels without light are dropped from it after bounce 0.
     lookup: Arc<TexelLookup>,
-    /// The last bounce per texel, unwidened: what the next bounce gathers.
+    /// The last bounce per texel, unwidened: what the next bounce gathers
+    /// (split by side when `next_sides`).
     next: Option<RowBuffer>,
+    next_sides: bool,
 }
 
 impl TexelState {
@@ -288,6 +290,7 @@ impl TexelState {
         TexelState {
             lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &chart)),
             next: None,
+            next_sides: false,
             seconds: Vec::new(),
             hits: Vec::new(),
             texels: coverage.texels.clone(),
@@ -351,6 +354,11 @@ impl TexelState {
             let stride = pass.channels * pass.coeffs;
             let mut rows = RowBuffer::zeroed(self.texels.len() * stride);
             super::normalise::normalise_rows(rows.as_mut_slice(), &sums.sums, &self.weights, stride);
+            // Window mode: the next bounce reads the side of a face its ray meets.
+            self.next_sides = pass.params.mode == crate::bake::Mode::Window;
+            if self.next_sides {
+                rows = super::normalise::split_sides(rows.as_slice(), &self.weights, &sums.moments, pass.channels, pass.coeffs);
+            }
             self.next = Some(rows);
         }
         let sigma = VertexDc::new(&self.weights, &sums.sums, pass.channels * pass.coeffs, &sums.moments).standard_errors();
@@ -374,7 +382,8 @@ impl TexelState {
     /// What the next bounce gathers at hits on atlas triangles: this
     /// bounce's texels (once; `None` after the last bounce).
     pub(crate) fn take_source(&mut self) -> Option<TexelRows> {
-        self.next.take().map(|rows| TexelRows { lookup: Arc::clone(&self.lookup), rows })
+        let sides = self.next_sides;
+        self.next.take().map(|rows| TexelRows { lookup: Arc::clone(&self.lookup), rows, sides })
     }
 
     /// `--denoise K` over the texels ([`denoise_texels`]).
@@ -406,13 +415,13 @@ impl TexelState {
     /// What a later round gathers at hits on atlas triangles: the merged
     /// previous bounce (`rows`, normalised), read through the lookup without
     /// the texels bounce 0 left empty (`weights`), as a whole bake reads it.
-    pub(crate) fn source_from_merged(&mut self, weights: &[f32], rows: &[f32]) -> TexelRows {
+    pub(crate) fn source_from_merged(&mut self, weights: &[f32], rows: &[f32], sides: bool) -> TexelRows {
         if let Some(lookup) = Arc::get_mut(&mut self.lookup) {
             lookup.drop_empty(&self.texels, weights);
         }
         let mut buffer = RowBuffer::zeroed(rows.len());
         buffer.as_mut_slice().copy_from_slice(rows);
-        TexelRows { lookup: Arc::clone(&self.lookup), rows: buffer }
+        TexelRows { lookup: Arc::clone(&self.lookup), rows: buffer, sides }
     }
 }
 
@@ -484,6 +493,7 @@ mod tests {
             traced: 0,
             lookup: Arc::new(TexelLookup::empty()),
             next: None,
+            next_sides: false,
             seconds: Vec::new(),
             hits: Vec::new(),
         };
