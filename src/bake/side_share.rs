@@ -13,6 +13,16 @@
 
 use super::noise::Moments;
 
+/// The part of a receiver's transfer one side of its face shows: its front
+/// share from the front, the rest from behind; all of it without a share.
+pub fn seen_side_share(front_share: Option<f32>, seen_front: bool) -> f32 {
+    match front_share {
+        Some(share) if seen_front => share,
+        Some(share) => 1.0 - share,
+        None => 1.0,
+    }
+}
+
 /// Adds one bounce's back-side DC per receiver, Σ w·b / Σ w (0 without
 /// weight), to `back` (empty: becomes the bounce's).
 pub(crate) fn add_back_dc(back: &mut Vec<f32>, weights: &[f32], moments: &[Moments]) {

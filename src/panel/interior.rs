@@ -87,7 +87,7 @@ impl SideShares {
                 Some((1.0 - u - v) * a + u * b + v * c)
             }
         };
-        crate::view::reference::seen_side_share(front, !back_face)
+        crate::bake::side_share::seen_side_share(front, !back_face)
     }
 }
 

@@ -13,7 +13,7 @@ use crate::bundle::SunSeries;
 /// `lighting` is truncated or zero-padded to the transfer order. `sun` is the
 /// series and the step, when the sun term is on. The cosine is `max(n·s, 0)`:
 /// the side the eye sees is lit only when it faces the sun. `k` is the seen
-/// side's share of the transfer ([`seen_side_share`]).
+/// side's share of the transfer ([`crate::bake::side_share::seen_side_share`]).
 pub fn vertex_light(
     scene: &PreparedScene,
     lighting: &[[f32; 3]],
@@ -33,7 +33,7 @@ pub fn vertex_light(
             light[c] += scene.transfer[base + channel * n2 + i] * l[c];
         }
     }
-    let k = seen_side_share(scene.front_share.get(v).copied(), seen_front);
+    let k = crate::bake::side_share::seen_side_share(scene.front_share.get(v).copied(), seen_front);
     light.iter_mut().for_each(|l| *l *= k);
     if let Some((series, step)) = sun {
         if let Some(s) = series.steps.get(step) {
@@ -47,16 +47,6 @@ pub fn vertex_light(
         }
     }
     light
-}
-
-/// The part of a receiver's transfer the side the eye sees shows: its front
-/// share from the front, the rest from behind; all of it without a share.
-pub fn seen_side_share(front_share: Option<f32>, seen_front: bool) -> f32 {
-    match front_share {
-        Some(share) if seen_front => share,
-        Some(share) => 1.0 - share,
-        None => 1.0,
-    }
 }
 
 /// Outgoing radiance `albedo · E`.
