@@ -39,7 +39,7 @@ def load(path):
         scene = trimesh.load(path, force="mesh", process=False)
         return np.asarray(scene.vertices, dtype=np.float32), np.asarray(scene.faces, dtype=np.uint32)
     from pathtracer_compare import load_obj_rgb  # the OBJ read as the pixel comparison reads it
-    positions, tris, _, _ = load_obj_rgb(path)
+    positions, tris, _, _, _ = load_obj_rgb(path)
     return positions, tris
 
 

@@ -14,7 +14,10 @@ Needs numpy, mitsuba and flip-evaluator (PyPI) in a virtualenv:
 
 The mesh is the OBJ the bundle was baked from (loaded as prtbake loads it:
 Y up, no clean), every surface Lambertian and two-sided with its MTL Kd (0.8
-where there is none), RGB. Without MESH (or with a GLB that `prtbake export`
+where there is none), RGB, shaded with the mesh's vertex normals where it
+gives one per vertex (OBJ `vn` through the faces, GLB NORMAL): the normals
+the bake and the viewer take their cosines from (`--flat-normals`: flat
+faces, as references before 2026-11-29 were). Without MESH (or with a GLB that `prtbake export`
 wrote) the mesh is the bundle's own, exported into OUTDIR/prtbake_export.glb: the
 triangles the bake saw after `--clean`, each material's albedo as the
 viewer shades it (a GLB or glTF model as downloaded is not read here: its
@@ -83,8 +86,12 @@ DEFAULT_ALBEDO = 0.8
 
 
 def load_obj_rgb(path):
-    """Positions, triangles (fan-triangulated faces) and per-triangle material index; materials [(name, rgb)]."""
+    """Positions, triangles (fan-triangulated faces) and per-triangle material
+    index; materials [(name, rgb)]; and the shading normal of each position
+    when the file gives every position one (`vn` through the faces), else None."""
     positions, tris, tri_mat, materials, index = [], [], [], [], {}
+    file_normals, corner_normal = [], {}
+    one_normal_each = True
     kd = {}
     current = None
     base = os.path.dirname(path)
@@ -103,11 +110,21 @@ def load_obj_rgb(path):
                 continue
             if parts[0] == "v":
                 positions.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "vn":
+                file_normals.append([float(x) for x in parts[1:4]])
             elif parts[0] == "f":
                 ids = []
                 for p in parts[1:]:
-                    i = int(p.split("/")[0])
+                    fields = p.split("/")
+                    i = int(fields[0])
                     ids.append(i - 1 if i > 0 else len(positions) + i)
+                    if len(fields) > 2 and fields[2]:
+                        n = int(fields[2])
+                        n = n - 1 if n > 0 else len(file_normals) + n
+                        if corner_normal.setdefault(ids[-1], n) != n:
+                            one_normal_each = False
+                    else:
+                        one_normal_each = False
                 for k in range(1, len(ids) - 1):
                     tris.append([ids[0], ids[k], ids[k + 1]])
                     tri_mat.append(current)
@@ -117,7 +134,11 @@ def load_obj_rgb(path):
                 kd.update(load_mtl(os.path.join(base, " ".join(parts[1:]))))
                 for m in materials:
                     m[1] = kd.get(m[0], m[1])
-    return np.array(positions, dtype=np.float32), np.array(tris, dtype=np.uint32), np.array(tri_mat), materials
+    normals = None
+    if one_normal_each and file_normals and len(corner_normal) == len(positions):
+        fn = np.array(file_normals, dtype=np.float32)
+        normals = fn[[corner_normal[i] for i in range(len(positions))]]
+    return np.array(positions, dtype=np.float32), np.array(tris, dtype=np.uint32), np.array(tri_mat), materials, normals
 
 
 def is_export_glb(path):
@@ -165,7 +186,7 @@ def load_export_glb(path):
         roles[name] = m.get("extras", {}).get("prtbake_role", "opaque")
         tau[name] = m.get("extensions", {}).get("KHR_materials_transmission", {}).get("transmissionFactor", 1.0)
     # Primitives index vertex pools (prtbake's export shares one): each pool once.
-    positions, tris, tri_mat, pool_base = [], [], [], {}
+    positions, normals, tris, tri_mat, pool_base = [], [], [], [], {}
     base = 0
     for node in doc.get("nodes", []):
         if any(k in node for k in ("matrix", "translation", "rotation", "scale", "children")):
@@ -177,11 +198,14 @@ def load_export_glb(path):
             if pool not in pool_base:
                 pool_base[pool] = base
                 positions.append(accessor(pool).astype(np.float32))
+                normal = prim["attributes"].get("NORMAL")
+                normals.append(accessor(normal).astype(np.float32) if normal is not None else None)
                 base += len(positions[-1])
             t = accessor(prim["indices"]).reshape(-1, 3).astype(np.uint32) + pool_base[pool]
             tris.append(t)
             tri_mat.append(np.full(len(t), prim.get("material", 0)))
-    return np.concatenate(positions), np.concatenate(tris), np.concatenate(tri_mat), materials, roles, tau
+    normals = np.concatenate(normals) if normals and all(n is not None for n in normals) else None
+    return np.concatenate(positions), np.concatenate(tris), np.concatenate(tri_mat), materials, roles, tau, normals
 
 
 def window_materials(obj_path, materials, meta, glb_roles=None):
@@ -324,6 +348,8 @@ def main():
     ap.add_argument("--prtbake", default=os.path.join(ROOT, "target", "release", "prtbake"))
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("-o", "--out", required=True)
+    ap.add_argument("--flat-normals", action="store_true",
+                    help="Mitsuba shades flat faces even where the mesh gives vertex normals (the references before 2026-11-29)")
     ap.add_argument("--cache", default=None, help="folder for the Mitsuba references (default: OUTDIR)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -378,21 +404,27 @@ def main():
             sys.exit(f"{args.mesh}: exists and is not a GLB of `prtbake export`; not overwritten")
         subprocess.run([args.prtbake, "export", args.bundle, "-o", args.mesh], check=True, capture_output=True)
     if args.mesh.lower().endswith((".glb", ".gltf")):
-        positions, tris, tri_mat, materials, roles, tau = load_export_glb(args.mesh)
+        positions, tris, tri_mat, materials, roles, tau, normals = load_export_glb(args.mesh)
         windows = window_materials(args.mesh, materials, meta, (roles, tau))
     else:
-        positions, tris, tri_mat, materials = load_obj_rgb(args.mesh)
+        positions, tris, tri_mat, materials, normals = load_obj_rgb(args.mesh)
         windows = window_materials(args.mesh, materials, meta)
+    if normals is None or args.flat_normals:
+        normals = None
+        print("Mitsuba shades flat faces (the mesh gives no normal per vertex, or --flat-normals)", file=sys.stderr)
     shapes, glass = {}, {}
     for m, (name, rgb) in enumerate(materials):
         sel = tris[tri_mat == m]
         if len(sel) == 0:
             continue
         used, remap = np.unique(sel, return_inverse=True)
-        mesh = mi.Mesh(f"m{m}", len(used), len(sel), has_vertex_normals=False)
+        mesh = mi.Mesh(f"m{m}", len(used), len(sel), has_vertex_normals=normals is not None)
         params = mi.traverse(mesh)
         params["vertex_positions"] = mi.Float(positions[used].ravel())
         params["faces"] = mi.UInt32(remap.astype(np.uint32).ravel())
+        if normals is not None:
+            # The viewer's shading normals: the cosines of both renderers are the same ones.
+            params["vertex_normals"] = mi.Float(normals[used].ravel())
         params.update()
         mesh.set_bsdf(mi.load_dict({"type": "twosided", "material": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(rgb)}}}))
         (glass if name in windows else shapes)[f"m{m}"] = mesh
@@ -450,7 +482,8 @@ def main():
     # in --cache (default: OUTDIR) under a key of those, so bundles of one
     # scene are compared against the same images.
     # The triangles' corners, not the vertex arrays: the same triangles however the vertices are pooled.
-    mesh_hash = hashlib.sha256(positions[tris].tobytes() + tri_mat.astype(np.int64).tobytes() + json.dumps(materials).encode()).hexdigest()
+    mesh_hash = hashlib.sha256(positions[tris].tobytes() + tri_mat.astype(np.int64).tobytes() + json.dumps(materials).encode()
+                               + (normals[tris].tobytes() if normals is not None else b"")).hexdigest()
     scene_key = [mesh_hash, *light_key] + ([args.reference] if args.reference != "open" else []) + ([sorted(windows)] if windows else [])
     key = hashlib.sha256(json.dumps(scene_key + [args.camera, args.fov, width, height, args.spp, bounces, order, args.env_yaw]).encode()).hexdigest()[:16]
     cache = os.path.join(args.cache or args.out, f"mitsuba-{key}.npz")
