@@ -58,7 +58,8 @@ pub(super) fn random_transfer(rng: &mut Rng, vertices: usize, quantization: Quan
         channels,
         quantization,
         layers: vec![layer(rng, LayerKind::Bounce(0)), layer(rng, LayerKind::Total)],
-        front_share: Vec::new(),
+        // Side shares (SIDE) in every random bundle: round trips and the fuzzer read them.
+        front_share: (0..vertices).map(|v| ((v * 37) % 256) as f32 / 255.0).collect(),
     }
 }
 
@@ -220,7 +221,7 @@ fn f32_round_trip_is_bit_exact() {
     let back = decode_bundle(&bytes).unwrap();
     assert_eq!(back, bundle);
     let tags: Vec<String> = list_sections(&bytes).unwrap().iter().map(|s| s.tag_name()).collect();
-    assert_eq!(tags, ["META", "MESH", "MATL", "XFER", "SUNM", "SUND"]);
+    assert_eq!(tags, ["META", "MESH", "MATL", "XFER", "SIDE", "SUNM", "SUND"]);
     let sun = back.sun.unwrap();
     assert_eq!(sun.words_per_vertex, 3); // 92 steps
 }
