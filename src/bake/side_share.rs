@@ -38,8 +38,12 @@ pub(crate) fn add_back_dc(back: &mut Vec<f32>, weights: &[f32], moments: &[Momen
 
 /// Each receiver's front-side share of its light: 1 − back / DC, the DC the
 /// mean over `channels` of coefficient 0 of `total` (`[receiver][channel][coeff]`),
-/// clamped to [0, 1]; 1 where the receiver holds no light.
-pub(crate) fn front_shares(back: &[f32], total: &[f32], channels: usize, coeffs: usize) -> Vec<f32> {
+/// clamped to [0, 1]; 1 where the receiver holds no light. None (empty)
+/// outside window mode, whose points see one side only.
+pub(crate) fn front_shares(mode: super::Mode, back: &[f32], total: &[f32], channels: usize, coeffs: usize) -> Vec<f32> {
+    if mode != super::Mode::Window {
+        return Vec::new();
+    }
     let stride = channels * coeffs;
     back.iter()
         .zip(total.chunks_exact(stride))
@@ -70,10 +74,11 @@ mod tests {
         assert_eq!(back, vec![0.5, 0.0]);
         // Receiver 0's DC is 2 in every channel: a quarter came through the back.
         let total = [2.0f32, 2.0, 2.0, 0.0, 0.0, 0.0];
-        assert_eq!(front_shares(&back, &total, 3, 1), vec![0.75, 1.0]);
+        assert_eq!(front_shares(Mode::Window, &back, &total, 3, 1), vec![0.75, 1.0]);
         // Rounding past the DC stays a share.
-        assert_eq!(front_shares(&[2.5], &[2.0, 2.0, 2.0], 3, 1), vec![0.0]);
-        assert_eq!(front_shares(&[-0.1], &[2.0, 2.0, 2.0], 3, 1), vec![1.0]);
+        assert_eq!(front_shares(Mode::Window, &[2.5], &[2.0, 2.0, 2.0], 3, 1), vec![0.0]);
+        assert_eq!(front_shares(Mode::Window, &[-0.1], &[2.0, 2.0, 2.0], 3, 1), vec![1.0]);
+        assert!(front_shares(Mode::Open, &back, &total, 3, 1).is_empty());
     }
 
     use crate::bake::{BakeParams, Mode, Surfaces};

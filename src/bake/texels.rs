@@ -80,11 +80,8 @@ pub(crate) fn bake_texels_for(
     let coverage = Coverage::of(&atlas);
     let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params.pattern, params.seed);
     let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, receivers, None, Some(&mut state))?;
-    let front_share = if params.mode == super::Mode::Window {
-        super::side_share::front_shares(&state.back_dc, &state.total, result.channels, crate::sh::coeff_count(params.order))
-    } else {
-        Vec::new()
-    };
+    let coeffs = crate::sh::coeff_count(params.order);
+    let front_share = super::side_share::front_shares(params.mode, &state.back_dc, &state.total, result.channels, coeffs);
     if params.denoise > 0.0 {
         state.denoise(result.channels * crate::sh::coeff_count(params.order), params.denoise);
     }

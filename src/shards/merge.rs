@@ -361,7 +361,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     layers.iter_mut().for_each(|l| l.truncate(mesh_vertices * stride));
     noise.truncate(mesh_vertices);
     back_dc.truncate(mesh_vertices);
-    let front_share = if params.mode == crate::bake::Mode::Window { front_shares(&back_dc, &total, channels, coeffs) } else { Vec::new() };
+    let front_share = front_shares(params.mode, &back_dc, &total, channels, coeffs);
     let stats = BakeStats {
         triangles: first.identity.mesh.triangles,
         vertices: mesh_vertices as u64,
@@ -400,12 +400,9 @@ pub fn merged_texel_transfer(
             key.atlas_crc
         ));
     }
-    let front_share = if params.mode == crate::bake::Mode::Window {
-        let channels = merged.total.len() / (merged.texel_count as usize * crate::sh::coeff_count(params.order)).max(1);
-        front_shares(&merged.back_dc, &merged.total, channels, crate::sh::coeff_count(params.order))
-    } else {
-        Vec::new()
-    };
+    let coeffs = crate::sh::coeff_count(params.order);
+    let channels = merged.total.len() / (merged.texel_count as usize * coeffs).max(1);
+    let front_share = front_shares(params.mode, &merged.back_dc, &merged.total, channels, coeffs);
     Ok(crate::bake::texels::TexelTransfer {
         atlas: frame.atlas,
         texels: frame.texels,

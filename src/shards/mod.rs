@@ -367,11 +367,7 @@ mod tests {
                 }
                 assert_eq!(bits(&t.noise), bits(&whole_texels.noise), "{what}: texel noise");
                 let coeffs = crate::sh::coeff_count(params.order);
-                let shares = if mode == Mode::Window {
-                    crate::bake::side_share::front_shares(&t.back_dc, &t.total, whole.channels, coeffs)
-                } else {
-                    Vec::new()
-                };
+                let shares = crate::bake::side_share::front_shares(mode, &t.back_dc, &t.total, whole.channels, coeffs);
                 assert_eq!(bits(&shares), bits(&whole_texels.front_share), "{what}: texel side shares");
                 assert_eq!(shares.is_empty(), mode == Mode::Open, "{what}: texel sides kept");
                 assert_eq!(bits(&t.weights), bits(&whole_texels.covered_area), "{what}: texel weights");

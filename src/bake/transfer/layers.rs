@@ -195,7 +195,7 @@ pub(crate) fn bake_layers_with_texels(
     noise.truncate(vertex_count);
     back_dc.truncate(vertex_count);
     // The share of the light as baked: the denoiser smooths values, not sides.
-    let front_share = if params.mode == crate::bake::Mode::Window { front_shares(&back_dc, &total, channels, coeffs) } else { Vec::new() };
+    let front_share = front_shares(params.mode, &back_dc, &total, channels, coeffs);
     if params.denoise > 0.0 && kept.is_none() {
         crate::bake::denoise::denoise(mesh, &mut total, &mut layers, &mut noise, stride, params.denoise);
     }
