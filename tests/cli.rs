@@ -865,8 +865,66 @@ fn texel_sun_bits_are_baked_deterministic_and_refused_where_they_cannot_apply() 
     let ht = h.texels.as_ref().unwrap();
     assert!(ht.transfer.is_none() && ht.atlas == t.atlas);
     assert_eq!(h.sun.as_ref().unwrap().texel_masks, series.texel_masks);
+    // On a texel bundle, --texel-size gives the sun an atlas of its own (TSAT)
+    // beside the transfer's: finer bits, the transfer's sections byte for
+    // byte; at half the transfer's size its charts repacked, at another
+    // size a new unwrap, whose bits a vertex bundle gets on the same atlas.
+    let (o, own) = sun(&texel, "own.prtb", &["--texel-size", "0.05", "--threads", "1"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, own_two) = sun(&texel, "own-two.prtb", &["--texel-size", "0.05", "--threads", "2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&own).unwrap(), std::fs::read(&own_two).unwrap(), "own-atlas sun bits differ across thread counts");
+    let ob = prtbake::bundle::read_bundle(&own).unwrap();
+    let own_sun = ob.sun.as_ref().unwrap();
+    let own_atlas = own_sun.texel_atlas.as_ref().expect("TSAT");
+    assert_eq!(own_atlas.atlas, t.atlas.with_texel_size(0.05).unwrap().unwrap(), "the transfer's charts at twice the scale");
+    // The same partition into charts (repacking numbers them anew).
+    let mut renamed = std::collections::HashMap::new();
+    for (&old, &new) in t.atlas.triangle_chart.iter().zip(&own_atlas.atlas.triangle_chart) {
+        assert_eq!(*renamed.entry(old).or_insert(new), new, "chart {old} split by the repacking");
+    }
+    assert_eq!(renamed.len(), renamed.values().collect::<std::collections::HashSet<_>>().len(), "two charts merged by the repacking");
+    assert!(own_atlas.texels.len() > 3 * t.texels.len(), "{} sun texels against {}", own_atlas.texels.len(), t.texels.len());
+    assert_eq!((&ob.texels, &ob.transfer), (&b.texels, &b.transfer), "the texel transfer kept");
+    assert_eq!(ob.meta["sun"]["texels"]["atlas"], "the texel transfer's charts, repacked");
+    let (o, odd) = sun(&texel, "odd.prtb", &["--texel-size", "0.06"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, odd_hybrid) = sun(&vertex, "odd-hybrid.prtb", &["--texel-size", "0.06"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (od, oh) = (prtbake::bundle::read_bundle(&odd).unwrap(), prtbake::bundle::read_bundle(&odd_hybrid).unwrap());
+    let (odd_sun, odd_texels) = (od.sun.as_ref().unwrap(), oh.texels.as_ref().unwrap());
+    let odd_atlas = odd_sun.texel_atlas.as_ref().expect("TSAT");
+    assert_eq!((&odd_atlas.atlas, &odd_atlas.texels), (&odd_texels.atlas, &odd_texels.texels));
+    assert_eq!(odd_sun.texel_masks, oh.sun.as_ref().unwrap().texel_masks, "the same points vote the same on the same atlas");
+    let sections = |path: &std::path::Path| {
+        let bytes = std::fs::read(path).unwrap();
+        let list = prtbake::bundle::list_sections(&bytes).unwrap();
+        list.iter().map(|s| (s.tag_name(), bytes[s.offset as usize..(s.offset + s.stored_len) as usize].to_vec())).collect::<Vec<_>>()
+    };
+    let kept = |path: &std::path::Path| {
+        sections(path).into_iter().filter(|(tag, _)| ["XFER", "ATLS", "TXFR"].contains(&tag.as_str())).collect::<Vec<_>>()
+    };
+    assert_eq!(kept(&own), kept(&texel), "XFER, ATLS and TXFR copied byte for byte");
+    let shown = String::from_utf8_lossy(&prtbake(&["inspect", own.to_str().unwrap()]).stdout).to_string();
+    assert!(shown.contains("sun texels (TSAT)") && shown.contains("TSAB"), "{shown}");
+    let part = dir.path("own.prtp");
+    let o = prtbake(&[
+        "sun",
+        texel.to_str().unwrap(),
+        "-o",
+        part.to_str().unwrap(),
+        "--steps",
+        "8",
+        "--texel-size",
+        "0.05",
+        "--shard",
+        "0/2",
+        "--quiet",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--shard") && !part.exists());
     for (input, extra, what) in [
-        (&texel, vec!["--texel-size", "0.1"], "has its atlas"),
+        (&sun_only, vec!["--texel-size", "0.1"], "sun bits only"),
         (&obj, vec!["--texel-size", "0"], "positive length"),
         (&obj, vec!["--texel-size", "0.1", "--refine", "0.2"], "--refine"),
         (&obj, vec!["--texel-size", "0.1", "--texel-points", "0"], "--texel-points"),

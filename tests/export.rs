@@ -41,7 +41,7 @@ fn sample_bundle() -> Bundle {
             ],
             front_share: (0..mesh.vertex_count()).map(|v| ((v * 37) % 256) as f32 / 255.0).collect(),
         }),
-        sun: Some(SunSeries { sky_order: 2, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() }),
+        sun: Some(SunSeries::per_vertex(2, steps, words_per_vertex, masks)),
         mesh,
         texels: None,
     }
@@ -338,4 +338,80 @@ fn a_texel_bundle_exports_its_texels_as_textures_on_its_lightmap_uvs() {
         }
     }
     assert!(partial > 0, "no texel was partly sunlit: the fractions were not tested");
+}
+
+/// With the sun's bits on an atlas of their own (TSAT), the export splits the
+/// vertices along both atlases' seams: every written vertex is a triangle
+/// corner of the bundle with its position in each atlas (TEXCOORD_1 and
+/// `_PRT_TEXCOORD_SUN`), each corner once; the sun textures are the sun
+/// atlas's size, its coverage exact and its bits exact on its texels.
+#[test]
+fn a_sun_atlas_of_its_own_exports_on_a_second_texture_coordinate() {
+    let dir = Scratch::new("export-sun-atlas");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &shapes::room_with_walls_running_past()).unwrap();
+    let (baked, sunned, out) = (dir.path("t.prtb"), dir.path("ts.prtb"), dir.path("t.glb"));
+    let bake =
+        ["bake", obj.to_str().unwrap(), "-o", baked.to_str().unwrap(), "--rays", "8", "--bounces", "0", "--texel-size", "0.25", "--quiet"];
+    let o = prtbake(&bake);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sun = ["sun", baked.to_str().unwrap(), "-o", sunned.to_str().unwrap(), "--steps", "12", "--texel-size", "0.1", "--quiet"];
+    let o = prtbake(&sun);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = prtbake(&["export", sunned.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let b = bundle::read_bundle(&sunned).unwrap();
+    let (t, series) = (b.texels.as_ref().unwrap(), b.sun.as_ref().unwrap());
+    let own = series.texel_atlas.as_ref().expect("TSAT");
+    let (atlas, sun_atlas) = (&t.atlas, &own.atlas);
+    assert!(own.texels.len() > 2 * t.texels.len());
+    // Each bundle triangle corner: (position, atlas position, sun atlas position), as bits.
+    let key = |p: [f32; 3], a: [f32; 2], s: [f32; 2]| {
+        (p.map(f32::to_bits), a.map(|x| (x * 1e3).round() as i64), s.map(|x| (x * 1e3).round() as i64))
+    };
+    let mut corners = std::collections::HashSet::new();
+    for (c, &v) in b.mesh.indices.iter().enumerate() {
+        let (a, s) = (atlas.uv[atlas.indices[c] as usize], sun_atlas.uv[sun_atlas.indices[c] as usize]);
+        corners.insert(key(b.mesh.positions[v as usize].to_array(), a.to_array(), s.to_array()));
+    }
+    let bytes = std::fs::read(&out).unwrap();
+    let gltf = gltf::Gltf::from_slice(&bytes).expect("a valid GLB");
+    let blob = gltf.blob.as_deref().unwrap();
+    let mut written = std::collections::HashSet::new();
+    for mesh in gltf.meshes() {
+        let primitive = mesh.primitives().next().unwrap();
+        let reader = primitive.reader(|_| Some(blob));
+        let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+        let uvs: Vec<[f32; 2]> = reader.read_tex_coords(1).expect("TEXCOORD_1").into_f32().collect();
+        let sun_uvs: Vec<[f32; 2]> = read_attribute(&primitive, "_PRT_TEXCOORD_SUN", blob);
+        let mut in_this_mesh = std::collections::HashSet::new();
+        for i in 0..positions.len() {
+            let a = [uvs[i][0] * atlas.width as f32, uvs[i][1] * atlas.height as f32];
+            let s = [sun_uvs[i][0] * sun_atlas.width as f32, sun_uvs[i][1] * sun_atlas.height as f32];
+            let k = key(positions[i], a, s);
+            assert!(corners.contains(&k), "written vertex {i} is no corner of the bundle: {k:?}");
+            written.insert(k);
+            in_this_mesh.insert(k);
+        }
+        assert_eq!(in_this_mesh.len(), positions.len(), "a corner written twice in one mesh");
+    }
+    assert_eq!(written.len(), corners.len(), "every corner written");
+    let extras: serde_json::Value = serde_json::from_str(gltf.document.as_json().extras.as_ref().unwrap().get()).unwrap();
+    let meta = &extras["prtbake"]["texels"]["sun"];
+    assert_eq!(meta["atlas"]["uv"], "_PRT_TEXCOORD_SUN");
+    let (w, h) = (sun_atlas.width, sun_atlas.height);
+    let (cw, ch, _, coverage) = png_samples(&gltf, blob, meta["atlas"]["coverage_texture"].as_u64().unwrap() as usize);
+    assert_eq!((cw, ch), (w, h));
+    assert_eq!((0..w * h).filter(|&i| coverage[i as usize] == 255).collect::<Vec<_>>(), own.texels);
+    let (sw, sh, _, bits) = png_samples(&gltf, blob, meta["textures"][0].as_u64().unwrap() as usize);
+    assert_eq!((sw, sh), (w, h));
+    let mut lit = 0;
+    for (row, &texel) in own.texels.iter().enumerate() {
+        for step in 0..series.step_count() {
+            let (j, bit) = (step / 8, step % 8);
+            assert_eq!((bits[texel as usize * 4 + j] >> bit) & 1 == 1, series.texel_bit(row, step), "texel {texel}, step {step}");
+            lit += usize::from(series.texel_bit(row, step));
+        }
+    }
+    assert!(lit > 0, "no sun texel lit: the bits were not tested");
 }

@@ -213,7 +213,7 @@ pub fn plane_and_sphere_time_lapse() -> (Bundle, Vec<Vec3>, usize) {
             sky_sh: Vec::new(),
         })
         .collect();
-    let sun = SunSeries { sky_order: 0, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() };
+    let sun = SunSeries::per_vertex(0, steps, words_per_vertex, masks);
     let transfer = unoccluded_transfer(&mesh, order);
     (bundle_of(mesh, order, transfer, Some(sun)), suns.to_vec(), plane_vertices)
 }
@@ -303,7 +303,7 @@ fn the_sun_lights_only_the_side_of_a_surface_that_faces_it() {
         night: false,
         sky_sh: Vec::new(),
     };
-    let sun = SunSeries { sky_order: 0, steps: vec![step], words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() };
+    let sun = SunSeries::per_vertex(0, vec![step], words_per_vertex, masks);
     // A flat transfer, the same on both sides: the sky term is `ambient` whichever side is seen.
     let transfer = vec![1.0 / (4.0 * std::f32::consts::PI).sqrt(); mesh.vertex_count()];
     let mut bundle = bundle_of(mesh, order, transfer, Some(sun));
@@ -962,29 +962,42 @@ fn texel_bundles_are_shaded_per_pixel_from_their_texels() {
 /// overhead sun of irradiance π, a pixel two texels left of the line shows
 /// the albedo (cos = 1), two texels right of it black, and the line itself
 /// lies within one texel of where the bits put it; with each texel's lit
-/// share stored (TSUF), within a quarter of a texel.
+/// share stored (TSUF), within a quarter of a texel. With the bits on an
+/// atlas of their own (TSAT) of quarter-size texels beside the texel
+/// transfer's, the line lies within one of their texels: the sun's atlas,
+/// not the transfer's, draws it.
 #[test]
 fn texel_sun_bits_draw_their_shadow_edge_per_pixel() {
     let Some(gpu) = gpu_or_skip("texel_sun_bits_draw_their_shadow_edge_per_pixel") else { return };
     let mut mesh = shapes::plane_grid(4, 2.0);
     mesh.materials[0].albedo = [0.5, 0.5, 0.5];
     let texel = 0.05f32;
-    let atlas = prtbake::atlas::Atlas::unwrap(&mesh, texel).unwrap();
-    let texels = prtbake::atlas::coverage::Coverage::of(&atlas).texels;
-    let to_world = atlas_to_world(&atlas, &mesh);
     let edge = 0.13f64;
-    // A texel's share left of the line, on an 8 × 8 grid of its square.
-    let share = |t: u32| {
-        let (x, y) = ((t % atlas.width) as f64, (t / atlas.width) as f64);
-        let lit = (0..64)
-            .filter(|g| to_world(glam::DVec2::new(x + (g % 8) as f64 / 8.0 + 1.0 / 16.0, y + (g / 8) as f64 / 8.0 + 1.0 / 16.0)).x < edge)
-            .count();
-        lit as f64 / 64.0
+    // An atlas of texel size `size`, its covered texels, their bits (lit
+    // where the centre is left of the line) and their lit shares in 4 bits.
+    let sun_texels = |size: f32| {
+        let atlas = prtbake::atlas::Atlas::unwrap(&mesh, size).unwrap();
+        let texels = prtbake::atlas::coverage::Coverage::of(&atlas).texels;
+        let to_world = atlas_to_world(&atlas, &mesh);
+        // A texel's share left of the line, on an 8 × 8 grid of its square.
+        let share = |t: u32| {
+            let (x, y) = ((t % atlas.width) as f64, (t / atlas.width) as f64);
+            let lit = (0..64)
+                .filter(|g| {
+                    to_world(glam::DVec2::new(x + (g % 8) as f64 / 8.0 + 1.0 / 16.0, y + (g / 8) as f64 / 8.0 + 1.0 / 16.0)).x < edge
+                })
+                .count();
+            lit as f64 / 64.0
+        };
+        let centre = |t: u32| to_world(glam::DVec2::new((t % atlas.width) as f64 + 0.5, (t / atlas.width) as f64 + 0.5));
+        let (_, bits) = SunSeries::pack(1, texels.len(), |i, _| centre(texels[i]).x < edge);
+        let fractions: Vec<u32> = texels.iter().map(|&t| (share(t) * 15.0).round() as u32).collect();
+        (atlas, texels, bits, fractions)
     };
-    let centre = |t: u32| to_world(glam::DVec2::new((t % atlas.width) as f64 + 0.5, (t / atlas.width) as f64 + 0.5));
-    let (words, texel_masks) = SunSeries::pack(1, texels.len(), |i, _| centre(texels[i]).x < edge);
-    let fractions: Vec<u32> = texels.iter().map(|&t| (share(t) * 15.0).round() as u32).collect();
-    let (_, masks) = SunSeries::pack(1, mesh.vertex_count(), |_, _| true);
+    let (atlas, texels, texel_masks, fractions) = sun_texels(texel);
+    let fine = texel / 4.0;
+    let (fine_atlas, fine_texels, fine_masks, _) = sun_texels(fine);
+    let (words, masks) = SunSeries::pack(1, mesh.vertex_count(), |_, _| true);
     let step = SunStep {
         unix_time_utc: 1_773_993_600.0,
         direction: [0.0, 1.0, 0.0],
@@ -994,19 +1007,23 @@ fn texel_sun_bits_draw_their_shadow_edge_per_pixel() {
         night: false,
         sky_sh: Vec::new(),
     };
-    for (with_fractions, tolerance) in [(false, 1.0), (true, 0.25)] {
+    // (fractions, own atlas, tolerance in texels of `texel`)
+    for (with_fractions, own_atlas, tolerance) in [(false, false, 1.0), (true, false, 0.25), (false, true, 0.25)] {
         let texel_fractions = if with_fractions { fractions.clone() } else { Vec::new() };
         let sun = SunSeries {
             sky_order: 0,
             steps: vec![step.clone()],
             words_per_vertex: words,
             masks: masks.clone(),
-            texel_masks: texel_masks.clone(),
+            texel_masks: if own_atlas { fine_masks.clone() } else { texel_masks.clone() },
             texel_fractions,
+            texel_atlas: own_atlas.then(|| prtbake::bundle::TexelAtlas { atlas: fine_atlas.clone(), texels: fine_texels.clone() }),
         };
         let mut bundle = bundle_of(mesh.clone(), 1, vec![0.0; mesh.vertex_count()], Some(sun));
         bundle.transfer = None;
-        bundle.texels = Some(prtbake::bundle::TexelLayers { atlas: atlas.clone(), texels: texels.clone(), transfer: None });
+        // Its own atlas sits beside texel transfer (here dark: the sky is black).
+        let texel_transfer = own_atlas.then(|| Transfer::zero(texels.len()));
+        bundle.texels = Some(prtbake::bundle::TexelLayers { atlas: atlas.clone(), texels: texels.clone(), transfer: texel_transfer });
         let bundle = prtbake::bundle::decode_bundle(&prtbake::bundle::encode_bundle(&bundle).unwrap()).unwrap();
         let mut shown = bundle.clone();
         shown.transfer = Some(Transfer::zero(mesh.vertex_count()));
@@ -1048,7 +1065,10 @@ fn texel_sun_bits_draw_their_shadow_edge_per_pixel() {
         assert!(worst < 0.01, "largest difference from the sun term {worst}");
         assert!(!crossings.is_empty());
         let off = crossings.iter().map(|x| (x - edge).abs()).fold(0.0, f64::max) / texel as f64;
-        eprintln!("fractions {with_fractions}: the edge drawn at most {off:.3} texels from the line");
-        assert!(off < tolerance, "fractions {with_fractions}: the shadow edge drawn {off} texels from where the texels put it");
+        eprintln!("fractions {with_fractions}, own atlas {own_atlas}: the edge drawn at most {off:.3} texels from the line");
+        assert!(
+            off < tolerance,
+            "fractions {with_fractions}, own atlas {own_atlas}: the shadow edge drawn {off} texels from where the texels put it"
+        );
     }
 }

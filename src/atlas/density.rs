@@ -143,6 +143,24 @@ pub fn choose_levels(detail: &ChartDetail, levels: u32, budget: f64) -> DensityC
 }
 
 impl Atlas {
+    /// This atlas's charts repacked at `texel_size` when that is this
+    /// atlas's over 1, 2, 4 or 8 ([`Atlas::with_chart_scales`], every chart
+    /// alike): a second atlas of the same mesh that shares the first's
+    /// charts and costs no unwrap. `None` for any other ratio.
+    pub fn with_texel_size(&self, texel_size: f32) -> Option<Result<Atlas, AtlasError>> {
+        let level = self.repack_level(texel_size)?;
+        Some(match level {
+            0 => Ok(self.clone()),
+            _ => self.with_chart_scales(&vec![level as u8; self.chart_count as usize]),
+        })
+    }
+
+    /// k when `texel_size` is this atlas's over 2^k, k < [`MAX_LEVELS`].
+    pub fn repack_level(&self, texel_size: f32) -> Option<u32> {
+        // Halving an f32 is exact, so 0.08 / 8 is 0.01 as the user typed it.
+        (0..MAX_LEVELS).find(|&k| self.texel_size / (1u32 << k) as f32 == texel_size)
+    }
+
     /// This atlas's charts repacked, chart `c` scaled by `2^levels[c]`:
     /// the same triangles in the same charts, at texel size `texel_size /
     /// 2^levels[c]` each. The result's [`Atlas::texel_size`] is the finest

@@ -194,9 +194,19 @@ pub fn sun_density_atlas(
     params: &SunParams,
     finest: f32,
     request: &DensityRequest,
+    charts_from: Option<&Atlas>,
 ) -> Result<(Atlas, DensityReport), BakeError> {
     let started = Instant::now();
-    let pilot_atlas = unwrap_pilot(mesh, finest, request)?;
+    // Beside a texel transfer's atlas the pilot repacks its charts when the sizes allow, instead of unwrapping anew.
+    let repacked = charts_from.and_then(|a| a.with_texel_size(request.pilot_size(finest)));
+    let pilot_atlas = match repacked {
+        Some(atlas) => {
+            request.check()?;
+            Atlas::check_texel_count(mesh, finest).map_err(|e| BakeError::Params(e.to_string()))?;
+            atlas.map_err(|e| BakeError::Params(format!("pilot atlas: {e}")))?
+        }
+        None => unwrap_pilot(mesh, finest, request)?,
+    };
     let quiet = SunParams { quiet: true, ..*params };
     let plan = TexelSunPlan::new(mesh, &pilot_atlas, SUN_PILOT_POINTS, DirectionPattern::Sobol, suns, &quiet)?;
     let traced = plan.trace(mesh, scene, surfaces, 0..plan.texel_count());
@@ -258,7 +268,7 @@ mod tests {
         let suns = [Some(Vec3::new(0.35, 1.0, -0.2).normalize()), Some(Vec3::new(-0.6, 0.8, 0.1).normalize()), None];
         let params = SunParams { mode: Mode::Open, seed: 3, ..SunParams::default() };
         let request = DensityRequest { levels: 3, budget: 0.0 };
-        let (atlas, report) = sun_density_atlas(&mesh, &scene, &surfaces, &suns, &params, 0.025, &request).unwrap();
+        let (atlas, report) = sun_density_atlas(&mesh, &scene, &surfaces, &suns, &params, 0.025, &request, None).unwrap();
         assert_eq!(report.pilot_texel_size, 0.1);
         assert!(report.coarsest_error > 0.0 && (report.estimated_error - report.coarsest_error / 2.0).abs() < 1e-9, "{report:?}");
         for t in floor..mesh.triangle_count() {
@@ -269,7 +279,7 @@ mod tests {
         let floor_charts: std::collections::BTreeSet<u32> = (0..floor).map(|t| atlas.triangle_chart[t]).collect();
         assert!(finest > 0 && floor_charts.iter().all(|c| !(floor..roof_end).any(|t| atlas.triangle_chart[t] == *c)));
         // Same inputs, same atlas.
-        assert_eq!(atlas, sun_density_atlas(&mesh, &scene, &surfaces, &suns, &params, 0.025, &request).unwrap().0);
+        assert_eq!(atlas, sun_density_atlas(&mesh, &scene, &surfaces, &suns, &params, 0.025, &request, None).unwrap().0);
     }
 
     /// The transfer pilot's detail: the floor under the roof (its contact

@@ -50,6 +50,9 @@ pub(crate) const TSUN: [u8; 4] = *b"TSUN";
 pub(crate) const TSUF: [u8; 4] = *b"TSUF";
 pub(crate) const SIDE: [u8; 4] = *b"SIDE";
 pub(crate) const TSID: [u8; 4] = *b"TSID";
+pub(crate) const TSAT: [u8; 4] = *b"TSAT";
+pub(crate) const TSAB: [u8; 4] = *b"TSAB";
+pub(crate) const TSAF: [u8; 4] = *b"TSAF";
 /// Offset of the header CRC field; the CRC covers bytes `0..HEADER_CRC_AT` and the table.
 const HEADER_CRC_AT: usize = 28;
 

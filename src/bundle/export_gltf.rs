@@ -18,7 +18,7 @@ use std::path::Path;
 
 use serde_json::{json, Value};
 
-use super::export_texels::{atlas_mesh, texel_images};
+use super::export_texels::{atlas_mesh, texel_images, two_atlas_mesh, SUN_TEXCOORD_ATTRIBUTE};
 use super::values::check_bundle;
 use super::{Bundle, LayerKind, Transfer};
 use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, GlbAdditions, MeshError};
@@ -81,13 +81,22 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
     // Decoded bundles passed these checks already; bundles built in memory did not.
     check_bundle(bundle).map_err(|e| invalid(e.to_string()))?;
-    // A texel bundle's vertices are split along the atlas's seams: each written
-    // vertex carries the values of the bundle vertex it copies.
-    let split = bundle.texels.as_ref().map(|t| atlas_mesh(&bundle.mesh, &t.atlas));
+    // A texel bundle's vertices are split along the atlas's seams (and the
+    // sun's own atlas's, with one): each written vertex carries the values of
+    // the bundle vertex it copies.
+    let own_sun_atlas = bundle.sun.as_ref().and_then(|s| s.texel_atlas.as_ref());
+    let (split, split_source, sun_texcoords) = match (&bundle.texels, own_sun_atlas) {
+        (Some(t), Some(own)) => {
+            let (mesh, source, sun_uv) = two_atlas_mesh(&bundle.mesh, &t.atlas, &own.atlas);
+            (Some(mesh), Some(source), Some(sun_uv))
+        }
+        (Some(t), None) => (Some(atlas_mesh(&bundle.mesh, &t.atlas)), Some(t.atlas.source_vertex.clone()), None),
+        (None, _) => (None, None, None),
+    };
     let mesh = split.as_ref().unwrap_or(&bundle.mesh);
     let vertex_count = mesh.vertex_count();
-    let source: Vec<usize> = match &bundle.texels {
-        Some(t) => t.atlas.source_vertex.iter().map(|&v| v as usize).collect(),
+    let source: Vec<usize> = match split_source {
+        Some(source) => source.iter().map(|&v| v as usize).collect(),
         None => (0..vertex_count).collect(),
     };
     let requested = match layer {
@@ -148,6 +157,9 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         });
     }
     let sun_count = attributes.iter().filter(|a| a.semantic.starts_with(SUN_ATTRIBUTE_PREFIX)).count();
+    if let Some(data) = sun_texcoords {
+        attributes.push(CustomAttribute { semantic: SUN_TEXCOORD_ATTRIBUTE.into(), values: AttributeValues::F32 { components: 2, data } });
+    }
     let mut images = Vec::new();
     let mut texel_meta = Value::Null;
     if let Some(t) = &bundle.texels {

@@ -16,6 +16,9 @@ use serde_json::{json, Value};
 
 use super::types::{SunSeries, TexelLayers};
 use crate::atlas::Atlas;
+
+/// The vertex attribute holding each vertex's position in the sun's own atlas.
+pub const SUN_TEXCOORD_ATTRIBUTE: &str = "_PRT_TEXCOORD_SUN";
 use crate::mesh::{EmbeddedImage, Mesh};
 
 /// The mesh with one vertex per atlas vertex: attributes copied from the
@@ -32,6 +35,39 @@ pub(super) fn atlas_mesh(mesh: &Mesh, atlas: &Atlas) -> Mesh {
         groups: mesh.groups.clone(),
         ..mesh.gather_vertices(&atlas.source_vertex)
     }
+}
+
+/// The mesh split along two atlases' seams (the transfer's and the sun's
+/// own): one vertex per pair of atlas vertices, in first use over the
+/// triangles' corners, `lightmap_uvs` the first atlas's position as in
+/// [`atlas_mesh`]. Also each written vertex's bundle vertex and its
+/// position in the sun's atlas over that atlas's size.
+pub(super) fn two_atlas_mesh(mesh: &Mesh, atlas: &Atlas, sun_atlas: &Atlas) -> (Mesh, Vec<u32>, Vec<f32>) {
+    let mut pairs: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
+    let mut first_atlas = Vec::new();
+    let mut sun_uv = Vec::new();
+    let mut indices = Vec::with_capacity(atlas.indices.len());
+    let (size, sun_size) = (Vec2::new(atlas.width as f32, atlas.height as f32), Vec2::new(sun_atlas.width as f32, sun_atlas.height as f32));
+    for (&a, &s) in atlas.indices.iter().zip(&sun_atlas.indices) {
+        let index = *pairs.entry((a, s)).or_insert_with(|| {
+            first_atlas.push(a);
+            let uv = sun_atlas.uv[s as usize] / sun_size;
+            sun_uv.extend([uv.x, uv.y]);
+            first_atlas.len() as u32 - 1
+        });
+        indices.push(index);
+    }
+    let source: Vec<u32> = first_atlas.iter().map(|&a| atlas.source_vertex[a as usize]).collect();
+    let split = Mesh {
+        lightmap_uvs: first_atlas.iter().map(|&a| atlas.uv[a as usize] / size).collect(),
+        indices,
+        tri_material: mesh.tri_material.clone(),
+        tri_group: mesh.tri_group.clone(),
+        materials: mesh.materials.clone(),
+        groups: mesh.groups.clone(),
+        ..mesh.gather_vertices(&source)
+    };
+    (split, source, sun_uv)
 }
 
 /// Where each texel of the atlas reads its values: its own covered row, or
@@ -140,6 +176,27 @@ pub(super) fn texel_images(
 
     let mut sun_meta = Value::Null;
     if let Some(sun) = sun.filter(|s| !s.texel_masks.is_empty()) {
+        // The sun's own atlas (TSAT) has its own texels, size and coverage.
+        let own_rows;
+        let (rows, width, height) = match &sun.texel_atlas {
+            Some(own) => {
+                own_rows = dilated_rows(own.atlas.width, own.atlas.height, &own.texels);
+                (&own_rows, own.atlas.width, own.atlas.height)
+            }
+            None => (&rows, width, height),
+        };
+        let own_coverage = match &sun.texel_atlas {
+            Some(own) => {
+                let mut coverage = vec![0u8; rows.len()];
+                for &texel in &own.texels {
+                    coverage[texel as usize] = 255;
+                }
+                let png = encode_png(width, height, png::ColorType::Grayscale, png::BitDepth::Eight, &coverage)?;
+                images.push(EmbeddedImage { name: "prtbake_sun_coverage".into(), png, nearest: true });
+                Some(images.len() - 1)
+            }
+            None => None,
+        };
         let words = sun.words_per_vertex as usize;
         let mut textures = Vec::new();
         for k in 0..words {
@@ -162,6 +219,11 @@ pub(super) fn texel_images(
             "decode": "step 32k + 8j + b is bit b of channel j of texture k (sample with nearest filtering)",
             "fraction_textures": fraction_textures,
             "fraction_decode": "the sunlit share of step 8k + 2j + h is nibble h (low first) of channel j of fraction texture k, over 15; use it instead of the bit where present" });
+        if let (Some(own), Some(coverage)) = (&sun.texel_atlas, own_coverage) {
+            sun_meta["atlas"] = json!({ "uv": SUN_TEXCOORD_ATTRIBUTE, "width": width, "height": height, "texel_size": own.atlas.texel_size,
+                "covered_texels": own.texels.len(), "coverage_texture": coverage,
+                "meaning": "the sun's bits lie on an atlas of their own (finer than the transfer's): sample these textures at the vertex attribute named by uv, in [0, 1] as TEXCOORD_1" });
+        }
     }
     let meta = json!({
         "width": width, "height": height, "texel_size": atlas.texel_size, "uv": "TEXCOORD_1", "covered_texels": texels.texels.len(),

@@ -111,7 +111,8 @@ fn base(bundle: Bundle, options: EncodeOptions) -> Base {
     Base { bytes, parts: raw_sections(&bundle), options }
 }
 
-/// Raw and zstd bundles of every quantization, a minimal one and an all-zstd one.
+/// Raw and zstd bundles of every quantization, a minimal one, an all-zstd
+/// one and a texel one with the sun on an atlas of its own.
 fn bases() -> Vec<Base> {
     let raw = EncodeOptions { compression: Compression::None };
     let zstd = EncodeOptions::default();
@@ -124,6 +125,7 @@ fn bases() -> Vec<Base> {
         base(fuzz_bundle(4, Quantization::F16Tinted), raw),
         base(fuzz_bundle(5, Quantization::I16PerVertexScale), raw),
         base(fuzz_bundle(6, Quantization::F16Tinted), zstd),
+        base(super::tests::sun_atlas_bundle(), zstd),
     ]
 }
 

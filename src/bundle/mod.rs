@@ -49,11 +49,13 @@ pub use export_gltf::{
 };
 pub use quantize::{choose_quantization, dequantize_i16, i16_scale, quantization_error, quantize_i16, round_trip, tint_split};
 pub use sections::quantize_share;
-pub use types::{window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Transfer, TransferLayer};
+pub use types::{
+    window_patterns_in, Bundle, LayerKind, Quantization, SunSeries, SunStep, TexelAtlas, TexelLayers, Transfer, TransferLayer,
+};
 pub use values::{BadValue, ValueProblem, UNIT_LENGTH_TOLERANCE};
 
 use container::{write_container, Container};
-use sections::{ReadRules, ATLS, MATL, MESH, META, SIDE, SUND, SUNM, TSID, TSUF, TSUN, TXFR, XFER};
+use sections::{ReadRules, ATLS, MATL, MESH, META, SIDE, SUND, SUNM, TSAB, TSAF, TSAT, TSID, TSUF, TSUN, TXFR, XFER};
 
 /// Encodes a bundle with the default options (zstd level 9 per section).
 ///
@@ -91,7 +93,7 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
         parts.push((SUND, sections::encode_sun_data(sun)?));
     }
     if let Some(t) = &b.texels {
-        parts.push((ATLS, sections::encode_atlas(t, &b.mesh)?));
+        parts.push((ATLS, sections::encode_atlas(&t.atlas, &t.texels, &b.mesh)?));
         if let Some(transfer) = &t.transfer {
             parts.push((TXFR, sections::encode_transfer_of(t.texels.len(), transfer, TXFR)?));
             if !transfer.front_share.is_empty() {
@@ -99,19 +101,49 @@ pub fn encode_bundle_with(b: &Bundle, options: EncodeOptions) -> Result<Vec<u8>,
             }
         }
     }
-    if let Some(sun) = b.sun.as_ref().filter(|s| !s.texel_masks.is_empty()) {
-        let t = b.texels.as_ref().ok_or_else(|| BundleError::Invalid("texel sun masks without an atlas".into()))?;
-        parts.push((TSUN, sections::encode_texel_sun_masks(sun, t.texels.len())?));
-        if !sun.texel_fractions.is_empty() {
-            parts.push((TSUF, sections::encode_texel_sun_fractions(sun, t.texels.len())?));
-        }
-    } else if b.sun.as_ref().is_some_and(|s| !s.texel_fractions.is_empty()) {
-        return Err(BundleError::Invalid("texel sun fractions without texel sun masks".into()));
+    if let Some(sun) = &b.sun {
+        parts.extend(texel_sun_sections(sun, b.texels.as_ref(), &b.mesh)?);
     }
     if b.texels.as_ref().is_some_and(|t| t.transfer.is_none()) && b.sun.as_ref().is_none_or(|s| s.texel_masks.is_empty()) {
         return Err(BundleError::Invalid("an atlas with neither texel transfer nor texel sun masks".into()));
     }
     write_container(&parts, options)
+}
+
+/// TSUN and TSUF of `sun` over `texels`' atlas, or TSAT, TSAB and TSAF
+/// over the sun's own (none when it has no texel masks). The bits on the
+/// sun's own atlas have tags of their own, so a reader that knows none of
+/// the three skips them all and reads the rest of the bundle.
+fn texel_sun_sections(
+    sun: &SunSeries,
+    texels: Option<&TexelLayers>,
+    mesh: &crate::mesh::Mesh,
+) -> Result<Vec<([u8; 4], Vec<u8>)>, BundleError> {
+    if sun.texel_masks.is_empty() {
+        if !sun.texel_fractions.is_empty() {
+            return Err(BundleError::Invalid("texel sun fractions without texel sun masks".into()));
+        }
+        if sun.texel_atlas.is_some() {
+            return Err(BundleError::Invalid("a sun atlas without texel sun masks".into()));
+        }
+        return Ok(Vec::new());
+    }
+    let mut parts = Vec::new();
+    if let Some(own) = &sun.texel_atlas {
+        // Its own atlas sits beside the texel transfer's; beside vertex transfer the atlas is ATLS.
+        if texels.is_none_or(|t| t.transfer.is_none()) {
+            return Err(BundleError::Invalid("a sun atlas of its own (TSAT) needs texel transfer; store the atlas as ATLS".into()));
+        }
+        parts.push((TSAT, sections::encode_atlas(&own.atlas, &own.texels, mesh)?));
+    }
+    let count = sun.texel_count(texels).ok_or_else(|| BundleError::Invalid("texel sun masks without an atlas".into()))?;
+    let own = sun.texel_atlas.is_some();
+    let (bits, shares) = if own { (TSAB, TSAF) } else { (TSUN, TSUF) };
+    parts.push((bits, sections::encode_texel_sun_masks(sun, count, own)?));
+    if !sun.texel_fractions.is_empty() {
+        parts.push((shares, sections::encode_texel_sun_fractions(sun, count, own)?));
+    }
+    Ok(parts)
 }
 
 /// Decodes and fully checks a bundle (see "Reader rules" in docs/bundle-format.md).
@@ -160,7 +192,7 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
             if steps.len() != step_count as usize {
                 return Err(BundleError::malformed(SUND, format!("{} steps, but SUNM has {step_count}", steps.len())));
             }
-            Some(SunSeries { sky_order, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() })
+            Some(SunSeries::per_vertex(sky_order, steps, words_per_vertex, masks))
         }
     };
     let (atlas_raw, texel_transfer_raw, texel_sun_raw) = (section(ATLS)?, section(TXFR)?, section(TSUN)?);
@@ -176,7 +208,7 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
         None if texel_transfer_raw.is_some() || texel_sun_raw.is_some() => return Err(BundleError::MissingSection(Tag(ATLS))),
         None => None,
         Some(atlas_raw) => {
-            let (atlas, texels) = sections::decode_atlas(&atlas_raw, &mesh, rules)?;
+            let (atlas, texels) = sections::decode_atlas(&atlas_raw, &mesh, rules, ATLS)?;
             let transfer = match texel_transfer_raw {
                 Some(raw) => {
                     let mut transfer = sections::decode_transfer_of(&raw, texels.len(), rules, TXFR)?;
@@ -194,9 +226,33 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
     let mut sun = sun;
     if let (Some(raw), Some(t)) = (texel_sun_raw, &texels) {
         let series = sun.as_mut().ok_or(BundleError::MissingSection(Tag(SUNM)))?;
-        series.texel_masks = sections::decode_texel_sun_masks(&raw, t.texels.len(), series.steps.len() as u32, rules)?;
+        series.texel_masks = sections::decode_texel_sun_masks(&raw, t.texels.len(), series.steps.len() as u32, rules, false)?;
         if let Some(raw) = texel_fractions_raw {
-            series.texel_fractions = sections::decode_texel_sun_fractions(&raw, t.texels.len(), series.steps.len() as u32, rules)?;
+            series.texel_fractions = sections::decode_texel_sun_fractions(&raw, t.texels.len(), series.steps.len() as u32, rules, false)?;
+        }
+    }
+    // The sun's own atlas (TSAT) with its bits (TSAB) and shares (TSAF), beside texel transfer.
+    let (own_atlas_raw, own_bits_raw, own_shares_raw) = (section(TSAT)?, section(TSAB)?, section(TSAF)?);
+    match (own_atlas_raw, own_bits_raw) {
+        (None, None) if own_shares_raw.is_some() => return Err(BundleError::MissingSection(Tag(TSAB))),
+        (None, None) => {}
+        (Some(_), None) => return Err(BundleError::MissingSection(Tag(TSAB))),
+        (None, Some(_)) => return Err(BundleError::MissingSection(Tag(TSAT))),
+        (Some(atlas_raw), Some(bits_raw)) => {
+            if texels.as_ref().is_none_or(|t| t.transfer.is_none()) {
+                return Err(BundleError::MissingSection(Tag(TXFR)));
+            }
+            let series = sun.as_mut().ok_or(BundleError::MissingSection(Tag(SUNM)))?;
+            if !series.texel_masks.is_empty() {
+                return Err(BundleError::malformed(TSAB, "sun bits on the sun's own atlas and on the transfer's (TSUN) both"));
+            }
+            let (atlas, covered) = sections::decode_atlas(&atlas_raw, &mesh, rules, TSAT)?;
+            let steps = series.steps.len() as u32;
+            series.texel_masks = sections::decode_texel_sun_masks(&bits_raw, covered.len(), steps, rules, true)?;
+            if let Some(raw) = own_shares_raw {
+                series.texel_fractions = sections::decode_texel_sun_fractions(&raw, covered.len(), steps, rules, true)?;
+            }
+            series.texel_atlas = Some(TexelAtlas { atlas, texels: covered });
         }
     }
     Ok(Bundle { meta, mesh, transfer, sun, texels })
@@ -209,8 +265,9 @@ pub fn decode_bundle(bytes: &[u8]) -> Result<Bundle, BundleError> {
 /// as decoded, in range; the result is a file of the current minor.) The
 /// sections come in [`encode_bundle`]'s order: META replaced in place, the
 /// other sections before the sun in their order, then SUNM and SUND, then
-/// ATLS and TXFR, then TSUN and TSUF (the texels' masks and fractions, when
-/// the series has them; earlier ones are dropped otherwise).
+/// ATLS and TXFR, then TSUN and TSUF (the texels' masks and fractions) or
+/// TSAT, TSAB and TSAF (the sun's own atlas, masks and fractions), when the
+/// series has them; earlier ones are dropped otherwise.
 ///
 /// `original` is fully decoded first (every check of [`decode_bundle`]); the
 /// sun series must match its mesh's vertex count.
@@ -220,7 +277,9 @@ pub fn encode_with_sun(original: &[u8], meta: &serde_json::Value, sun: &SunSerie
 
 /// [`encode_with_sun`] with the atlas its texel sun masks are laid over:
 /// added as ATLS to an `original` without one (texel sun bits beside
-/// per-vertex transfer), or the same as `original`'s (else refused).
+/// per-vertex transfer), or the same as `original`'s (else refused). A
+/// series with an atlas of its own ([`SunSeries::texel_atlas`]) goes to TSAT
+/// beside `original`'s texel transfer; `atlas` is then `None`.
 pub fn encode_with_sun_on(
     original: &[u8],
     meta: &serde_json::Value,
@@ -231,7 +290,7 @@ pub fn encode_with_sun_on(
     let added_atlas = match (atlas, &decoded.texels) {
         (Some((a, texels)), None) => {
             let layers = TexelLayers { atlas: a.clone(), texels: texels.to_vec(), transfer: None };
-            Some((sections::encode_atlas(&layers, &decoded.mesh)?, layers))
+            Some((sections::encode_atlas(&layers.atlas, &layers.texels, &decoded.mesh)?, layers))
         }
         (Some((a, texels)), Some(t)) if (a, texels) != (&t.atlas, &t.texels[..]) => {
             return Err(BundleError::Invalid("the texel sun masks' atlas is not the bundle's".into()));
@@ -243,18 +302,10 @@ pub fn encode_with_sun_on(
     let vertex_count = decoded.mesh.vertex_count();
     let sun_masks = sections::encode_sun_masks(sun, vertex_count)?;
     let sun_data = sections::encode_sun_data(sun)?;
-    let texel_sun = match (texels, sun.texel_masks.is_empty()) {
-        (_, true) if !sun.texel_fractions.is_empty() => {
-            return Err(BundleError::Invalid("texel sun fractions without texel sun masks".into()));
-        }
-        (_, true) => None,
-        (Some(t), false) => {
-            let fractions =
-                (!sun.texel_fractions.is_empty()).then(|| sections::encode_texel_sun_fractions(sun, t.texels.len())).transpose()?;
-            Some((sections::encode_texel_sun_masks(sun, t.texels.len())?, fractions))
-        }
-        (None, false) => return Err(BundleError::Invalid("texel sun masks, but the bundle has no atlas".into())),
-    };
+    if texels.is_none() && !sun.texel_masks.is_empty() && sun.texel_atlas.is_none() {
+        return Err(BundleError::Invalid("texel sun masks, but the bundle has no atlas".into()));
+    }
+    let texel_sun = texel_sun_sections(sun, texels, &decoded.mesh)?;
     // A 1.0 file's mesh and materials may hold values its writer did not bring
     // into range (the decoder did): those two are stored as decoded.
     let legacy_values = container.minor < values::RANGES_CHECKED_SINCE_MINOR;
@@ -267,7 +318,7 @@ pub fn encode_with_sun_on(
     for info in &container.sections {
         match info.tag {
             META => parts.push((META, sections::encode_meta(meta)?)),
-            SUNM | SUND | TSUN | TSUF => {}
+            SUNM | SUND | TSUN | TSUF | TSAT | TSAB | TSAF => {}
             ATLS | TXFR | TSID => texel_sections.push((info.tag, container.payload(info)?.into_owned())),
             MESH if legacy_values => parts.push((MESH, sections::encode_mesh(&decoded.mesh)?)),
             MATL if legacy_values => parts.push((MATL, sections::encode_materials(&decoded.mesh.materials, &decoded.mesh.groups)?)),
@@ -280,12 +331,7 @@ pub fn encode_with_sun_on(
         parts.push((ATLS, raw));
     }
     parts.extend(texel_sections);
-    if let Some((masks, fractions)) = texel_sun {
-        parts.push((TSUN, masks));
-        if let Some(fractions) = fractions {
-            parts.push((TSUF, fractions));
-        }
-    }
+    parts.extend(texel_sun);
     write_container(&parts, EncodeOptions::default())
 }
 

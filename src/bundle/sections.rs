@@ -10,11 +10,11 @@ use glam::{Vec2, Vec3};
 use super::cursor::{pad_to, put_f32, put_f64, put_u16, put_u32, Cursor};
 use super::error::BundleError;
 use super::quantize::{decode_layer, encode_layer, layer_bytes};
-use super::types::{LayerKind, Quantization, SunSeries, SunStep, TexelLayers, Transfer, TransferLayer};
+use super::types::{LayerKind, Quantization, SunSeries, SunStep, Transfer, TransferLayer};
 use super::values;
 use crate::mesh::{Material, MaterialRole, Mesh};
 
-pub(crate) use super::container::{ATLS, MATL, MESH, META, SIDE, SUND, SUNM, TSID, TSUF, TSUN, TXFR, XFER};
+pub(crate) use super::container::{ATLS, MATL, MESH, META, SIDE, SUND, SUNM, TSAB, TSAF, TSAT, TSID, TSUF, TSUN, TXFR, XFER};
 
 const MESH_HAS_UVS: u32 = 1;
 const MESH_HAS_COLORS: u32 = 2;
@@ -450,6 +450,18 @@ const TEXEL_SUN_BITS: TexelSteps = TexelSteps { tag: TSUN, bits: 1, what: "sun m
 /// reserved, then per covered texel `ceil(step_count / 8)` words of 4-bit
 /// values (step k in bits `4 (k % 8)` of word `k / 8`).
 const TEXEL_SUN_SHARES: TexelSteps = TexelSteps { tag: TSUF, bits: 4, what: "sun fraction" };
+/// TSAB and TSAF: TSUN's and TSUF's layouts over the sun's own atlas (TSAT).
+const OWN_ATLAS_SUN_BITS: TexelSteps = TexelSteps { tag: TSAB, bits: 1, what: "sun mask" };
+const OWN_ATLAS_SUN_SHARES: TexelSteps = TexelSteps { tag: TSAF, bits: 4, what: "sun fraction" };
+
+/// The layouts of the sun bits and shares: on the bundle's atlas, or (`own`) on the sun's own.
+fn texel_sun_layouts(own: bool) -> (TexelSteps, TexelSteps) {
+    if own {
+        (OWN_ATLAS_SUN_BITS, OWN_ATLAS_SUN_SHARES)
+    } else {
+        (TEXEL_SUN_BITS, TEXEL_SUN_SHARES)
+    }
+}
 
 impl TexelSteps {
     fn words_per_texel(self, steps: u32) -> u64 {
@@ -527,20 +539,34 @@ fn first_with_values_past(words: &[u32], step_count: u32, bits: u32) -> Option<u
     words.chunks_exact(per_receiver).position(|w| w.last().is_some_and(|w| w & unused != 0))
 }
 
-pub(crate) fn encode_texel_sun_masks(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
-    TEXEL_SUN_BITS.encode(&sun.texel_masks, sun.steps.len(), covered)
+/// TSUN, or TSAB on the sun's own atlas (`own`).
+pub(crate) fn encode_texel_sun_masks(sun: &SunSeries, covered: usize, own: bool) -> Result<Vec<u8>, BundleError> {
+    texel_sun_layouts(own).0.encode(&sun.texel_masks, sun.steps.len(), covered)
 }
 
-pub(crate) fn decode_texel_sun_masks(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
-    TEXEL_SUN_BITS.decode(raw, covered, step_count, rules)
+pub(crate) fn decode_texel_sun_masks(
+    raw: &[u8],
+    covered: usize,
+    step_count: u32,
+    rules: ReadRules,
+    own: bool,
+) -> Result<Vec<u32>, BundleError> {
+    texel_sun_layouts(own).0.decode(raw, covered, step_count, rules)
 }
 
-pub(crate) fn encode_texel_sun_fractions(sun: &SunSeries, covered: usize) -> Result<Vec<u8>, BundleError> {
-    TEXEL_SUN_SHARES.encode(&sun.texel_fractions, sun.steps.len(), covered)
+/// TSUF, or TSAF on the sun's own atlas (`own`).
+pub(crate) fn encode_texel_sun_fractions(sun: &SunSeries, covered: usize, own: bool) -> Result<Vec<u8>, BundleError> {
+    texel_sun_layouts(own).1.encode(&sun.texel_fractions, sun.steps.len(), covered)
 }
 
-pub(crate) fn decode_texel_sun_fractions(raw: &[u8], covered: usize, step_count: u32, rules: ReadRules) -> Result<Vec<u32>, BundleError> {
-    TEXEL_SUN_SHARES.decode(raw, covered, step_count, rules)
+pub(crate) fn decode_texel_sun_fractions(
+    raw: &[u8],
+    covered: usize,
+    step_count: u32,
+    rules: ReadRules,
+    own: bool,
+) -> Result<Vec<u32>, BundleError> {
+    texel_sun_layouts(own).1.decode(raw, covered, step_count, rules)
 }
 
 // ---------------------------------------------------------------- SUND
@@ -613,9 +639,9 @@ pub(crate) fn decode_sun_data(raw: &[u8], rules: ReadRules) -> Result<(u32, Vec<
 /// atlas_vertex_count V, u32 triangle_count T, u32 covered_count C, u32
 /// reserved; V × (f32 u, f32 v); V × u32 source vertex; T × 3 u32 atlas
 /// vertex; T × u32 chart (0xFFFFFFFF: none); C × u32 texel id, ascending.
-pub(crate) fn encode_atlas(t: &TexelLayers, mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
-    check_atlas(&t.atlas, &t.texels, mesh).map_err(invalid)?;
-    let a = &t.atlas;
+/// TSAT (the sun's own atlas) has the same layout.
+pub(crate) fn encode_atlas(a: &crate::atlas::Atlas, texels: &[u32], mesh: &Mesh) -> Result<Vec<u8>, BundleError> {
+    check_atlas(a, texels, mesh).map_err(invalid)?;
     let mut out = Vec::new();
     put_u32(&mut out, a.width);
     put_u32(&mut out, a.height);
@@ -623,7 +649,7 @@ pub(crate) fn encode_atlas(t: &TexelLayers, mesh: &Mesh) -> Result<Vec<u8>, Bund
     put_u32(&mut out, a.chart_count);
     put_u32(&mut out, count_u32(a.uv.len(), "atlas vertex count")?);
     put_u32(&mut out, count_u32(a.triangle_count(), "atlas triangle count")?);
-    put_u32(&mut out, count_u32(t.texels.len(), "covered texel count")?);
+    put_u32(&mut out, count_u32(texels.len(), "covered texel count")?);
     put_u32(&mut out, 0);
     a.uv.iter().for_each(|p| {
         put_f32(&mut out, p.x);
@@ -632,13 +658,18 @@ pub(crate) fn encode_atlas(t: &TexelLayers, mesh: &Mesh) -> Result<Vec<u8>, Bund
     a.source_vertex.iter().for_each(|&v| put_u32(&mut out, v));
     a.indices.iter().for_each(|&i| put_u32(&mut out, i));
     a.triangle_chart.iter().for_each(|&c| put_u32(&mut out, c));
-    t.texels.iter().for_each(|&x| put_u32(&mut out, x));
+    texels.iter().for_each(|&x| put_u32(&mut out, x));
     Ok(out)
 }
 
-/// Decodes ATLS against the bundle's mesh; returns the atlas and the covered texels.
-pub(crate) fn decode_atlas(raw: &[u8], mesh: &Mesh, rules: ReadRules) -> Result<(crate::atlas::Atlas, Vec<u32>), BundleError> {
-    let mut cur = Cursor::new(raw, ATLS);
+/// Decodes ATLS (or TSAT, `tag`) against the bundle's mesh; returns the atlas and the covered texels.
+pub(crate) fn decode_atlas(
+    raw: &[u8],
+    mesh: &Mesh,
+    rules: ReadRules,
+    tag: [u8; 4],
+) -> Result<(crate::atlas::Atlas, Vec<u32>), BundleError> {
+    let mut cur = Cursor::new(raw, tag);
     let width = cur.u32("width")?;
     let height = cur.u32("height")?;
     let texel_size = cur.f32("texel size")?;
@@ -659,7 +690,7 @@ pub(crate) fn decode_atlas(raw: &[u8], mesh: &Mesh, rules: ReadRules) -> Result<
     let texels = cur.u32s(covered, "texels")?;
     cur.finish()?;
     let atlas = crate::atlas::Atlas { width, height, texel_size, uv, source_vertex, indices, triangle_chart, chart_count };
-    check_atlas(&atlas, &texels, mesh).map_err(|e| BundleError::malformed(ATLS, e))?;
+    check_atlas(&atlas, &texels, mesh).map_err(|e| BundleError::malformed(tag, e))?;
     Ok((atlas, texels))
 }
 

@@ -78,7 +78,7 @@ pub(super) fn random_sun(rng: &mut Rng, vertices: usize, step_count: usize) -> S
         .collect();
     let bits: Vec<bool> = (0..vertices * step_count).map(|_| rng.next() & 1 == 1).collect();
     let (words_per_vertex, masks) = SunSeries::pack(step_count, vertices, |v, k| bits[v * step_count + k]);
-    SunSeries { sky_order: sky_order as u32, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() }
+    SunSeries::per_vertex(sky_order as u32, steps, words_per_vertex, masks)
 }
 
 fn random_bundle(seed: u64, vertices: usize, triangles: usize, quantization: Quantization) -> Bundle {
@@ -160,6 +160,7 @@ pub(super) fn small_regular_bundle() -> Bundle {
             masks,
             texel_masks: Vec::new(),
             texel_fractions: Vec::new(),
+            texel_atlas: None,
         }),
         texels: None,
     }
@@ -1058,6 +1059,29 @@ fn texel_bundle() -> Bundle {
     bundle
 }
 
+/// A small texel bundle whose sun bits lie on an atlas of their own (TSAT,
+/// TSAB, TSAF), for the reader's fuzzer.
+pub(super) fn sun_atlas_bundle() -> Bundle {
+    let mut bundle = texel_bundle();
+    bundle.mesh = crate::verify::shapes::plane_grid(1, 1.0);
+    let vertex_count = bundle.mesh.vertex_count();
+    let transfer = bundle.transfer.as_mut().unwrap();
+    transfer.layers[0].data = (0..vertex_count * 4).map(|i| i as f32 * 0.1).collect();
+    let atlas = crate::atlas::Atlas::unwrap(&bundle.mesh, 0.25).unwrap();
+    let texels = crate::atlas::coverage::Coverage::of(&atlas).texels;
+    let mut texel_transfer = transfer.clone();
+    texel_transfer.layers[0].data = (0..texels.len() * 4).map(|i| (i as f32 * 0.3).sin()).collect();
+    bundle.texels = Some(TexelLayers { atlas, texels, transfer: Some(texel_transfer) });
+    let fine = crate::atlas::Atlas::unwrap(&bundle.mesh, 0.125).unwrap();
+    let fine_texels = crate::atlas::coverage::Coverage::of(&fine).texels;
+    let mut sun = random_sun(&mut Rng(47), vertex_count, 5);
+    sun.texel_masks = SunSeries::pack(5, fine_texels.len(), |i, k| (i + k) % 3 == 0).1;
+    sun.texel_fractions = (0..fine_texels.len() as u32).map(|i| (i * 0x1111) & 0xF_FFFF).collect();
+    sun.texel_atlas = Some(TexelAtlas { atlas: fine, texels: fine_texels });
+    bundle.sun = Some(sun);
+    bundle
+}
+
 #[test]
 fn texel_bundles_round_trip_and_refuse_a_broken_atlas() {
     let bundle = texel_bundle();
@@ -1077,7 +1101,7 @@ fn texel_bundles_round_trip_and_refuse_a_broken_atlas() {
             (MATL, sections::encode_materials(&mesh.materials, &mesh.groups).unwrap()),
         ]
     };
-    let atlas_raw = sections::encode_atlas(t, mesh).unwrap();
+    let atlas_raw = sections::encode_atlas(&t.atlas, &t.texels, mesh).unwrap();
     let mut only_atlas = base();
     only_atlas.push((ATLS, atlas_raw.clone()));
     let only_atlas = write_container(&only_atlas, EncodeOptions::default()).unwrap();
@@ -1151,4 +1175,96 @@ fn texel_sun_masks_round_trip_with_and_without_texel_transfer() {
     let mut empty = sun_only.clone();
     empty.sun.as_mut().unwrap().texel_masks.clear();
     assert!(encode_bundle(&empty).is_err());
+}
+
+/// The sun's bits on an atlas of their own (TSAT with TSAB and TSAF, finer
+/// than the texel transfer's) round trip; `sun` again on such a bundle
+/// replaces or drops them; TSAT without TSAB, TSAB without TSAT, either
+/// without texel transfer, bits on both atlases, and masks for the
+/// transfer's texel count are refused; without the three the rest reads.
+#[test]
+fn a_sun_atlas_of_its_own_round_trips_beside_the_texel_transfer() {
+    let mut bundle = texel_bundle();
+    let fine = crate::atlas::Atlas::unwrap(&bundle.mesh, 0.02).unwrap();
+    let fine_texels = crate::atlas::coverage::Coverage::of(&fine).texels;
+    let covered = bundle.texels.as_ref().unwrap().texels.len();
+    assert!(fine_texels.len() > 4 * covered, "{} fine texels against {covered}", fine_texels.len());
+    let mut rng = Rng(43);
+    let mut sun = random_sun(&mut rng, bundle.mesh.vertex_count(), 12);
+    sun.texel_masks = SunSeries::pack(12, fine_texels.len(), |i, k| (i * 5 + k) % 7 < 3).1;
+    sun.texel_fractions = (0..fine_texels.len() * 2).map(|w| 0x9abc_def0u32.rotate_left(w as u32 % 32)).collect();
+    for (i, w) in sun.texel_fractions.iter_mut().enumerate() {
+        if i % 2 == 1 {
+            *w &= 0x0000_FFFF; // steps 12..16 do not exist
+        }
+    }
+    sun.texel_atlas = Some(TexelAtlas { atlas: fine.clone(), texels: fine_texels.clone() });
+    bundle.sun = Some(sun.clone());
+    let bytes = encode_bundle(&bundle).unwrap();
+    let decoded = decode_bundle(&bytes).unwrap();
+    assert_eq!(decoded, bundle);
+    let tags: Vec<String> = list_sections(&bytes).unwrap().iter().map(|s| s.tag_name()).collect();
+    let at = |tag: &str| tags.iter().position(|t| t == tag).unwrap();
+    assert!(at("ATLS") < at("TXFR") && at("TXFR") < at("TSAT") && at("TSAT") < at("TSAB") && at("TSAB") < at("TSAF"), "{tags:?}");
+    assert!(!tags.iter().any(|t| t == "TSUN" || t == "TSUF"), "{tags:?}");
+    assert_eq!(decoded.sun.as_ref().unwrap().texel_count(decoded.texels.as_ref()), Some(fine_texels.len()));
+    // `sun` again: with its own atlas it is re-encoded alike; on the transfer's atlas TSAT goes.
+    assert_eq!(encode_with_sun(&bytes, &bundle.meta, &sun).unwrap(), bytes);
+    let mut on_transfer_atlas = sun.clone();
+    on_transfer_atlas.texel_atlas = None;
+    on_transfer_atlas.texel_fractions.clear();
+    on_transfer_atlas.texel_masks = SunSeries::pack(12, covered, |i, k| (i + k) % 2 == 0).1;
+    let replaced = encode_with_sun(&bytes, &bundle.meta, &on_transfer_atlas).unwrap();
+    assert!(!list_sections(&replaced).unwrap().iter().any(|s| s.tag_name() == "TSAT"));
+    let replaced = decode_bundle(&replaced).unwrap();
+    assert_eq!((replaced.texels, replaced.sun.unwrap().texel_masks), (bundle.texels.clone(), on_transfer_atlas.texel_masks.clone()));
+    // Masks counted on the transfer's texels while TSAT has more: refused.
+    let mut wrong_count = bundle.clone();
+    wrong_count.sun.as_mut().unwrap().texel_masks = SunSeries::pack(12, covered, |_, _| true).1;
+    wrong_count.sun.as_mut().unwrap().texel_fractions.clear();
+    assert!(encode_bundle(&wrong_count).is_err());
+    // Beside vertex transfer only, the sun's atlas is ATLS: TSAT is refused.
+    let mut vertex_transfer = bundle.clone();
+    vertex_transfer.texels.as_mut().unwrap().transfer = None;
+    assert!(encode_bundle(&vertex_transfer).is_err());
+    // On disk: TSAT without TSUN, and TSAT beside an atlas without TXFR.
+    let mesh = &bundle.mesh;
+    let t = bundle.texels.as_ref().unwrap();
+    let head = vec![
+        (META, sections::encode_meta(&bundle.meta).unwrap()),
+        (MESH, sections::encode_mesh(mesh).unwrap()),
+        (MATL, sections::encode_materials(&mesh.materials, &mesh.groups).unwrap()),
+        (SUNM, sections::encode_sun_masks(&sun, mesh.vertex_count()).unwrap()),
+        (SUND, sections::encode_sun_data(&sun).unwrap()),
+        (ATLS, sections::encode_atlas(&t.atlas, &t.texels, mesh).unwrap()),
+    ];
+    let tsat = (TSAT, sections::encode_atlas(&fine, &fine_texels, mesh).unwrap());
+    let tsab = (TSAB, sections::encode_texel_sun_masks(&sun, fine_texels.len(), true).unwrap());
+    let txfr = (TXFR, sections::encode_transfer_of(t.texels.len(), t.transfer.as_ref().unwrap(), TXFR).unwrap());
+    let mut no_masks = head.clone();
+    no_masks.extend([txfr.clone(), tsat.clone()]);
+    let no_masks = write_container(&no_masks, EncodeOptions::default()).unwrap();
+    assert!(matches!(decode_bundle(&no_masks), Err(BundleError::MissingSection(Tag(TSAB)))));
+    let mut no_atlas = head.clone();
+    no_atlas.extend([txfr.clone(), tsab.clone()]);
+    let no_atlas = write_container(&no_atlas, EncodeOptions::default()).unwrap();
+    assert!(matches!(decode_bundle(&no_atlas), Err(BundleError::MissingSection(Tag(TSAT)))));
+    let mut no_transfer = head.clone();
+    no_transfer.extend([tsat.clone(), tsab.clone()]);
+    let no_transfer = write_container(&no_transfer, EncodeOptions::default()).unwrap();
+    assert!(matches!(decode_bundle(&no_transfer), Err(BundleError::MissingSection(Tag(TXFR)))));
+    let mut both = head.clone();
+    let tsun = (TSUN, sections::encode_texel_sun_masks(&on_transfer_atlas, covered, false).unwrap());
+    both.extend([txfr.clone(), tsat.clone(), tsab.clone(), tsun]);
+    let error = decode_bundle(&write_container(&both, EncodeOptions::default()).unwrap()).unwrap_err().to_string();
+    assert!(error.contains("TSAB") && error.contains("both"), "{error}");
+    // A reader that knows none of TSAT, TSAB, TSAF skips them: the texel transfer with the sun per vertex.
+    let mut older = head.clone();
+    older.push(txfr.clone());
+    let older = decode_bundle(&write_container(&older, EncodeOptions::default()).unwrap()).unwrap();
+    assert!(older.sun.as_ref().unwrap().texel_masks.is_empty() && older.texels == bundle.texels);
+    let mut whole = head;
+    whole.extend([txfr, tsat, tsab]);
+    let whole = decode_bundle(&write_container(&whole, EncodeOptions::default()).unwrap()).unwrap();
+    assert_eq!(whole.sun.unwrap().texel_atlas.unwrap().texels, fine_texels);
 }

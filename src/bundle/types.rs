@@ -237,9 +237,26 @@ pub struct SunSeries {
     /// 4 bits (value/15), `ceil(steps / 8)` words a texel, step k in bits
     /// `4 (k % 8)` of word `k / 8`; empty when not stored.
     pub texel_fractions: Vec<u32>,
+    /// The atlas the texel masks lie on when it is not the bundle's
+    /// (section TSAT): sun bits on finer texels than the texel transfer's,
+    /// which a slat's sharp shadow needs and the soft sky light does not.
+    /// `None`: they lie on [`TexelLayers`]' atlas.
+    pub texel_atlas: Option<TexelAtlas>,
+}
+
+/// An atlas and its covered texels, in id order (the layout of ATLS).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelAtlas {
+    pub atlas: crate::atlas::Atlas,
+    pub texels: Vec<u32>,
 }
 
 impl SunSeries {
+    /// A series with its bits per vertex only (no texel masks).
+    pub fn per_vertex(sky_order: u32, steps: Vec<SunStep>, words_per_vertex: u32, masks: Vec<u32>) -> SunSeries {
+        SunSeries { sky_order, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new(), texel_atlas: None }
+    }
+
     /// Whether `vertex` is sunlit at `step`. Out-of-range arguments give `false`.
     pub fn bit(&self, vertex: usize, step: usize) -> bool {
         let word =
@@ -281,6 +298,15 @@ impl SunSeries {
         match word {
             Some(w) if step < self.steps.len() => ((w >> (4 * (step % 8))) & 0xF) as f32 / 15.0,
             _ => 0.0,
+        }
+    }
+
+    /// The number of covered texels the texel masks have, given the
+    /// bundle's texels: those of the sun's own atlas when it has one.
+    pub fn texel_count(&self, bundle_texels: Option<&TexelLayers>) -> Option<usize> {
+        match &self.texel_atlas {
+            Some(own) => Some(own.texels.len()),
+            None => bundle_texels.map(|t| t.texels.len()),
         }
     }
 

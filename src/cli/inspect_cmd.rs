@@ -27,7 +27,8 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             "sides": side_summary(&t.front_share),
         })
     });
-    let covered = b.texels.as_ref().map_or(0, |t| t.texels.len());
+    // The sun bits' texels: on the sun's own atlas (TSAT) when it has one.
+    let covered = b.sun.as_ref().and_then(|s| s.texel_count(b.texels.as_ref())).unwrap_or(0);
     let lapse = b.sun.as_ref().map(|s| time_lapse(s, b.mesh.vertex_count(), covered, &b.meta));
     let sun = b.sun.as_ref().map(|s| {
         json!({
@@ -57,6 +58,10 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             })),
             "sun_bits": b.sun.as_ref().is_some_and(|s| !s.texel_masks.is_empty()),
             "sun_fractions": b.sun.as_ref().is_some_and(|s| !s.texel_fractions.is_empty()),
+            "sun_atlas": b.sun.as_ref().and_then(|s| s.texel_atlas.as_ref()).map(|own| json!({
+                "width": own.atlas.width, "height": own.atlas.height, "texel_size": own.atlas.texel_size,
+                "charts": own.atlas.chart_count, "atlas_vertices": own.atlas.uv.len(), "covered": own.texels.len(),
+            })),
         })),
         "sections": sections.iter().map(|s| json!({
             "tag": s.tag_name(), "codec": s.codec_name(), "stored_bytes": s.stored_len, "raw_bytes": s.raw_len,
@@ -89,36 +94,26 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
             format!("order {}, {} channel(s), {}, layers {layers}", x.order, x.channels, x.quantization.name())
         });
         let sun_bits = match &b.sun {
+            Some(s) if s.texel_atlas.is_some() => "; sun bits on an atlas of their own (below)",
             Some(s) if !s.texel_fractions.is_empty() => "; sun bits and lit shares per texel",
             Some(s) if !s.texel_masks.is_empty() => "; sun bits per texel",
             _ => "",
         };
-        // Whose atlas, where the bake recorded it: the mesh's own (TEXCOORD_1) or xatlas's.
-        let whose = ["/texels/atlas", "/sun/texels/atlas"]
-            .iter()
-            .find_map(|p| b.meta.pointer(p).and_then(|v| v.as_str()))
-            .map(|s| format!(" of {s}"))
-            .unwrap_or_default();
-        println!(
-            "  texels: atlas {} × {} of {} (world units), {} charts{whose}; {} covered texels ({:.1}% of the texture), {transfer}{sun_bits}",
-            a.width,
-            a.height,
-            a.texel_size,
-            a.chart_count,
-            t.texels.len(),
-            100.0 * t.texels.len() as f64 / (a.width as f64 * a.height as f64),
-        );
-        // A texel size per chart (`--texel-levels`): the atlas's size above is the finest chart's.
-        if let Some(d) = ["/texels/density", "/sun/texels/density"].iter().find_map(|p| b.meta.pointer(p)) {
-            let levels = d["levels"].as_u64().unwrap_or(0);
-            let coarsest = d["pilot_texel_size"].as_f64().unwrap_or(0.0) as f32;
-            println!(
-                "    texel size per chart, {levels} sizes up to {coarsest} (the pilot's): charts per size, coarsest first {}; estimated resolution error {:.2}% (budget {:.2}%)",
-                d["charts_per_level"],
-                100.0 * d["estimated_error"].as_f64().unwrap_or(f64::NAN),
-                100.0 * d["budget"].as_f64().unwrap_or(f64::NAN)
-            );
-        }
+        // Where the bake recorded it: whose atlas (the mesh's own TEXCOORD_1 or
+        // xatlas's) and its texel size per chart; the sun's, when it made this atlas.
+        let own_sun_atlas = b.sun.as_ref().is_some_and(|s| s.texel_atlas.is_some());
+        let paths: &[&str] = if own_sun_atlas { &["/texels"] } else { &["/texels", "/sun/texels"] };
+        let recorded = |key: &str| paths.iter().find_map(|p| b.meta.pointer(&format!("{p}/{key}")));
+        let whose = recorded("atlas").and_then(|v| v.as_str()).map(|s| format!(" of {s}")).unwrap_or_default();
+        println!("  texels: {}{whose}; {}, {transfer}{sun_bits}", atlas_summary(a), covered_summary(a, t.texels.len()));
+        print_density(recorded("density"));
+    }
+    if let Some((s, own)) = b.sun.as_ref().and_then(|s| s.texel_atlas.as_ref().map(|own| (s, own))) {
+        let what = if s.texel_fractions.is_empty() { "sun bits" } else { "sun bits and lit shares" };
+        let whose = b.meta.pointer("/sun/texels/atlas").and_then(|v| v.as_str()).map(|s| format!(" of {s}")).unwrap_or_default();
+        let covered = covered_summary(&own.atlas, own.texels.len());
+        println!("  sun texels (TSAT): {}{whose}; {covered}, {what} per texel", atlas_summary(&own.atlas));
+        print_density(b.meta.pointer("/sun/texels/density"));
     }
     if let Some(s) = &b.sun {
         println!("  sun: {} steps, sky order {}", s.step_count(), s.sky_order);
@@ -253,6 +248,28 @@ fn side_summary(shares: &[f32]) -> serde_json::Value {
     let back = shares.iter().filter(|&&s| s < 0.5).count() as f64 / n;
     let both = shares.iter().filter(|&&s| (0.1..=0.9).contains(&s)).count() as f64 / n;
     json!({ "receivers": shares.len(), "mostly_back": back, "both_sides": both })
+}
+
+/// An atlas's size, texel size and charts, as `inspect` prints them.
+fn atlas_summary(a: &crate::atlas::Atlas) -> String {
+    format!("atlas {} × {} of {} (world units), {} charts", a.width, a.height, a.texel_size, a.chart_count)
+}
+
+fn covered_summary(a: &crate::atlas::Atlas, covered: usize) -> String {
+    format!("{covered} covered texels ({:.1}% of the texture)", 100.0 * covered as f64 / (a.width as f64 * a.height as f64))
+}
+
+/// A texel size per chart (`--texel-levels`, META `density`): the atlas's size printed is the finest chart's.
+fn print_density(density: Option<&serde_json::Value>) {
+    let Some(d) = density else { return };
+    let levels = d["levels"].as_u64().unwrap_or(0);
+    let coarsest = d["pilot_texel_size"].as_f64().unwrap_or(0.0) as f32;
+    println!(
+        "    texel size per chart, {levels} sizes up to {coarsest} (the pilot's): charts per size, coarsest first {}; estimated resolution error {:.2}% (budget {:.2}%)",
+        d["charts_per_level"],
+        100.0 * d["estimated_error"].as_f64().unwrap_or(f64::NAN),
+        100.0 * d["budget"].as_f64().unwrap_or(f64::NAN)
+    );
 }
 
 fn print_sides(what: &str, shares: &[f32]) {

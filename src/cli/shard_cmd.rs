@@ -250,6 +250,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
                 0;
                 if config.texel_fractions { texel_words(crate::bake::texel_sun::fraction_words(steps.len())) } else { 0 }
             ],
+            texel_atlas: None,
             steps,
         };
         let mut meta = sun_meta(config, &input.frame, &placeholder_stats(&series.steps), input.was_bundle());

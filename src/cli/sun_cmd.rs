@@ -68,7 +68,8 @@ pub struct SunConfig {
     /// transfer is then baked again on the refined mesh (`bundle::recipe`).
     pub refine: Option<super::bake_cmd::RefineRequest>,
     /// Sun bits per texel too: of a new atlas at this size (`--texel-size`)
-    /// for a mesh or a vertex bundle; a texel bundle's own atlas is always used.
+    /// for a mesh or a vertex bundle, or beside a bundle's texel transfer as
+    /// the sun's own atlas; without it a texel bundle's atlas is used.
     pub texel_size: Option<f32>,
     /// Points per texel (`--texel-points`); default: the texel bundle's
     /// transfer bake's, else [`bake::texels::POINTS_PER_TEXEL`].
@@ -138,8 +139,15 @@ pub struct SunInput {
     /// The light the input bundle was baked for (its transfer's, else its
     /// earlier sun masks'): window mode and patterns.
     pub recorded_windows: Option<(Mode, Vec<String>)>,
-    /// A texel bundle's atlas and covered texels.
+    /// A texel bundle's atlas and covered texels, when the sun bits go on
+    /// it (`None` with [`SunInput::sun_atlas_of_its_own`]).
     pub atlas: Option<(crate::atlas::Atlas, Vec<u32>)>,
+    /// `--texel-size` on a bundle with texel transfer: the sun bits get an
+    /// atlas of their own (TSAT) at that size, beside the transfer's.
+    pub sun_atlas_of_its_own: bool,
+    /// With [`SunInput::sun_atlas_of_its_own`]: the transfer's atlas, whose
+    /// charts the sun's repacks when the texel sizes allow.
+    pub charts_from: Option<crate::atlas::Atlas>,
 }
 
 impl SunInput {
@@ -173,19 +181,23 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     } else {
         UpAxis::Y
     };
-    let (mesh, original, had_transfer, atlas) = if input_was_bundle {
+    let (mesh, original, had_transfer, atlas, sun_atlas_of_its_own, charts_from) = if input_was_bundle {
         let bytes = bundle::read_bundle_bytes(input).map_err(|e| match e {
             bundle::BundleError::Io { source, .. } => anyhow::Error::new(source).context(format!("cannot read {}", input.display())),
             bundle::BundleError::InFile { source, .. } => anyhow::anyhow!("{}: not a valid bundle: {source}", input.display()),
             other => other.into(),
         })?;
         let b = bundle::decode_bundle(&bytes).with_context(|| format!("{}: not a valid bundle", input.display()))?;
-        let atlas = b.texels.map(|t| (t.atlas, t.texels));
-        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some(), atlas)
+        let own = config.texel_size.is_some() && b.texels.as_ref().is_some_and(|t| t.transfer.is_some());
+        let (atlas, charts_from) = match b.texels {
+            Some(t) if own => (None, Some(t.atlas)),
+            t => (t.map(|t| (t.atlas, t.texels)), None),
+        };
+        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some(), atlas, own, charts_from)
     } else {
         // The new bundle says which glass was a window, as a transfer bake's does.
         let mesh = super::load_mesh(input, config.up, quiet, &outputs, config.force)?;
-        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false, None)
+        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false, None, false, None)
     };
     let recorded_windows = original.as_ref().and_then(|(_, meta)| recorded_windows(meta, had_transfer));
     let up = Vec3::Y;
@@ -202,14 +214,15 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
     let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
-    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows, atlas })
+    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows, atlas, sun_atlas_of_its_own, charts_from })
 }
 
 /// The points per texel of a texel sun bake: `--texel-points`, else the
-/// texel bundle's transfer bake's (its points, so the same seed votes on
-/// the same points), else the default.
+/// texel bundle's transfer bake's when the bits go on its atlas (its
+/// points, so the same seed votes on the same points), else the default.
 pub fn texel_points(config: &SunConfig, input: &SunInput) -> u32 {
-    let recorded = input.original.as_ref().and_then(|(_, meta)| meta.pointer("/texels/points_per_texel")?.as_u64());
+    let recorded = input.original.as_ref().filter(|_| !input.sun_atlas_of_its_own);
+    let recorded = recorded.and_then(|(_, meta)| meta.pointer("/texels/points_per_texel")?.as_u64());
     config.texel_points.or(recorded.and_then(|p| u32::try_from(p).ok())).unwrap_or(bake::texels::POINTS_PER_TEXEL)
 }
 
@@ -350,9 +363,16 @@ pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Resu
             super::bake_cmd::check_density_atlas(&input.mesh, config.unwrap, &config.input)?;
         }
     }
+    if input.sun_atlas_of_its_own && config.shard.is_some() {
+        anyhow::bail!(
+            "{}: --texel-size on a bundle with texel transfer makes the sun an atlas of its own, which a sharded sun bake does not yet: \
+             leave --shard out, or leave --texel-size out (the sun bits then go on the transfer's atlas)",
+            config.input.display()
+        );
+    }
     if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
         anyhow::bail!(
-            "{}: --texel-size {size}, but the bundle has its atlas ({} m texels), whose texels the sun bits must match; leave --texel-size out",
+            "{}: --texel-size {size}, but the bundle has an atlas ({} m texels) with sun bits only, whose texels the new bits must match; leave --texel-size out",
             config.input.display(),
             atlas.texel_size
         );
@@ -361,14 +381,19 @@ pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Resu
 }
 
 /// The atlas of a texel sun bake, with the seconds unwrapping took: a texel
-/// bundle's own (0 s), else a new one at `--texel-size`; none per vertex.
+/// bundle's own (0 s), else a new one at `--texel-size` (beside texel
+/// transfer, its charts repacked when its size is theirs over 1, 2, 4 or
+/// 8); none per vertex.
 pub fn sun_atlas(config: &SunConfig, input: &SunInput) -> anyhow::Result<Option<(crate::atlas::Atlas, f64)>> {
     let started = Instant::now();
     Ok(match (&input.atlas, config.texel_size) {
         (Some((atlas, _)), _) => Some((atlas.clone(), 0.0)),
         (None, Some(size)) => {
-            let atlas =
-                crate::atlas::Atlas::for_mesh(&input.mesh, size, config.unwrap).with_context(|| config.input.display().to_string())?;
+            let atlas = match input.charts_from.as_ref().and_then(|a| a.with_texel_size(size)) {
+                Some(repacked) => repacked,
+                None => crate::atlas::Atlas::for_mesh(&input.mesh, size, config.unwrap),
+            };
+            let atlas = atlas.with_context(|| config.input.display().to_string())?;
             Some((atlas, started.elapsed().as_secs_f64()))
         }
         (None, None) => None,
@@ -438,7 +463,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     // read how before any work, so a bundle that cannot be re-baked stops here.
     if config.refine.is_some() {
         // Its texels (transfer or sun bits) belong to the mesh refinement replaces, and only the vertices could be re-baked.
-        if input.atlas.is_some() {
+        if input.atlas.is_some() || input.sun_atlas_of_its_own {
             anyhow::bail!(
                 "{}: the bundle holds texels (texel mode): --refine replaces its mesh, whose atlas and texels would be lost; \
                  run sun on it without --refine, or refine the mesh and bake texels again",
@@ -477,9 +502,17 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             let atlas = match (&input.atlas, config.texel_size, &config.texel_density) {
                 (None, Some(finest), Some(density)) => {
                     let started = Instant::now();
-                    let (atlas, report) =
-                        bake::texel_density::sun_density_atlas(&input.mesh, &scene, &surfaces, &suns, &config.params, finest, density)
-                            .with_context(|| format!("{}: --texel-levels", config.input.display()))?;
+                    let (atlas, report) = bake::texel_density::sun_density_atlas(
+                        &input.mesh,
+                        &scene,
+                        &surfaces,
+                        &suns,
+                        &config.params,
+                        finest,
+                        density,
+                        input.charts_from.as_ref(),
+                    )
+                    .with_context(|| format!("{}: --texel-levels", config.input.display()))?;
                     Some((atlas, started.elapsed().as_secs_f64(), Some(report)))
                 }
                 _ => sun_atlas(config, &input)?.map(|(atlas, seconds)| (atlas, seconds, None)),
@@ -499,10 +532,25 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         })??;
     // Whose atlas a new one is: the mesh's own (TEXCOORD_1) or xatlas's.
     let mut new_atlas_source = None;
+    let mut own_atlas = None;
     if let Some((masks, atlas, _, _)) = &texel_masks {
         if input.atlas.is_none() {
             new_atlas_source = Some(new_atlas_source_name(config, &input));
-            input.atlas = Some((atlas.clone(), masks.texels.clone()));
+            // The sun's own atlas repacks the transfer's charts where the sizes allow.
+            let pilot_or_size = match (&config.texel_density, config.texel_size) {
+                (Some(density), Some(finest)) => Some(density.pilot_size(finest)),
+                (_, size) => size,
+            };
+            let base = input.charts_from.as_ref();
+            if base.zip(pilot_or_size).is_some_and(|(base, size)| base.repack_level(size).is_some()) {
+                new_atlas_source = Some("the texel transfer's charts, repacked");
+            }
+            let atlas = bundle::TexelAtlas { atlas: atlas.clone(), texels: masks.texels.clone() };
+            if input.sun_atlas_of_its_own {
+                own_atlas = Some(atlas);
+            } else {
+                input.atlas = Some((atlas.atlas, atlas.texels));
+            }
         }
     }
     let texel_density = texel_masks.as_ref().and_then(|(_, _, _, density)| density.clone());
@@ -520,10 +568,16 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         masks: masks.masks.clone(),
         texel_masks: texel_masks.as_ref().map(|(t, _)| t.masks.clone()).unwrap_or_default(),
         texel_fractions: texel_masks.as_ref().filter(|_| config.texel_fractions).map(|(t, _)| t.fractions.clone()).unwrap_or_default(),
+        texel_atlas: own_atlas,
     };
     let mut sun_meta = sun_meta(config, &input.frame, &masks.stats, input.was_bundle());
-    if let (Some((t, _)), Some((atlas, _))) = (&texel_masks, &input.atlas) {
+    let sun_texel_atlas = series.texel_atlas.as_ref().map(|own| &own.atlas).or(input.atlas.as_ref().map(|(atlas, _)| atlas));
+    if let (Some((t, _)), Some(atlas)) = (&texel_masks, sun_texel_atlas) {
         sun_meta["texels"] = texel_sun_meta(atlas, &t.stats, config.texel_fractions, new_atlas_source);
+        if series.texel_atlas.is_some() {
+            // TSAT: the sun's texels are not the texel transfer's.
+            sun_meta["texels"]["own_atlas"] = json!(true);
+        }
         if let Some(density) = &texel_density {
             sun_meta["texels"]["density"] = density.meta();
         }

@@ -116,6 +116,8 @@ struct LightmapGpu {
     pipeline: wgpu::RenderPipeline,
     texcoords: wgpu::Buffer,
     texture: wgpu::Texture,
+    /// The sunlit shares on the sun's own atlas (R32Float; 1 × 1 without one).
+    sun_texture: wgpu::Texture,
     bind: wgpu::BindGroup,
     scene: super::scene::LightmapScene,
 }
@@ -323,7 +325,8 @@ impl Renderer {
             hdr_pipeline("scene", &scene_pipeline_layout, &shading, ("vs_main", "fs_main"), &vertex_layout, opaque, HDR_FORMAT.into());
         // A textured variant of the scene's shading (same bindings in group 0): a texture
         // in group 1 and texture coordinates in vertex buffer 1 (the panel, texel mode).
-        let textured = |label: &str, source: String, entry_points: (&str, &str), textures: u32| {
+        // `texcoord_floats`: 2 (one atlas position) or 4 (the lightmap's two).
+        let textured = |label: &str, source: String, entry_points: (&str, &str), textures: u32, texcoord_floats: u64| {
             let entries: Vec<_> = (0..textures).map(|b| hdr_texture_entry(b, wgpu::ShaderStages::FRAGMENT)).collect();
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
             let module = device
@@ -333,11 +336,12 @@ impl Renderer {
                 bind_group_layouts: &[Some(&scene_layout), Some(&layout)],
                 immediate_size: 0,
             });
-            let texcoord_attributes = wgpu::vertex_attr_array![4 => Float32x2];
+            let texcoord_attributes =
+                if texcoord_floats == 4 { wgpu::vertex_attr_array![4 => Float32x4] } else { wgpu::vertex_attr_array![4 => Float32x2] };
             let buffers = [
                 vertex_layout[0].clone(),
                 Some(wgpu::VertexBufferLayout {
-                    array_stride: 8,
+                    array_stride: 4 * texcoord_floats,
                     step_mode: wgpu::VertexStepMode::Vertex,
                     attributes: &texcoord_attributes,
                 }),
@@ -346,7 +350,7 @@ impl Renderer {
         };
         let panel = scene.panel.as_ref().map(|draws| {
             let source = concat!(include_str!("shading.wgsl"), include_str!("panel.wgsl")).to_string();
-            let (pipeline, layout) = textured("panel", source, ("vs_panel", "fs_panel"), 1);
+            let (pipeline, layout) = textured("panel", source, ("vs_panel", "fs_panel"), 1, 2);
             let texcoord_words: Vec<u32> = draws.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
             let texcoords = init("panel texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
             let mut panel = PanelGpu { pipeline, layout, texcoords, texture: None };
@@ -367,29 +371,29 @@ impl Renderer {
                 }
                 // Whether the texels carry their own sun bits and sky light, as constants of the shader.
                 let source = format!(
-                    "{}{}const TEXEL_SUN: bool = {};\nconst TEXEL_SKY: bool = {};\nconst TEXEL_SIDES: bool = {};\n",
+                    "{}{}const TEXEL_SUN: bool = {};\nconst TEXEL_SKY: bool = {};\nconst TEXEL_SIDES: bool = {};\nconst SUN_ATLAS: bool = {};\n",
                     include_str!("shading.wgsl"),
                     include_str!("lightmap.wgsl"),
                     lm.has_sun_bits(),
                     lm.has_sky(),
-                    lm.has_side_shares()
+                    lm.has_side_shares(),
+                    lm.sun_atlas.is_some()
                 );
-                let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"), 2);
+                if let Some(own) = &lm.sun_atlas {
+                    if own.width > limits.max_texture_dimension_2d || own.height > limits.max_texture_dimension_2d {
+                        return Err(ViewError::Gpu(format!(
+                            "the sun's atlas is {} × {} texels; this device's textures reach {} (bake the sun with a larger --texel-size)",
+                            own.width, own.height, limits.max_texture_dimension_2d
+                        )));
+                    }
+                }
+                let (pipeline, layout) = textured("lightmap", source, ("vs_lightmap", "fs_lightmap"), 3, 4);
                 let texcoord_words: Vec<u32> = lm.texcoords.iter().flatten().map(|x| x.to_bits()).collect();
                 let texcoords = init("lightmap texture coordinates", &words_to_bytes(&texcoord_words), wgpu::BufferUsages::VERTEX);
                 let size = wgpu::Extent3d { width: lm.width, height: lm.height, depth_or_array_layers: 1 };
                 // The texels' front shares do not change with the lighting: written once.
                 let share_size = if lm.has_side_shares() { size } else { wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 } };
-                let shares = device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("texel side shares"),
-                    size: share_size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::R32Float,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                });
+                let shares = read_texture(device, "texel side shares", share_size, wgpu::TextureFormat::R32Float);
                 let share_image = if lm.has_side_shares() { lm.side_share_image() } else { vec![1.0] };
                 let share_words: Vec<u32> = share_image.iter().map(|x| x.to_bits()).collect();
                 gpu.queue.write_texture(
@@ -403,8 +407,13 @@ impl Renderer {
                     share_size,
                 );
                 let share_view = shares.create_view(&Default::default());
-                let (texture, bind) = rgba32f_texture(device, &layout, "lightmap", size, Some(&share_view));
-                Some(LightmapGpu { pipeline, texcoords, texture, bind, scene: lm.clone() })
+                let sun_size = lm.sun_atlas.as_ref().map_or(wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 }, |own| {
+                    wgpu::Extent3d { width: own.width, height: own.height, depth_or_array_layers: 1 }
+                });
+                let sun_texture = read_texture(device, "sun texels", sun_size, wgpu::TextureFormat::R32Float);
+                let sun_view = sun_texture.create_view(&Default::default());
+                let (texture, bind) = rgba32f_texture(device, &layout, "lightmap", size, &[&share_view, &sun_view]);
+                Some(LightmapGpu { pipeline, texcoords, texture, sun_texture, bind, scene: lm.clone() })
             }
         };
         // Glass: alpha ← min(alpha, τ); colour untouched.
@@ -695,7 +704,8 @@ impl Renderer {
             + self.panel.as_ref().map_or(0, |p| p.texcoords.size())
             + self.lightmap.as_ref().map_or(0, |l| {
                 let texels = l.scene.width as u64 * l.scene.height as u64;
-                l.texcoords.size() + 16 * texels + if l.scene.has_side_shares() { 4 * texels } else { 4 }
+                let sun_texels = l.scene.sun_atlas.as_ref().map_or(1, |own| own.width as u64 * own.height as u64);
+                l.texcoords.size() + 16 * texels + if l.scene.has_side_shares() { 4 * texels } else { 4 } + 4 * sun_texels
             });
         let pixels = self.targets.width as u64 * self.targets.height as u64;
         let environment = self.env_size.0 as u64 * self.env_size.1 as u64 * 16;
@@ -762,6 +772,16 @@ impl Renderer {
             let image = lm.scene.irradiance(self.order, self.channels, &settings.lighting, step);
             let words: Vec<u32> = image.iter().flatten().map(|x| x.to_bits()).collect();
             write_rgba32f(queue, &lm.texture, &words);
+            if lm.scene.sun_atlas.is_some() {
+                let shares: Vec<u32> = lm.scene.own_atlas_sun(step).iter().map(|x| x.to_bits()).collect();
+                let size = lm.sun_texture.size();
+                queue.write_texture(
+                    lm.sun_texture.as_image_copy(),
+                    &words_to_bytes(&shares),
+                    wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * size.width), rows_per_image: Some(size.height) },
+                    size,
+                );
+            }
         }
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         {
@@ -851,7 +871,7 @@ impl PanelGpu {
     fn set_texture(&mut self, gpu: &Gpu, texture: &PanelTexture) {
         let size = wgpu::Extent3d { width: texture.width.max(1), height: texture.height.max(1), depth_or_array_layers: 1 };
         if self.texture.as_ref().is_none_or(|(t, _)| t.size() != size) {
-            self.texture = Some(rgba32f_texture(&gpu.device, &self.layout, "panel", size, None));
+            self.texture = Some(rgba32f_texture(&gpu.device, &self.layout, "panel", size, &[]));
         }
         let Some((gpu_texture, _)) = &self.texture else { return };
         let texels: Vec<u32> = texture.rgb.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]).map(f32::to_bits).collect();
@@ -859,30 +879,35 @@ impl PanelGpu {
     }
 }
 
-/// An RGBA32F texture the fragment stage reads (`textureLoad`), bound alone
-/// in a group of `layout` (the panel's and texel mode's group 1).
-/// An RGBA32F texture and its bind group (binding 0; `second`, when given, at binding 1).
-fn rgba32f_texture(
-    device: &wgpu::Device,
-    layout: &wgpu::BindGroupLayout,
-    label: &str,
-    size: wgpu::Extent3d,
-    second: Option<&wgpu::TextureView>,
-) -> (wgpu::Texture, wgpu::BindGroup) {
-    let texture = device.create_texture(&wgpu::TextureDescriptor {
+/// A 2D texture the CPU writes and a shader reads (`textureLoad`).
+fn read_texture(device: &wgpu::Device, label: &str, size: wgpu::Extent3d, format: wgpu::TextureFormat) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
         size,
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
+        format,
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
-    });
+    })
+}
+
+/// An RGBA32F texture the fragment stage reads (`textureLoad`), bound alone
+/// in a group of `layout` (the panel's and texel mode's group 1).
+/// An RGBA32F texture and its bind group (binding 0; `more`, at bindings 1, 2, …).
+fn rgba32f_texture(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    label: &str,
+    size: wgpu::Extent3d,
+    more: &[&wgpu::TextureView],
+) -> (wgpu::Texture, wgpu::BindGroup) {
+    let texture = read_texture(device, label, size, wgpu::TextureFormat::Rgba32Float);
     let view = texture.create_view(&Default::default());
     let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&view) }];
-    if let Some(second) = second {
-        entries.push(wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(second) });
+    for (binding, view) in (1..).zip(more) {
+        entries.push(wgpu::BindGroupEntry { binding, resource: wgpu::BindingResource::TextureView(view) });
     }
     let bind = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries });
     (texture, bind)

@@ -106,7 +106,7 @@ mod tests {
             })
             .collect();
         let (words_per_vertex, masks) = SunSeries::pack(times.len(), 0, |_, _| false);
-        SunSeries { sky_order: 0, steps, words_per_vertex, masks, texel_masks: Vec::new(), texel_fractions: Vec::new() }
+        SunSeries::per_vertex(0, steps, words_per_vertex, masks)
     }
 
     #[test]

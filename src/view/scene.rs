@@ -106,8 +106,9 @@ pub struct PreparedScene {
 pub struct LightmapScene {
     pub width: u32,
     pub height: u32,
-    /// Per GPU vertex, its position in the atlas in texels (zero for glass copies).
-    pub texcoords: Vec<[f32; 2]>,
+    /// Per GPU vertex, its position in the atlas in texels, then in the
+    /// sun's own atlas (zero without one, and for glass copies).
+    pub texcoords: Vec<[f32; 4]>,
     /// Covered texel ids (`y * width + x`), and whether each holds light
     /// (a texel whose points all lay inside geometry does not).
     pub texels: Vec<u32>,
@@ -122,6 +123,18 @@ pub struct LightmapScene {
     /// per-vertex masks left out: the vertex buffers carry them); `None`:
     /// the sun stays per vertex.
     pub texel_sun: Option<SunSeries>,
+    /// The sun's bits on an atlas of their own (section TSAT): its size
+    /// and covered texels; the bits of `texel_sun` are its texels'.
+    pub sun_atlas: Option<SunAtlasTexels>,
+}
+
+/// The sun's own atlas as the viewer reads it.
+#[derive(Clone, Debug)]
+pub struct SunAtlasTexels {
+    pub width: u32,
+    pub height: u32,
+    /// Covered texel ids (`y * width + x`), in the order of the sun's bits.
+    pub texels: Vec<u32>,
 }
 
 impl LightmapScene {
@@ -149,11 +162,25 @@ impl LightmapScene {
         image
     }
 
+    /// The sun's own atlas at `sun_step`: 1 + each covered texel's sunlit
+    /// share, 0 off its texels (the fragment shader reads it bilinearly
+    /// over its covered texels); empty without a sun atlas.
+    pub fn own_atlas_sun(&self, sun_step: Option<usize>) -> Vec<f32> {
+        let (Some(own), Some(series)) = (&self.sun_atlas, &self.texel_sun) else {
+            return Vec::new();
+        };
+        let mut image = vec![0.0f32; own.width as usize * own.height as usize];
+        for (i, &texel) in own.texels.iter().enumerate() {
+            image[texel as usize] = 1.0 + sun_step.map_or(0.0, |k| series.texel_sun(i, k));
+        }
+        image
+    }
+
     /// Irradiance per texel of the whole texture for `lighting` (the SH dot
     /// product the vertex shader does per vertex), RGBA; the fragment shader
     /// reads it bilinearly. A is 0 where the texel holds no light, else 1,
-    /// plus its sunlit share at `sun_step` when it has sun bits (its stored
-    /// fraction, else its bit).
+    /// plus its sunlit share at `sun_step` when it has sun bits on this
+    /// atlas (its stored fraction, else its bit).
     pub fn irradiance(&self, order: u32, channels: u32, lighting: &[[f32; 3]], sun_step: Option<usize>) -> Vec<[f32; 4]> {
         let n2 = (order * order) as usize;
         let stride = n2 * channels as usize;
@@ -172,7 +199,7 @@ impl LightmapScene {
                 }
             }
             let lit = match (&self.texel_sun, sun_step) {
-                (Some(series), Some(k)) => series.texel_sun(i, k),
+                (Some(series), Some(k)) if self.sun_atlas.is_none() => series.texel_sun(i, k),
                 _ => 0.0,
             };
             image[texel as usize] = [e[0], e[1], e[2], 1.0 + lit];
@@ -256,9 +283,11 @@ pub fn prepare_scene_with_panel(
 
     // One GPU vertex per (bundle vertex, draw) pair in first-use order; in
     // texel mode per (atlas vertex, draw), since a chart seam splits a vertex.
+    // With the sun on an atlas of its own, per (atlas vertex, its atlas vertex, draw).
     let atlas = bundle.texels.as_ref().map(|t| &t.atlas);
-    let mut atlas_uv: Vec<[f32; 2]> = Vec::new();
-    let mut copies: HashMap<(u32, usize), u32> = HashMap::new();
+    let sun_atlas = bundle.sun.as_ref().and_then(|s| s.texel_atlas.as_ref()).map(|own| &own.atlas);
+    let mut atlas_uv: Vec<[f32; 4]> = Vec::new();
+    let mut copies: HashMap<(u32, u32, usize), u32> = HashMap::new();
     let mut vertices = Vec::new();
     let mut texcoords = Vec::new();
     let mut indices = Vec::with_capacity(mesh.indices.len());
@@ -275,11 +304,14 @@ pub fn prepare_scene_with_panel(
         for &t in &triangles_of_draw[d] {
             for (corner, v) in mesh.triangle(t as usize).into_iter().enumerate() {
                 let atlas_vertex = atlas.map(|a| a.indices[3 * t as usize + corner]);
-                let key = (atlas_vertex.unwrap_or(v), d);
+                let sun_atlas_vertex = sun_atlas.map_or(0, |a| a.indices[3 * t as usize + corner]);
+                let key = (atlas_vertex.unwrap_or(v), sun_atlas_vertex, d);
                 let index = *copies.entry(key).or_insert_with(|| {
                     if let Some(a) = atlas {
                         let uv = a.uv[atlas_vertex.unwrap_or(0) as usize];
-                        atlas_uv.push(if matches!(kind, DrawKind::Glass { .. }) { [0.0; 2] } else { uv.to_array() });
+                        let sun_uv = sun_atlas.map_or(glam::Vec2::ZERO, |s| s.uv[sun_atlas_vertex as usize]);
+                        let glass = matches!(kind, DrawKind::Glass { .. });
+                        atlas_uv.push(if glass { [0.0; 4] } else { [uv.x, uv.y, sun_uv.x, sun_uv.y] });
                     }
                     let position = mesh.positions[v as usize];
                     lo = lo.min(position);
@@ -334,6 +366,12 @@ pub fn prepare_scene_with_panel(
                 masks: Vec::new(),
                 texel_masks: s.texel_masks.clone(),
                 texel_fractions: s.texel_fractions.clone(),
+                texel_atlas: None,
+            });
+            let sun_atlas = bundle.sun.as_ref().and_then(|s| s.texel_atlas.as_ref()).map(|own| SunAtlasTexels {
+                width: own.atlas.width,
+                height: own.atlas.height,
+                texels: own.texels.clone(),
             });
             Some(LightmapScene {
                 width: t.atlas.width,
@@ -344,6 +382,7 @@ pub fn prepare_scene_with_panel(
                 transfer: texel_transfer,
                 front_share: texel_front_share,
                 texel_sun,
+                sun_atlas,
             })
         }
         None => None,
