@@ -118,6 +118,9 @@ struct LightmapGpu {
     texture: wgpu::Texture,
     /// The sunlit shares on the sun's own atlas (R32Float; 1 × 1 without one).
     sun_texture: wgpu::Texture,
+    /// The step whose shares `sun_texture` holds (outer `None`: not written
+    /// yet): the texture, millions of texels, changes with the step only.
+    sun_texture_step: std::cell::Cell<Option<Option<usize>>>,
     bind: wgpu::BindGroup,
     scene: super::scene::LightmapScene,
 }
@@ -413,7 +416,8 @@ impl Renderer {
                 let sun_texture = read_texture(device, "sun texels", sun_size, wgpu::TextureFormat::R32Float);
                 let sun_view = sun_texture.create_view(&Default::default());
                 let (texture, bind) = rgba32f_texture(device, &layout, "lightmap", size, &[&share_view, &sun_view]);
-                Some(LightmapGpu { pipeline, texcoords, texture, sun_texture, bind, scene: lm.clone() })
+                let sun_texture_step = std::cell::Cell::new(None);
+                Some(LightmapGpu { pipeline, texcoords, texture, sun_texture, sun_texture_step, bind, scene: lm.clone() })
             }
         };
         // Glass: alpha ← min(alpha, τ); colour untouched.
@@ -772,7 +776,8 @@ impl Renderer {
             let image = lm.scene.irradiance(self.order, self.channels, &settings.lighting, step);
             let words: Vec<u32> = image.iter().flatten().map(|x| x.to_bits()).collect();
             write_rgba32f(queue, &lm.texture, &words);
-            if lm.scene.sun_atlas.is_some() {
+            if lm.scene.sun_atlas.is_some() && lm.sun_texture_step.get() != Some(step) {
+                lm.sun_texture_step.set(Some(step));
                 let shares: Vec<u32> = lm.scene.own_atlas_sun(step).iter().map(|x| x.to_bits()).collect();
                 let size = lm.sun_texture.size();
                 queue.write_texture(
