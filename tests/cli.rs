@@ -907,22 +907,6 @@ fn texel_sun_bits_are_baked_deterministic_and_refused_where_they_cannot_apply() 
     assert_eq!(kept(&own), kept(&texel), "XFER, ATLS and TXFR copied byte for byte");
     let shown = String::from_utf8_lossy(&prtbake(&["inspect", own.to_str().unwrap()]).stdout).to_string();
     assert!(shown.contains("sun texels (TSAT)") && shown.contains("TSAB"), "{shown}");
-    let part = dir.path("own.prtp");
-    let o = prtbake(&[
-        "sun",
-        texel.to_str().unwrap(),
-        "-o",
-        part.to_str().unwrap(),
-        "--steps",
-        "8",
-        "--texel-size",
-        "0.05",
-        "--shard",
-        "0/2",
-        "--quiet",
-    ]);
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--shard") && !part.exists());
     for (input, extra, what) in [
         (&sun_only, vec!["--texel-size", "0.1"], "sun bits only"),
         (&obj, vec!["--texel-size", "0"], "positive length"),

@@ -205,7 +205,8 @@ fn sharded_sun_merges_into_the_single_process_bundle() {
 
 /// Texel mode's sun through shards, for each way a texel sun bake starts:
 /// a mesh given a new atlas (with the texels' lit shares), a per-vertex
-/// bundle given one, and a texel bundle with its own. The single process
+/// bundle given one, a texel bundle with its own, and a texel bundle whose
+/// sun gets an atlas of its own (TSAT, its charts repacked). The single process
 /// writes the same bundle at 1 and 2 threads, and 1, 2 and 3 shards (run
 /// in shuffled order at 1 or 2 threads) merge into it byte for byte; a part
 /// of other texel settings is named.
@@ -232,12 +233,13 @@ fn sharded_texel_sun_merges_into_the_single_process_bundle() {
         "--quiet",
     ]);
     let common = ["--window", "glass", "--steps", "12", "--seed", "3", "--quiet"];
-    let cases: [(&str, &Path, &[&str]); 3] = [
-        ("mesh", &mesh, &["--texel-size", "0.06", "--texel-fractions"]),
-        ("vertex-bundle", &vertex_bundle, &["--texel-size", "0.06"]),
-        ("texel-bundle", &texel_bundle, &["--texel-fractions"]),
+    let cases: [(&str, &Path, &[&str], &str); 4] = [
+        ("mesh", &mesh, &["--texel-size", "0.06", "--texel-fractions"], "\"TSUN\""),
+        ("vertex-bundle", &vertex_bundle, &["--texel-size", "0.06"], "\"TSUN\""),
+        ("texel-bundle", &texel_bundle, &["--texel-fractions"], "\"TSUN\""),
+        ("sun-atlas", &texel_bundle, &["--texel-size", "0.04", "--texel-fractions"], "\"TSAB\""),
     ];
-    for (name, input, texel_args) in cases {
+    for (name, input, texel_args, section) in cases {
         let sun = |out: &Path, extra: &[&str]| {
             let mut a = vec!["sun", s(input), "-o", s(out)];
             a.extend(common);
@@ -252,7 +254,7 @@ fn sharded_texel_sun_merges_into_the_single_process_bundle() {
         sun(&one_thread, &["--threads", "1"]);
         assert!(std::fs::read(&one_thread).unwrap() == expected, "{name}: the bundle differs between 1 and 2 threads");
         let inspect = run(&["inspect", s(&single), "--json"]);
-        assert!(inspect.contains("\"TSUN\""), "{name}: no texel sun section in {inspect}");
+        assert!(inspect.contains(section), "{name}: no texel sun section {section} in {inspect}");
         for n in [1u32, 2, 3] {
             let part = |k: u32| dir.path(&format!("{name}-{n}-{k}.prtp"));
             for k in shuffled(n, 11) {

@@ -223,7 +223,8 @@ fn merge_sun(config: &MergeConfig, parts: &[(PathBuf, SunPart)]) -> anyhow::Resu
     series.words_per_vertex = masks.words_per_vertex;
     series.masks = masks.masks;
     if let Some(texels) = merged.texels {
-        let covered = b.texels.as_ref().map_or(0, |t| t.texels.len());
+        // The sun's own atlas's texels (TSAT) when it has one, else the bundle's.
+        let covered = series.texel_count(b.texels.as_ref()).unwrap_or(0);
         let texel_meta = sun_meta.get_mut("texels").and_then(|t| t.as_object_mut());
         let (Some(texel_meta), true) = (texel_meta, covered * merged.key.steps.div_ceil(32) as usize == texels.masks.len()) else {
             return Err(frame_error("its bundle frame has no atlas or texel sun metadata for the parts' texels".into()).into());

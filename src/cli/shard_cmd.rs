@@ -241,7 +241,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
         // The merge fills in the masks and the stats; everything else is the bundle a whole bake writes.
         let words = part.words;
         let texel_words = |per_texel: usize| atlas.as_ref().map_or(0, |(_, texels)| texels.len() * per_texel);
-        let series = SunSeries {
+        let mut series = SunSeries {
             sky_order: config.sky_order as u32,
             words_per_vertex: words,
             masks: vec![0; input.mesh.vertex_count() * words as usize],
@@ -258,7 +258,13 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             let new_source = input.atlas.is_none().then(|| new_atlas_source_name(config, &input));
             let stats = TexelSunStats { texels: texels.len() as u64, points_per_texel, ..TexelSunStats::default() };
             meta["texels"] = texel_sun_meta(&atlas, &stats, config.texel_fractions, new_source);
-            input.atlas = Some((atlas, texels));
+            if input.sun_atlas_of_its_own {
+                // TSAT: the sun's texels are not the texel transfer's (as `sun` in one process).
+                meta["texels"]["own_atlas"] = json!(true);
+                series.texel_atlas = Some(crate::bundle::TexelAtlas { atlas, texels });
+            } else {
+                input.atlas = Some((atlas, texels));
+            }
         }
         part.frame = encode_sun_output(&input, meta, &series, &config.output)?;
     }

@@ -363,13 +363,6 @@ pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Resu
             super::bake_cmd::check_density_atlas(&input.mesh, config.unwrap, &config.input)?;
         }
     }
-    if input.sun_atlas_of_its_own && config.shard.is_some() {
-        anyhow::bail!(
-            "{}: --texel-size on a bundle with texel transfer makes the sun an atlas of its own, which a sharded sun bake does not yet: \
-             leave --shard out, or leave --texel-size out (the sun bits then go on the transfer's atlas)",
-            config.input.display()
-        );
-    }
     if let (Some(size), Some((atlas, _))) = (config.texel_size, &input.atlas) {
         anyhow::bail!(
             "{}: --texel-size {size}, but the bundle has an atlas ({} m texels) with sun bits only, whose texels the new bits must match; leave --texel-size out",
@@ -400,8 +393,17 @@ pub fn sun_atlas(config: &SunConfig, input: &SunInput) -> anyhow::Result<Option<
     })
 }
 
-/// Whose a new atlas is: the mesh's own lightmap UVs or xatlas's unwrap.
+/// Whose a new atlas is: the mesh's own lightmap UVs, xatlas's unwrap, or
+/// (the sun's own atlas beside texel transfer) the transfer's charts repacked.
 pub fn new_atlas_source_name(config: &SunConfig, input: &SunInput) -> &'static str {
+    let pilot_or_size = match (&config.texel_density, config.texel_size) {
+        (Some(density), Some(finest)) => Some(density.pilot_size(finest)),
+        (_, size) => size,
+    };
+    let base = input.charts_from.as_ref();
+    if base.zip(pilot_or_size).is_some_and(|(base, size)| base.repack_level(size).is_some()) {
+        return "the texel transfer's charts, repacked";
+    }
     super::bake_cmd::atlas_source_name(&input.mesh, config.unwrap)
 }
 
@@ -536,15 +538,6 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     if let Some((masks, atlas, _, _)) = &texel_masks {
         if input.atlas.is_none() {
             new_atlas_source = Some(new_atlas_source_name(config, &input));
-            // The sun's own atlas repacks the transfer's charts where the sizes allow.
-            let pilot_or_size = match (&config.texel_density, config.texel_size) {
-                (Some(density), Some(finest)) => Some(density.pilot_size(finest)),
-                (_, size) => size,
-            };
-            let base = input.charts_from.as_ref();
-            if base.zip(pilot_or_size).is_some_and(|(base, size)| base.repack_level(size).is_some()) {
-                new_atlas_source = Some("the texel transfer's charts, repacked");
-            }
             let atlas = bundle::TexelAtlas { atlas: atlas.clone(), texels: masks.texels.clone() };
             if input.sun_atlas_of_its_own {
                 own_atlas = Some(atlas);
