@@ -343,7 +343,7 @@ fn a_texel_bundle_exports_its_texels_as_textures_on_its_lightmap_uvs() {
 /// With the sun's bits on an atlas of their own (TSAT), the export splits the
 /// vertices along both atlases' seams: every written vertex is a triangle
 /// corner of the bundle with its position in each atlas (TEXCOORD_1 and
-/// `_PRT_TEXCOORD_SUN`), each corner once; the sun textures are the sun
+/// TEXCOORD_2), each corner once; the sun textures are the sun
 /// atlas's size, its coverage exact and its bits exact on its texels.
 #[test]
 fn a_sun_atlas_of_its_own_exports_on_a_second_texture_coordinate() {
@@ -383,7 +383,7 @@ fn a_sun_atlas_of_its_own_exports_on_a_second_texture_coordinate() {
         let reader = primitive.reader(|_| Some(blob));
         let positions: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
         let uvs: Vec<[f32; 2]> = reader.read_tex_coords(1).expect("TEXCOORD_1").into_f32().collect();
-        let sun_uvs: Vec<[f32; 2]> = read_attribute(&primitive, "_PRT_TEXCOORD_SUN", blob);
+        let sun_uvs: Vec<[f32; 2]> = reader.read_tex_coords(2).expect("TEXCOORD_2").into_f32().collect();
         let mut in_this_mesh = std::collections::HashSet::new();
         for i in 0..positions.len() {
             let a = [uvs[i][0] * atlas.width as f32, uvs[i][1] * atlas.height as f32];
@@ -398,7 +398,7 @@ fn a_sun_atlas_of_its_own_exports_on_a_second_texture_coordinate() {
     assert_eq!(written.len(), corners.len(), "every corner written");
     let extras: serde_json::Value = serde_json::from_str(gltf.document.as_json().extras.as_ref().unwrap().get()).unwrap();
     let meta = &extras["prtbake"]["texels"]["sun"];
-    assert_eq!(meta["atlas"]["uv"], "_PRT_TEXCOORD_SUN");
+    assert_eq!(meta["atlas"]["uv"], "TEXCOORD_2");
     let (w, h) = (sun_atlas.width, sun_atlas.height);
     let (cw, ch, _, coverage) = png_samples(&gltf, blob, meta["atlas"]["coverage_texture"].as_u64().unwrap() as usize);
     assert_eq!((cw, ch), (w, h));

@@ -18,7 +18,7 @@ use std::path::Path;
 
 use serde_json::{json, Value};
 
-use super::export_texels::{atlas_mesh, texel_images, two_atlas_mesh, SUN_TEXCOORD_ATTRIBUTE};
+use super::export_texels::{atlas_mesh, texel_images, two_atlas_mesh};
 use super::values::check_bundle;
 use super::{Bundle, LayerKind, Transfer};
 use crate::mesh::{write_glb_with, AttributeValues, CustomAttribute, GlbAdditions, MeshError};
@@ -45,6 +45,8 @@ pub struct GltfExportReport {
     pub layer: String,
     /// Texel bundles: the PNG textures written (coverage, transfer, sun bits); 0 otherwise.
     pub texel_textures: usize,
+    /// The sun's bits on an atlas of their own, whose position is `TEXCOORD_2`.
+    pub sun_atlas: bool,
 }
 
 /// The transfer attributes of `values` (S per vertex), 4 floats each, zero-padded.
@@ -157,9 +159,6 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         });
     }
     let sun_count = attributes.iter().filter(|a| a.semantic.starts_with(SUN_ATTRIBUTE_PREFIX)).count();
-    if let Some(data) = sun_texcoords {
-        attributes.push(CustomAttribute { semantic: SUN_TEXCOORD_ATTRIBUTE.into(), values: AttributeValues::F32 { components: 2, data } });
-    }
     let mut images = Vec::new();
     let mut texel_meta = Value::Null;
     if let Some(t) = &bundle.texels {
@@ -181,7 +180,12 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         "shading": "radiance = albedo * (sum_i L_i t_i + bit * max(n.s, 0) * sun_rgb / pi); L_i = integral of L(w) y_i(w) dw",
         "conventions": bundle.meta.get("conventions").cloned().unwrap_or(Value::Null),
     }});
-    write_glb_with(path, mesh, GlbAdditions { attributes: &attributes, extras: Some(extras), images: &images })?;
+    let second_lightmap_uvs = sun_texcoords.unwrap_or_default();
+    write_glb_with(
+        path,
+        mesh,
+        GlbAdditions { attributes: &attributes, extras: Some(extras), images: &images, second_lightmap_uvs: &second_lightmap_uvs },
+    )?;
     Ok(GltfExportReport {
         vertices: vertex_count,
         triangles: mesh.triangle_count(),
@@ -189,5 +193,6 @@ pub fn export_glb(path: &Path, bundle: &Bundle, layer: Option<LayerKind>) -> Res
         sun_attributes: sun_count,
         layer: layer_name,
         texel_textures: images.len(),
+        sun_atlas: !second_lightmap_uvs.is_empty(),
     })
 }

@@ -16,9 +16,6 @@ use serde_json::{json, Value};
 
 use super::types::{SunSeries, TexelLayers};
 use crate::atlas::Atlas;
-
-/// The vertex attribute holding each vertex's position in the sun's own atlas.
-pub const SUN_TEXCOORD_ATTRIBUTE: &str = "_PRT_TEXCOORD_SUN";
 use crate::mesh::{EmbeddedImage, Mesh};
 
 /// The mesh with one vertex per atlas vertex: attributes copied from the
@@ -42,7 +39,7 @@ pub(super) fn atlas_mesh(mesh: &Mesh, atlas: &Atlas) -> Mesh {
 /// triangles' corners, `lightmap_uvs` the first atlas's position as in
 /// [`atlas_mesh`]. Also each written vertex's bundle vertex and its
 /// position in the sun's atlas over that atlas's size.
-pub(super) fn two_atlas_mesh(mesh: &Mesh, atlas: &Atlas, sun_atlas: &Atlas) -> (Mesh, Vec<u32>, Vec<f32>) {
+pub(super) fn two_atlas_mesh(mesh: &Mesh, atlas: &Atlas, sun_atlas: &Atlas) -> (Mesh, Vec<u32>, Vec<Vec2>) {
     let mut pairs: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
     let mut first_atlas = Vec::new();
     let mut sun_uv = Vec::new();
@@ -51,8 +48,7 @@ pub(super) fn two_atlas_mesh(mesh: &Mesh, atlas: &Atlas, sun_atlas: &Atlas) -> (
     for (&a, &s) in atlas.indices.iter().zip(&sun_atlas.indices) {
         let index = *pairs.entry((a, s)).or_insert_with(|| {
             first_atlas.push(a);
-            let uv = sun_atlas.uv[s as usize] / sun_size;
-            sun_uv.extend([uv.x, uv.y]);
+            sun_uv.push(sun_atlas.uv[s as usize] / sun_size);
             first_atlas.len() as u32 - 1
         });
         indices.push(index);
@@ -220,7 +216,7 @@ pub(super) fn texel_images(
             "fraction_textures": fraction_textures,
             "fraction_decode": "the sunlit share of step 8k + 2j + h is nibble h (low first) of channel j of fraction texture k, over 15; use it instead of the bit where present" });
         if let (Some(own), Some(coverage)) = (&sun.texel_atlas, own_coverage) {
-            sun_meta["atlas"] = json!({ "uv": SUN_TEXCOORD_ATTRIBUTE, "width": width, "height": height, "texel_size": own.atlas.texel_size,
+            sun_meta["atlas"] = json!({ "uv": "TEXCOORD_2", "width": width, "height": height, "texel_size": own.atlas.texel_size,
                 "covered_texels": own.texels.len(), "coverage_texture": coverage,
                 "meaning": "the sun's bits lie on an atlas of their own (finer than the transfer's): sample these textures at the vertex attribute named by uv, in [0, 1] as TEXCOORD_1" });
         }

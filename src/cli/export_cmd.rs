@@ -38,7 +38,11 @@ pub fn run(input: &Path, output: &Path, layer: Option<LayerKind>, as_json: bool,
         report.transfer_attributes,
         report.layer,
         report.sun_attributes,
-        if report.texel_textures > 0 { format!(", {} texel textures on TEXCOORD_1", report.texel_textures) } else { String::new() }
+        match (report.texel_textures, report.sun_atlas) {
+            (0, _) => String::new(),
+            (n, false) => format!(", {n} texel textures on TEXCOORD_1"),
+            (n, true) => format!(", {n} texel textures on TEXCOORD_1 (transfer) and TEXCOORD_2 (sun)"),
+        }
     );
     Ok(())
 }

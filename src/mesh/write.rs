@@ -327,13 +327,27 @@ pub struct GlbAdditions<'a> {
     pub extras: Option<Value>,
     /// PNGs in the binary chunk, image and texture `i` each.
     pub images: &'a [EmbeddedImage],
+    /// A second atlas's positions, one per vertex, as `TEXCOORD_2` (with
+    /// the mesh's lightmap UVs as `TEXCOORD_1`); empty: none.
+    pub second_lightmap_uvs: &'a [glam::Vec2],
 }
 
 /// [`write_glb_with`] into a command's staged outputs.
 pub fn stage_glb_with(staged: &mut Staged, path: &Path, mesh: &Mesh, additions: GlbAdditions) -> Result<(), MeshError> {
-    let GlbAdditions { attributes: attributes_in, extras, images } = additions;
+    let GlbAdditions { attributes: attributes_in, extras, images, second_lightmap_uvs } = additions;
     check_writable(path, mesh)?;
     let invalid = |message: String| MeshError::InvalidForWrite { path: path.to_path_buf(), message };
+    if !second_lightmap_uvs.is_empty() && (mesh.lightmap_uvs.is_empty() || second_lightmap_uvs.len() != mesh.vertex_count()) {
+        return Err(invalid(format!(
+            "{} second lightmap UVs for {} vertices with {} lightmap UVs (TEXCOORD_2 needs TEXCOORD_1 and one per vertex)",
+            second_lightmap_uvs.len(),
+            mesh.vertex_count(),
+            mesh.lightmap_uvs.len()
+        )));
+    }
+    if let Some(v) = second_lightmap_uvs.iter().position(|uv| !uv.is_finite()) {
+        return Err(invalid(format!("second lightmap UV of vertex {v} is not finite")));
+    }
     if mesh.triangle_count() == 0 {
         // glTF has no empty primitive: such a file fails validation.
         return Err(invalid("the mesh has no triangles: nothing to write".into()));
@@ -376,6 +390,11 @@ pub fn stage_glb_with(staged: &mut Staged, path: &Path, mesh: &Mesh, additions: 
         // is the same accessor (the loader reads that back as none).
         if mesh.uvs.is_empty() {
             attributes["TEXCOORD_0"] = attributes["TEXCOORD_1"].clone();
+        }
+        if !second_lightmap_uvs.is_empty() {
+            let data: Vec<u8> = second_lightmap_uvs.iter().flat_map(|uv| uv.to_array()).flat_map(f32::to_le_bytes).collect();
+            attributes["TEXCOORD_2"] =
+                json!(bin.push(&data, ARRAY_BUFFER, json!({"componentType": FLOAT, "count": pool.len(), "type": "VEC2"})));
         }
     }
     if !mesh.colors.is_empty() {
