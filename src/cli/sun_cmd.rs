@@ -142,15 +142,18 @@ pub struct SunInput {
     /// A texel bundle's atlas and covered texels, when the sun bits go on
     /// it (`None` with [`SunInput::sun_atlas_of_its_own`]).
     pub atlas: Option<(crate::atlas::Atlas, Vec<u32>)>,
-    /// `--texel-size` on a bundle with texel transfer: the sun bits get an
-    /// atlas of their own (TSAT) at that size, beside the transfer's.
-    pub sun_atlas_of_its_own: bool,
     /// With [`SunInput::sun_atlas_of_its_own`]: the transfer's atlas, whose
     /// charts the sun's repacks when the texel sizes allow.
     pub charts_from: Option<crate::atlas::Atlas>,
 }
 
 impl SunInput {
+    /// `--texel-size` on a bundle with texel transfer: the sun bits get an
+    /// atlas of their own (TSAT) at that size, beside the transfer's.
+    pub fn sun_atlas_of_its_own(&self) -> bool {
+        self.charts_from.is_some()
+    }
+
     pub fn was_bundle(&self) -> bool {
         self.original.is_some()
     }
@@ -181,7 +184,7 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     } else {
         UpAxis::Y
     };
-    let (mesh, original, had_transfer, atlas, sun_atlas_of_its_own, charts_from) = if input_was_bundle {
+    let (mesh, original, had_transfer, atlas, charts_from) = if input_was_bundle {
         let bytes = bundle::read_bundle_bytes(input).map_err(|e| match e {
             bundle::BundleError::Io { source, .. } => anyhow::Error::new(source).context(format!("cannot read {}", input.display())),
             bundle::BundleError::InFile { source, .. } => anyhow::anyhow!("{}: not a valid bundle: {source}", input.display()),
@@ -193,11 +196,11 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
             Some(t) if own => (None, Some(t.atlas)),
             t => (t.map(|t| (t.atlas, t.texels)), None),
         };
-        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some(), atlas, own, charts_from)
+        (b.mesh, Some((bytes, b.meta)), b.transfer.is_some(), atlas, charts_from)
     } else {
         // The new bundle says which glass was a window, as a transfer bake's does.
         let mesh = super::load_mesh(input, config.up, quiet, &outputs, config.force)?;
-        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false, None, false, None)
+        (Surfaces::with_window_roles(&mesh, &config.window_patterns)?, None, false, None, None)
     };
     let recorded_windows = original.as_ref().and_then(|(_, meta)| recorded_windows(meta, had_transfer));
     let up = Vec3::Y;
@@ -214,14 +217,14 @@ pub fn load_sun_input(config: &SunConfig, formats: &[&str], in_place: bool) -> a
     };
     let frame = SkyFrame { north, up, turbidity: config.turbidity, sky_order: config.sky_order };
     let source_name = input.file_name().map(|n| n.to_string_lossy().to_string());
-    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows, atlas, sun_atlas_of_its_own, charts_from })
+    Ok(SunInput { mesh, original, had_transfer, frame, file_up, source_name, recorded_windows, atlas, charts_from })
 }
 
 /// The points per texel of a texel sun bake: `--texel-points`, else the
 /// texel bundle's transfer bake's when the bits go on its atlas (its
 /// points, so the same seed votes on the same points), else the default.
 pub fn texel_points(config: &SunConfig, input: &SunInput) -> u32 {
-    let recorded = input.original.as_ref().filter(|_| !input.sun_atlas_of_its_own);
+    let recorded = input.original.as_ref().filter(|_| !input.sun_atlas_of_its_own());
     let recorded = recorded.and_then(|(_, meta)| meta.pointer("/texels/points_per_texel")?.as_u64());
     config.texel_points.or(recorded.and_then(|p| u32::try_from(p).ok())).unwrap_or(bake::texels::POINTS_PER_TEXEL)
 }
@@ -465,7 +468,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
     // read how before any work, so a bundle that cannot be re-baked stops here.
     if config.refine.is_some() {
         // Its texels (transfer or sun bits) belong to the mesh refinement replaces, and only the vertices could be re-baked.
-        if input.atlas.is_some() || input.sun_atlas_of_its_own {
+        if input.atlas.is_some() || input.sun_atlas_of_its_own() {
             anyhow::bail!(
                 "{}: the bundle holds texels (texel mode): --refine replaces its mesh, whose atlas and texels would be lost; \
                  run sun on it without --refine, or refine the mesh and bake texels again",
@@ -539,7 +542,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
         if input.atlas.is_none() {
             new_atlas_source = Some(new_atlas_source_name(config, &input));
             let atlas = bundle::TexelAtlas { atlas: atlas.clone(), texels: masks.texels.clone() };
-            if input.sun_atlas_of_its_own {
+            if input.sun_atlas_of_its_own() {
                 own_atlas = Some(atlas);
             } else {
                 input.atlas = Some((atlas.atlas, atlas.texels));
