@@ -68,7 +68,9 @@ and mean FLIP (flip-evaluator, LDR) on both images tone-mapped alike
 reference's own noise is the same L2 between two Mitsuba seeds divided by
 sqrt(2); the bake's own error is then sqrt(L2^2 - noise^2) (independent
 errors add in squares), printed beside the raw figure. Writes OUTDIR/{prtbake,mitsuba_a,mitsuba_b}.exr, tone-mapped PNGs, the
-FLIP error maps (flip_a.png, flip_b.png) and the counted pixels (mask.npy).
+FLIP error maps (flip_a.png, flip_b.png), the counted pixels (mask.npy), and
+where_{a,b}.png: the fewest pixels holding half of the squared error (red:
+prtbake brighter, blue: darker), their count printed.
 """
 import argparse
 import hashlib
@@ -525,7 +527,8 @@ def main():
         # The bake and the reference are independent, so their squared errors
         # add: what the bake alone is off by, with the reference's noise taken out.
         bake_only = math.sqrt(max(l2 * l2 - ref_noise * ref_noise, 0.0))
-        result[name] = {"rel_l2": l2, "rel_l2_without_reference_noise": bake_only, "relmse": relmse, "flip_mean": mean_flip}
+        result[name] = {"rel_l2": l2, "rel_l2_without_reference_noise": bake_only, "relmse": relmse, "flip_mean": mean_flip,
+                        "half_error_pixels": where_error_lies(mi, ours, ref, mask, os.path.join(args.out, f"where_{name}.png"))}
     with open(os.path.join(args.out, "result.json"), "w") as f:
         json.dump(result, f, indent=1)
     if args.json:
@@ -539,7 +542,30 @@ def main():
         r = result[name]
         print(f"  ({name}) {what}: image error {100 * r['rel_l2']:.2f}% rel L2 "
               f"({100 * r['rel_l2_without_reference_noise']:.2f}% without the reference's noise), "
-              f"relMSE {r['relmse']:.4f}, FLIP {r['flip_mean']:.4f}")
+              f"relMSE {r['relmse']:.4f}, FLIP {r['flip_mean']:.4f}; half of its squared error in "
+              f"{r['half_error_pixels']} pixels (where_{name}.png)")
+
+
+def where_error_lies(mi, ours, ref, mask, path):
+    """The fewest pixels that hold half of the squared error, drawn over the
+    reference's luminance: red where prtbake is brighter, blue where darker.
+    Returns their count: a few hundred pixels mean a few features (a thin
+    part, a contact line), a large share means noise or a bias everywhere."""
+    err = ((ours - ref) ** 2).sum(-1) * mask
+    total = float(err.sum())
+    if total <= 0:
+        save_png(mi, np.zeros(ours.shape, dtype=np.float32), path)
+        return 0
+    order = np.sort(err.ravel())[::-1]
+    count = int(np.searchsorted(np.cumsum(order), 0.5 * total)) + 1
+    top = err >= order[count - 1]
+    lum_ref, lum_ours = luminance(ref), luminance(ours)
+    grey = np.clip(lum_ref / max(float(np.percentile(lum_ref[mask], 99)), 1e-30), 0, 1) ** 0.5 * 0.6
+    image = np.repeat(np.where(mask, grey, 0.0)[..., None], 3, -1)
+    image[top & (lum_ours > lum_ref)] = [1.0, 0.2, 0.2]
+    image[top & (lum_ours <= lum_ref)] = [0.2, 0.5, 1.0]
+    save_png(mi, image.astype(np.float32), path)
+    return count
 
 
 MASK_GRID = 8
