@@ -271,9 +271,14 @@ fn no_window_halo_on_the_outer_face_of_a_wall() {
     let bake = |keep_outside_sides: bool| {
         let params = BakeParams { order: 2, rays: 256, mode: Mode::Window, keep_outside_sides, ..BakeParams::default() };
         let (result, _, _) = bake_mesh(&mesh, &params, &[]).unwrap();
-        (0..mesh.vertex_count()).map(|v| result.coefficients(v, 0)[0]).collect::<Vec<f32>>()
+        let dc = (0..mesh.vertex_count()).map(|v| result.coefficients(v, 0)[0]).collect::<Vec<f32>>();
+        (dc, result.stats.outside_light_share)
     };
-    let (kept, inside_only) = (bake(true), bake(false));
+    let ((kept, kept_share), (inside_only, dropped_share)) = (bake(true), bake(false));
+    // The stats say what the rule dropped: the wall's outer side, nothing when kept.
+    eprintln!("light through glass dropped as outside: {:.1}%", 100.0 * dropped_share);
+    assert_eq!(kept_share, 0.0);
+    assert!(dropped_share > 0.05 && dropped_share < 1.0, "dropped share {dropped_share}");
     let on_wall = |v: usize| wall.contains(&v);
     let halo = (0..mesh.vertex_count()).filter(|&v| on_wall(v)).map(|v| kept[v]).fold(0.0f32, f32::max);
     let room_max = (0..mesh.vertex_count()).filter(|&v| !on_wall(v)).map(|v| kept[v]).fold(0.0f32, f32::max);

@@ -257,6 +257,12 @@ pub struct BakeStats {
     pub points: u64,
     /// Interior samples rejected as lying inside geometry.
     pub points_rejected: u64,
+    /// Window mode: of the light through glass that bounce 0's sample points
+    /// met (DC summed over points), the share on sides the enclosure rule
+    /// found outside and dropped (`BakeParams::keep_outside_sides` keeps
+    /// it: the share is then 0). Right for a room's outer walls; on a car
+    /// body with gaps it is light the cabin should keep.
+    pub outside_light_share: f64,
     /// Of `points`, those adaptive allocation added after bounce 0 (`BakeParams::adaptive`).
     pub points_added: u64,
     /// Vertices no sample reached (only on window or degenerate triangles): their transfer is zero.

@@ -126,6 +126,10 @@ pub(crate) fn bake_layers_with_texels(
         for index in sums.rejected {
             rejected[index as usize] = true;
         }
+        if bounce == 0 {
+            let [kept_dc, dropped_dc] = sums.glass_dc;
+            stats.outside_light_share = if kept_dc + dropped_dc > 0.0 { dropped_dc / (kept_dc + dropped_dc) } else { 0.0 };
+        }
         let mut layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
         match kept {
             Some(kept) => {

@@ -248,6 +248,8 @@ pub(crate) fn adaptive_range(
     for (_, task) in &extra_tasks {
         out.rays += task.rays;
         out.traced += task.traced;
+        out.glass_dc[0] += task.glass_dc[0];
+        out.glass_dc[1] += task.glass_dc[1];
         out.rejected.extend_from_slice(&task.rejected);
     }
     out.rejected.sort_unstable();

@@ -57,6 +57,10 @@ pub(crate) struct Traced {
     /// The part of the estimate's DC (mean over channels) that arrived
     /// through the back of the point's face (window mode, else 0).
     pub(crate) back_dc: f32,
+    /// Window mode, bounce 0: the DC (first channel) of the light through
+    /// glass the point's sides kept, and that of sides found outside the
+    /// enclosure, dropped ([`Sides::outside`]).
+    pub(crate) glass_dc: [f32; 2],
 }
 
 /// One point rays leave from.
@@ -117,6 +121,8 @@ pub(crate) struct TaskOutput {
     /// Per item and corner, the moments of the points' DC (when the pass
     /// tracks noise, else empty).
     pub(crate) moments: Vec<Moments>,
+    /// Summed [`Traced::glass_dc`] of the task's points: kept, dropped.
+    pub(crate) glass_dc: [f64; 2],
 }
 
 /// Bounce 0's hit records of the points from `first_point` on (a whole
@@ -156,6 +162,8 @@ pub(crate) struct RangeSums {
     pub(crate) rejected: Vec<u32>,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
+    /// Summed [`Traced::glass_dc`] of the range's points, in task order: kept, dropped.
+    pub(crate) glass_dc: [f64; 2],
     /// Bounce 0's hit records of the range's points, in point order, when recorded.
     pub(crate) hits: Vec<u64>,
     /// `--gather-fit`: each item's three corner sums, `[item][corner][channel][coeff]`.
@@ -246,6 +254,7 @@ impl RangeSums {
             rejected: Vec::new(),
             rays: 0,
             traced: 0,
+            glass_dc: [0.0; 2],
             hits: Vec::new(),
             item_sums: match pass.items {
                 Items::Interior { .. } if pass.params.gather_fit => vec![0.0; pass.items.len() * 3 * pass.channels * pass.coeffs],
@@ -259,6 +268,8 @@ impl RangeSums {
     pub(crate) fn add_task(&mut self, pass: &Pass, task_start: usize, task: &TaskOutput, late_before: Option<(&[u32], usize)>) {
         self.rays += task.rays;
         self.traced += task.traced;
+        self.glass_dc[0] += task.glass_dc[0];
+        self.glass_dc[1] += task.glass_dc[1];
         self.rejected.extend_from_slice(&task.rejected);
         let corners = pass.items.corners();
         let stride = pass.channels * pass.coeffs;
@@ -364,6 +375,7 @@ impl Pass<'_> {
             rejected: Vec::new(),
             rays: 0,
             traced: 0,
+            glass_dc: [0.0; 2],
             hits: Vec::new(),
             moments: if self.track_noise { vec![Moments::default(); (end - start) * corners] } else { Vec::new() },
         };
@@ -420,6 +432,8 @@ impl Pass<'_> {
                         };
                         out.rays += self.params.rays as u64;
                         out.traced += traced.rays;
+                        out.glass_dc[0] += traced.glass_dc[0] as f64;
+                        out.glass_dc[1] += traced.glass_dc[1] as f64;
                         if traced.inside {
                             out.rejected.push(global);
                             continue;
@@ -596,24 +610,28 @@ impl Pass<'_> {
                 }
             }
             if check_inside && batch.start < probe && self.reject_inside(inside_hits, probe, hits) {
-                return Traced { rays: traced, inside: true, back_dc: 0.0 };
+                return Traced { rays: traced, inside: true, ..Traced::default() };
             }
         }
         if let Some(windows) = sample_windows {
             traced += self.add_window_light(point, windows, if split_sides { None } else { Some(&mut *result) }, scratch);
         }
+        let mut glass_dc = [0.0f32; 2];
         if split_sides {
             // Only the sides inside the enclosure keep their light through glass.
             for side in 0..2 {
                 if params.keep_outside_sides || !sides.outside(side) {
                     result.iter_mut().zip(&scratch.side_light[side]).for_each(|(r, l)| *r += l);
+                    glass_dc[0] += scratch.side_light[side][0];
                     if side == 1 {
                         back_dc = scratch.side_light[1][0];
                     }
+                } else {
+                    glass_dc[1] += scratch.side_light[side][0];
                 }
             }
         }
-        Traced { rays: traced, inside: false, back_dc: back_dc / self.channels as f32 }
+        Traced { rays: traced, inside: false, back_dc: back_dc / self.channels as f32, glass_dc }
     }
 
     /// `record` marked [`BACK_SIDE`] when, in window mode, its ray toward
