@@ -246,11 +246,7 @@ pub(crate) fn adaptive_range(
         out.add_task(&pass, *start, task, first_items.map(|f| (f, range.start)));
     }
     for (_, task) in &extra_tasks {
-        out.rays += task.rays;
-        out.traced += task.traced;
-        out.glass_dc[0] += task.glass_dc[0];
-        out.glass_dc[1] += task.glass_dc[1];
-        out.rejected.extend_from_slice(&task.rejected);
+        out.add_counts(task);
     }
     out.rejected.sort_unstable();
     out.hits = records;

@@ -263,14 +263,20 @@ impl RangeSums {
         }
     }
 
-    /// Adds one task's item sums, in item and corner order. `late_before`:
-    /// receivers whose first item is before this item index go to `late`.
-    pub(crate) fn add_task(&mut self, pass: &Pass, task_start: usize, task: &TaskOutput, late_before: Option<(&[u32], usize)>) {
+    /// Adds one task's counts (rays, the light through glass kept and
+    /// dropped) and its rejected points; not its sums.
+    pub(crate) fn add_counts(&mut self, task: &TaskOutput) {
         self.rays += task.rays;
         self.traced += task.traced;
         self.glass_dc[0] += task.glass_dc[0];
         self.glass_dc[1] += task.glass_dc[1];
         self.rejected.extend_from_slice(&task.rejected);
+    }
+
+    /// Adds one task's item sums, in item and corner order. `late_before`:
+    /// receivers whose first item is before this item index go to `late`.
+    pub(crate) fn add_task(&mut self, pass: &Pass, task_start: usize, task: &TaskOutput, late_before: Option<(&[u32], usize)>) {
+        self.add_counts(task);
         let corners = pass.items.corners();
         let stride = pass.channels * pass.coeffs;
         let with_weights = pass.bounce == 0;
