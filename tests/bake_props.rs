@@ -260,8 +260,8 @@ fn window_mode_is_side_blind() {
 /// is two-sided, so the wall's outer side saw the pane from behind and its
 /// vertices along the opening glowed. Closed form for bounce 0: the wall's
 /// inner side cannot see the pane (it lies beyond the wall's plane), and its
-/// outer side sees the open sky (more than a quarter of its rays escape
-/// without meeting glass) and is outside the enclosure, so every front-wall
+/// outer side sees the open sky (more of its rays escape without meeting
+/// glass than meet opaque surfaces) and is outside the enclosure, so every front-wall
 /// vertex is exactly 0. Every other surface sees the pane only from inside:
 /// its values are those of the bake that keeps outside sides (the same rays;
 /// only the order of the float sums differs).

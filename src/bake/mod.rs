@@ -107,12 +107,14 @@ pub struct BakeParams {
     pub window_sampling: bool,
     /// Window mode: keep the light through glass that reaches a sample point
     /// from a side outside the enclosure. Off (the default), a side of a
-    /// point from which more than a quarter of bounce 0's cosine rays escape
-    /// to the sky without meeting glass is outside, and its light through
-    /// glass is dropped: the outer face of a wall no longer glows from a pane
-    /// in front of it and carries the glow into the room through shared
-    /// vertices. On, for window scenes with no enclosure (a pane over an
-    /// open plane), where every side sees the open sky.
+    /// point from which more of bounce 0's cosine rays escape to the sky
+    /// without meeting glass than meet opaque surfaces is outside
+    /// (`bake::enclosure`), and its light through glass is dropped: the
+    /// outer face of a wall no longer glows from a pane in front of it and
+    /// carries the glow into the room through shared vertices. On, for
+    /// window scenes with no enclosure (a pane over an open plane), where
+    /// every side sees the open sky, and for a car body with gaps, which
+    /// make sides inside the cabin look outside.
     pub keep_outside_sides: bool,
     /// A sample is inside geometry when most of its probe rays hit back faces
     /// closer than this fraction of the scene diagonal.
