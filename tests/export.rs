@@ -415,3 +415,48 @@ fn a_sun_atlas_of_its_own_exports_on_a_second_texture_coordinate() {
     }
     assert!(lit > 0, "no sun texel lit: the bits were not tested");
 }
+
+/// A second atlas (`TEXCOORD_2`) is refused, naming the file, when the mesh
+/// has no first one, when it does not give one position per vertex, or
+/// when a position is not finite; nothing is written. With one finite
+/// position per vertex beside the first atlas it is written.
+#[test]
+fn a_second_lightmap_uv_set_is_checked_before_writing() {
+    use glam::Vec2;
+    use prtbake::mesh::{write_glb_with, GlbAdditions};
+    let dir = Scratch::new("export-second-uvs");
+    let plain = shapes::plane_grid(2, 1.0);
+    let n = plain.vertex_count();
+    let mut with_atlas = plain.clone();
+    with_atlas.lightmap_uvs = (0..n).map(|v| Vec2::new(v as f32 / n as f32, 0.5)).collect();
+    let good: Vec<Vec2> = (0..n).map(|v| Vec2::new(0.25, v as f32 / n as f32)).collect();
+    let mut not_finite = good.clone();
+    not_finite[3].y = f32::NAN;
+    let cases: [(&str, &Mesh, &[Vec2], &str); 3] = [
+        ("no-first-atlas", &plain, &good, "TEXCOORD_2 needs TEXCOORD_1 and one per vertex"),
+        ("one-short", &with_atlas, &good[..n - 1], "TEXCOORD_2 needs TEXCOORD_1 and one per vertex"),
+        ("nan", &with_atlas, &not_finite, "second lightmap UV of vertex 3 is not finite"),
+    ];
+    for (name, mesh, uvs, expected) in cases {
+        let path = dir.path(&format!("{name}.glb"));
+        let additions = GlbAdditions { second_lightmap_uvs: uvs, ..GlbAdditions::default() };
+        let message = write_glb_with(&path, mesh, additions).expect_err(name).to_string();
+        assert!(message.contains(expected) && message.contains(&format!("{name}.glb")), "{name}: {message}");
+        assert!(!path.exists(), "{name}: a refused GLB was written");
+    }
+    let path = dir.path("good.glb");
+    write_glb_with(&path, &with_atlas, GlbAdditions { second_lightmap_uvs: &good, ..GlbAdditions::default() }).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let gltf = gltf::Gltf::from_slice(&bytes).unwrap();
+    let blob = gltf.blob.as_deref().unwrap();
+    let mut read = Vec::new();
+    for mesh in gltf.meshes() {
+        for primitive in mesh.primitives() {
+            read.extend(primitive.reader(|_| Some(blob)).read_tex_coords(2).expect("TEXCOORD_2").into_f32().map(Vec2::from));
+        }
+    }
+    assert_eq!(read.len(), n, "the writer may split nothing on a plane");
+    for uv in &read {
+        assert!(good.contains(uv), "{uv:?} is none of the given positions");
+    }
+}
