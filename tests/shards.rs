@@ -514,6 +514,43 @@ fn merges_keep_the_window_roles_and_shards_may_be_empty() {
     }
 }
 
+/// The light through glass that the enclosure rule dropped
+/// (`stats.outside_light_share`) is carried by the shard parts and layers:
+/// the last merge reports what the single-process bake reports. The
+/// window-halo room (`verify::shapes::room_with_pane_outside_opening`): the
+/// front wall's outer side sees the pane and the sky, so some is dropped.
+#[test]
+fn merges_report_the_light_through_glass_dropped() {
+    let dir = Scratch::new("shards-glass-light");
+    let mesh = dir.path("halo-room.obj");
+    prtbake::mesh::write_obj(&mesh, &prtbake::verify::shapes::room_with_pane_outside_opening().0).unwrap();
+    let args = ["--window", "glass", "--bounces", "1", "--rays", "16", "--seed", "3", "--adaptive", "0", "--quiet"];
+    let json = |out: &str| -> f64 {
+        let doc: serde_json::Value = serde_json::from_str(out).unwrap();
+        doc["stats"]["outside_light_share"].as_f64().or_else(|| doc["outside_light_share"].as_f64()).unwrap()
+    };
+    let single = dir.path("single.prtb");
+    let mut a = vec!["bake", s(&mesh), "-o", s(&single), "--json"];
+    a.extend(args);
+    let whole = json(&run(&a));
+    assert!(whole > 0.01 && whole < 0.99, "the fixture drops some light through glass, not all: {whole}");
+    let work = dir.path("sharded");
+    std::fs::create_dir(&work).unwrap();
+    let merged = sharded_bake(&work, &mesh, &args, 1, 3);
+    assert!(std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(), "the merged bundle differs");
+    // The last merge again, asking for JSON; its text line too.
+    let parts: Vec<PathBuf> = (0..3).map(|k| work.join(format!("r1-{k}.prtp"))).collect();
+    let (again, layer) = (work.join("again.prtb"), work.join("r0.prtl"));
+    let mut a = merge(&parts.iter().map(|p| p.as_path()).collect::<Vec<_>>(), &again);
+    a.extend(["--layer", s(&layer)]);
+    let text = run(&a);
+    a.push("--json");
+    a.push("--force");
+    let sharded = json(&run(&a));
+    assert!((sharded - whole).abs() <= 1e-12 * whole, "merged {sharded} against the single bake's {whole}");
+    assert!(text.contains(&format!("window light: {:.1}%", 100.0 * whole)), "{text}");
+}
+
 /// A pilot part among round-0 parts is named as the other stage, and a
 /// truncated part as truncated (not by the garbage where its length was).
 #[test]

@@ -292,6 +292,16 @@ pub struct BakeStats {
     pub batching: Batching,
 }
 
+/// [`BakeStats::outside_light_share`] of the DC through glass that bounce
+/// 0's points met on sides kept and on sides dropped.
+pub fn outside_light_share([kept, dropped]: [f64; 2]) -> f64 {
+    if kept + dropped > 0.0 {
+        dropped / (kept + dropped)
+    } else {
+        0.0
+    }
+}
+
 /// A baked transfer: per vertex `[channel][coeff]`, vertex-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TransferResult {

@@ -574,14 +574,7 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
         report.result.channels,
         report.bundle_bytes
     );
-    if s.outside_light_share > 0.0 {
-        // Right for a building's outer walls; a car body with gaps makes
-        // sides inside the cabin look outside (docs/image-accuracy.md).
-        println!(
-            "window light: {:.1}% of what the sample points met through glass fell on sides outside the enclosure and was dropped (--keep-outside-sides keeps it)",
-            100.0 * s.outside_light_share
-        );
-    }
+    print_window_light(s.outside_light_share);
     if let Some(r) = &report.refine {
         println!("{}", r.summary());
     }
@@ -639,4 +632,17 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The line saying how much light through glass the enclosure rule dropped
+/// (nothing when it dropped none). Right for a building's outer walls; a car
+/// body with gaps makes sides inside the cabin look outside
+/// (docs/image-accuracy.md).
+pub(super) fn print_window_light(outside_light_share: f64) {
+    if outside_light_share > 0.0 {
+        println!(
+            "window light: {:.1}% of what the sample points met through glass fell on sides outside the enclosure and was dropped (--keep-outside-sides keeps it)",
+            100.0 * outside_light_share
+        );
+    }
 }

@@ -186,6 +186,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             json!({
                 "kind": "bundle", "round": round, "vertices": s.vertices, "triangles": s.triangles, "points": s.points,
                 "points_rejected": s.points_rejected, "rays": s.rays, "order": result.order, "channels": result.channels,
+                "outside_light_share": s.outside_light_share,
                 "storage": choice.as_ref().map(|c| crate::bundle::storage_meta(c, &result)),
             })
         }
@@ -258,5 +259,8 @@ fn report(config: &MergeConfig, parts: usize, summary: serde_json::Value) -> any
     let kind = summary["kind"].as_str().unwrap_or("file");
     let round = summary.get("round").and_then(|r| r.as_u64()).map(|r| format!(" of round {r}")).unwrap_or_default();
     println!("merged {parts} part(s){round} into {} ({kind}, {bytes} bytes)", config.output.display());
+    if let Some(share) = summary.get("outside_light_share").and_then(|s| s.as_f64()) {
+        super::bake_cmd::print_window_light(share);
+    }
     Ok(())
 }

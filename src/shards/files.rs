@@ -185,6 +185,10 @@ pub struct TransferPart {
     pub rays: u64,
     pub traced: u64,
     pub rejected: u64,
+    /// Round 0 in window mode: the DC through glass that the shard's points
+    /// met, summed in task order, on sides kept and on sides the enclosure
+    /// rule dropped (`BakeStats::outside_light_share`); else zeros.
+    pub glass_light: [f64; 2],
     /// Round 0 of interior sampling: the rows carry their points' DC moments.
     pub tracks_noise: bool,
     /// The pilot of adaptive allocation (base points only, bounce 0): the
@@ -268,6 +272,19 @@ impl TexelRoundPart {
     }
 }
 
+/// The light through glass kept and dropped (two f64s, finite and not
+/// negative); a part's rounds after 0 trace nothing and carry zeros.
+fn read_glass_light(r: &mut Reader, round: u32, part: bool) -> Result<[f64; 2], String> {
+    let light = [r.f64("light through glass kept")?, r.f64("light through glass dropped")?];
+    if light.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+        return Err(format!("its light through glass ({}, {}) is negative or not finite", light[0], light[1]));
+    }
+    if part && round > 0 && light != [0.0; 2] {
+        return Err(format!("round {round} carries light through glass, which only round 0 traces"));
+    }
+    Ok(light)
+}
+
 fn flag_u32(value: u32, what: &str) -> Result<bool, String> {
     match value {
         0 => Ok(false),
@@ -295,6 +312,9 @@ impl TransferPart {
         }
         for v in [self.rays, self.traced, self.rejected] {
             w.u64(v)?;
+        }
+        for v in self.glass_light {
+            w.f64(v)?;
         }
         w.u32(self.tracks_noise as u32 | (self.pilot as u32) << 1)?;
         self.opened.write(&mut w)?;
@@ -338,6 +358,7 @@ impl TransferPart {
             return Err(format!("round {round} with {pass_channels} of {channels} channels"));
         }
         let (rays, traced, rejected) = (r.u64("rays")?, r.u64("rays traced")?, r.u64("points rejected")?);
+        let glass_light = read_glass_light(&mut r, round, true)?;
         let (tracks_noise, pilot) = match r.u32("row flags")? {
             0 => (false, false),
             1 => (true, false),
@@ -370,6 +391,7 @@ impl TransferPart {
             rays,
             traced,
             rejected,
+            glass_light,
             tracks_noise,
             pilot,
             opened,
@@ -495,6 +517,8 @@ pub struct LayerFile {
     pub points: u64,
     pub points_rejected: u64,
     pub rays_traced: u64,
+    /// Round 0's [`TransferPart::glass_light`], summed over the shards in order.
+    pub glass_light: [f64; 2],
     /// Rays evaluated in each round so far.
     pub rays_per_bounce: Vec<u64>,
     /// Per vertex: barycentric weight (from round 0).
@@ -547,6 +571,9 @@ impl LayerFile {
         for v in [self.window_triangles, self.points, self.points_rejected, self.rays_traced] {
             w.u64(v)?;
         }
+        for v in self.glass_light {
+            w.f64(v)?;
+        }
         w.u32(self.rays_per_bounce.len() as u32)?;
         w.u64s(&self.rays_per_bounce)?;
         w.f32s(&self.weights)?;
@@ -595,6 +622,7 @@ impl LayerFile {
         }
         let (window_triangles, points, points_rejected, rays_traced) =
             (r.u64("window triangles")?, r.u64("points")?, r.u64("points rejected")?, r.u64("rays traced")?);
+        let glass_light = read_glass_light(&mut r, round, false)?;
         let bounces = r.u32("bounce count")?;
         if bounces != round + 1 {
             return Err(format!("{bounces} ray counts for round {round}"));
@@ -674,6 +702,7 @@ impl LayerFile {
             points,
             points_rejected,
             rays_traced,
+            glass_light,
             rays_per_bounce,
             weights,
             noise,
@@ -887,6 +916,7 @@ mod tests {
             rays: 96,
             traced: 96,
             rejected: 1,
+            glass_light: [2.5, 0.75],
             tracks_noise: true,
             pilot: false,
             opened: VertexRows {
@@ -941,6 +971,7 @@ mod tests {
             points: 9,
             points_rejected: 1,
             rays_traced: 300,
+            glass_light: [2.5, 0.75],
             rays_per_bounce: vec![288, 256],
             weights: vec![1.0; 5],
             noise: vec![0.0, 0.5, 0.25, 0.0, 1.0],
@@ -1026,6 +1057,12 @@ mod tests {
         let mut p = part();
         p.shard = 3;
         assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("shard index 3"));
+        let mut p = part();
+        p.glass_light[1] = f64::NAN;
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("light through glass"));
+        let mut p = part();
+        p.glass_light[0] = -1.0;
+        assert!(TransferPart::decode(&p.to_bytes()).unwrap_err().contains("negative or not finite"));
         let mut p = part();
         p.coeffs = 5;
         p.opened.rows.push(0.0);

@@ -311,9 +311,14 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
     }
 
     let layer = normalised_layer(&sums, &weights, pass_channels, channels, coeffs);
-    let (mut total, mut layers, mut rays_per_bounce, points_rejected, rays_traced) = match previous {
-        Some(p) => (p.total, p.layers, p.rays_per_bounce, p.points_rejected, p.rays_traced),
-        None => (vec![0.0f32; vertex_count * channels * coeffs], Vec::new(), Vec::new(), parts.iter().map(|(_, p)| p.rejected).sum(), 0),
+    let (mut total, mut layers, mut rays_per_bounce, points_rejected, rays_traced, glass_light) = match previous {
+        Some(p) => (p.total, p.layers, p.rays_per_bounce, p.points_rejected, p.rays_traced, p.glass_light),
+        None => {
+            let glass_light =
+                order.iter().fold([0.0f64; 2], |sum, &i| [sum[0] + parts[i].1.glass_light[0], sum[1] + parts[i].1.glass_light[1]]);
+            let rejected = parts.iter().map(|(_, p)| p.rejected).sum();
+            (vec![0.0f32; vertex_count * channels * coeffs], Vec::new(), Vec::new(), rejected, 0, glass_light)
+        }
     };
     add_layer(&mut total, &layer);
     rays_per_bounce.push(parts.iter().map(|(_, p)| p.rays).sum());
@@ -339,6 +344,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
             points: reference.point_count,
             points_rejected,
             rays_traced,
+            glass_light,
             rays_per_bounce,
             weights,
             noise,
@@ -375,6 +381,7 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         rays_gathered: rays_per_bounce.iter().skip(1).sum(),
         rays_per_bounce,
         rays_traced,
+        outside_light_share: crate::bake::outside_light_share(glass_light),
         ..BakeStats::default()
     };
     let result = TransferResult { order: params.order, channels, total, bounces: layers, noise, back: Vec::new(), front_share, stats };

@@ -263,6 +263,8 @@ pub fn bake_transfer_shard(
         rays: sums.rays,
         traced: sums.traced,
         rejected: sums.rejected.len() as u64,
+        // What bounce 0 met through glass, as a whole bake reports it.
+        glass_light: if stage == Stage::Round(0) { sums.glass_dc } else { [0.0; 2] },
         opened,
         tracks_noise,
         pilot: stage == Stage::Pilot,

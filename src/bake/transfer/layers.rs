@@ -127,8 +127,7 @@ pub(crate) fn bake_layers_with_texels(
             rejected[index as usize] = true;
         }
         if bounce == 0 {
-            let [kept_dc, dropped_dc] = sums.glass_dc;
-            stats.outside_light_share = if kept_dc + dropped_dc > 0.0 { dropped_dc / (kept_dc + dropped_dc) } else { 0.0 };
+            stats.outside_light_share = crate::bake::outside_light_share(sums.glass_dc);
         }
         let mut layer = normalised_layer(&sums.sums, &vertex_weight, pass_channels, channels, coeffs);
         match kept {
