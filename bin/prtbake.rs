@@ -135,6 +135,11 @@ struct BakeArgs {
     /// With --texel-size: unwrap a new atlas (xatlas) even where the mesh has its own (TEXCOORD_1).
     #[arg(long, requires = "texel_size")]
     unwrap: bool,
+    /// With --texel-size: rays per vertex sample point (default: --rays, which the texels take).
+    /// The picture reads the texels; the vertices serve tools that read vertices and, from
+    /// bounce 1 on, the back sides of faces, so fewer rays there cut a texel bake's time.
+    #[arg(long, value_name = "N", requires = "texel_size")]
+    vertex_rays: Option<u32>,
     /// With --texel-size L and --max-error E: a texel size per chart, from L to 2^(N-1)·L (N in
     /// 2..=4). A pilot bake on an atlas of the coarsest texels measures each chart, and the charts
     /// whose light changes most get finer texels until the estimated resolution error (relative L2
@@ -856,8 +861,11 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
             if matches!(a.sampling, SamplingArg::Vertex) {
                 return Err(with("--sampling vertex", "texels sample inside their triangles"));
             }
+            if let Some(n) = a.vertex_rays.filter(|n| !(1..=prtbake::sampling::MAX_RAYS_PER_POINT).contains(n)) {
+                anyhow::bail!("--vertex-rays {n}: expected 1..={}", prtbake::sampling::MAX_RAYS_PER_POINT);
+            }
             let density = texel_density(a.texel_levels, a.max_error)?;
-            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points, unwrap: a.unwrap, density })
+            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points, unwrap: a.unwrap, density, vertex_rays: a.vertex_rays })
         }
         None => None,
     };

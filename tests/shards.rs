@@ -340,6 +340,19 @@ fn sharded_texel_transfer_merges_into_the_single_process_bundle() {
         let merged = sharded_bake(&work, &mesh, texel_args, 2, n);
         assert!(std::fs::read(&merged).unwrap() == expected, "{n} shards: the merged texel bundle differs from the single-process bake");
     }
+    // The vertices with fewer rays than the texels (`--vertex-rays`): the
+    // texels are those of the bake above; shards merge into the same bytes.
+    let few: Vec<&str> = texel_args.iter().copied().chain(["--vertex-rays", "4"]).collect();
+    let expected_few = single("few.prtb", &few, "2");
+    let f = prtbake::bundle::read_bundle(&dir.path("few.prtb")).unwrap();
+    assert_eq!(f.meta["texels"]["vertex_rays"], 4, "{}", f.meta);
+    // A third of the vertices' rays (adaptive allocation places its extra points by what they found).
+    let vertex_rays = |m: &serde_json::Value| m["stats"]["rays_per_bounce"][0].as_u64().unwrap() as f64;
+    assert!((3.0 * vertex_rays(&f.meta) / vertex_rays(&b.meta) - 1.0).abs() < 0.01, "{} vs {}", f.meta["stats"], b.meta["stats"]);
+    let work = dir.path("texels-few");
+    std::fs::create_dir(&work).unwrap();
+    let merged = sharded_bake(&work, &mesh, &few, 2, 2);
+    assert!(std::fs::read(&merged).unwrap() == expected_few, "2 shards with --vertex-rays 4: the merged texel bundle differs");
     // Per vertex, denoised by the merge.
     let vertex_args: Vec<&str> = texel_args[..texel_args.len() - 6].iter().copied().chain(["--denoise", "1"]).collect();
     let expected = single("vertex.prtb", &vertex_args, "2");

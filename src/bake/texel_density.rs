@@ -168,8 +168,16 @@ pub fn transfer_density_atlas(
     };
     // Bounce 0 of the texels reads no vertex: the pilot bakes none.
     let no_vertices = vec![false; mesh.triangle_count()];
-    let (vertices, pilot) =
-        bake_texels_for(mesh, scene, surfaces, &pilot_params, pilot_atlas.clone(), points_per_texel, Some(&no_vertices))?;
+    let (vertices, pilot) = bake_texels_for(
+        mesh,
+        scene,
+        surfaces,
+        &pilot_params,
+        pilot_atlas.clone(),
+        points_per_texel,
+        pilot_params.rays,
+        Some(&no_vertices),
+    )?;
     let detail = transfer_chart_detail(&pilot, vertices.channels, crate::sh::coeff_count(vertices.order));
     let (atlas, choice) = repack(&pilot_atlas, &detail, request)?;
     let report = request.report(

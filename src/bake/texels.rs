@@ -61,12 +61,29 @@ pub fn bake_texels(
     atlas: Atlas,
     points_per_texel: u32,
 ) -> Result<(TransferResult, TexelTransfer), BakeError> {
-    bake_texels_for(mesh, scene, surfaces, params, atlas, points_per_texel, None)
+    bake_texels_for(mesh, scene, surfaces, params, atlas, points_per_texel, params.rays, None)
 }
 
-/// [`bake_texels`] with the vertices of the triangles of `receivers` only
-/// (`Some(all false)`: the texels alone, as a pilot that reads no vertex
-/// needs them).
+/// [`bake_texels`] with `vertex_rays` rays per vertex sample point, the
+/// texels keeping `params.rays`. The picture reads the texels; the vertices
+/// serve tools that read vertices and, from bounce 1 on, the back sides of
+/// faces, so a texel bake may spend fewer rays on them.
+pub fn bake_texels_with_vertex_rays(
+    mesh: &Mesh,
+    scene: &Scene,
+    surfaces: &Surfaces,
+    params: &BakeParams,
+    atlas: Atlas,
+    points_per_texel: u32,
+    vertex_rays: u32,
+) -> Result<(TransferResult, TexelTransfer), BakeError> {
+    bake_texels_for(mesh, scene, surfaces, params, atlas, points_per_texel, vertex_rays, None)
+}
+
+/// [`bake_texels_with_vertex_rays`] with the vertices of the triangles of
+/// `receivers` only (`Some(all false)`: the texels alone, as a pilot that
+/// reads no vertex needs them).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn bake_texels_for(
     mesh: &Mesh,
     scene: &Scene,
@@ -74,12 +91,14 @@ pub(crate) fn bake_texels_for(
     params: &BakeParams,
     atlas: Atlas,
     points_per_texel: u32,
+    vertex_rays: u32,
     receivers: Option<&[bool]>,
 ) -> Result<(TransferResult, TexelTransfer), BakeError> {
     check_texel_inputs(mesh, &atlas, points_per_texel)?;
     let coverage = Coverage::of(&atlas);
-    let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params.pattern, params.seed);
-    let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, params, receivers, None, Some(&mut state))?;
+    let mut state = TexelState::new(&atlas, &coverage, points_per_texel, params);
+    let vertex_params = BakeParams { rays: vertex_rays, ..*params };
+    let result = super::transfer::bake_layers_with_texels(mesh, scene, surfaces, &vertex_params, receivers, None, Some(&mut state))?;
     let coeffs = crate::sh::coeff_count(params.order);
     let front_share = super::side_share::front_shares(params.mode, &state.back_dc, &state.total, result.channels, coeffs);
     if params.denoise > 0.0 {
@@ -158,7 +177,7 @@ impl TexelTransferPlan {
     pub fn new(mesh: &Mesh, atlas: &Atlas, points_per_texel: u32, params: &BakeParams) -> Result<TexelTransferPlan, BakeError> {
         check_texel_inputs(mesh, atlas, points_per_texel)?;
         let coverage = Coverage::of(atlas);
-        Ok(TexelTransferPlan { state: TexelState::new(atlas, &coverage, points_per_texel, params.pattern, params.seed) })
+        Ok(TexelTransferPlan { state: TexelState::new(atlas, &coverage, points_per_texel, params) })
     }
 
     /// The covered texels (`y * width + x`, ascending).
@@ -313,6 +332,38 @@ mod tests {
         for (b, layer) in texels.bounces.iter().enumerate() {
             let mean: f64 =
                 (0..texels.texels.len()).map(|i| texels.covered_area[i] as f64 * layer[i * channels * coeffs] as f64).sum::<f64>() / area;
+            let expected = Y00 * f * (albedo as f64 * (1.0 - f)).powi(b as i32);
+            assert!((mean / expected - 1.0).abs() < 0.015, "bounce {b}: texel mean {mean}, expected {expected}");
+        }
+    }
+
+    /// Fewer rays per vertex point (`--vertex-rays`) leave the texels' bounce 0
+    /// the same bits (it reads no vertex), cut the vertices' rays in the same
+    /// ratio, and keep the texels' bounces on the integrating sphere's series
+    /// (they read texels at hits; vertices only on back sides).
+    #[test]
+    fn fewer_vertex_rays_leave_the_texels_bounce_zero_and_series() {
+        let (albedo, cap) = (0.6f32, 0.8f32);
+        let (mesh, f) = shapes::integrating_sphere(3, albedo, cap, shapes::Opening::Hole);
+        let params = BakeParams { order: 1, rays: 64, seed: 3, bounces: 2, store_bounces: true, ..BakeParams::default() };
+        let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
+        let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
+        let atlas = Atlas::unwrap(&mesh, 0.05).unwrap();
+        let run =
+            |vertex_rays: u32| bake_texels_with_vertex_rays(&mesh, &scene, &surfaces, &params, atlas.clone(), 4, vertex_rays).unwrap();
+        let ((all_v, all_t), (few_v, few_t)) = (run(64), run(8));
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&few_t.bounces[0]), bits(&all_t.bounces[0]), "the texels' bounce 0");
+        assert_eq!(few_t.rays, all_t.rays);
+        assert_eq!(few_v.stats.points, all_v.stats.points);
+        assert_eq!(few_v.stats.rays_per_bounce[0] * 8, all_v.stats.rays_per_bounce[0]);
+        assert_ne!(bits(&few_v.total), bits(&all_v.total), "the vertices took other rays");
+        let coeffs = crate::sh::coeff_count(1);
+        let channels = few_t.total.len() / few_t.texels.len() / coeffs;
+        let area: f64 = few_t.covered_area.iter().map(|&a| a as f64).sum();
+        for (b, layer) in few_t.bounces.iter().enumerate() {
+            let mean: f64 =
+                (0..few_t.texels.len()).map(|i| few_t.covered_area[i] as f64 * layer[i * channels * coeffs] as f64).sum::<f64>() / area;
             let expected = Y00 * f * (albedo as f64 * (1.0 - f)).powi(b as i32);
             assert!((mean / expected - 1.0).abs() < 0.015, "bounce {b}: texel mean {mean}, expected {expected}");
         }

@@ -89,6 +89,15 @@ pub fn make_bundle_stored(
     }
 }
 
+/// Texel mode with fewer rays per vertex point than per texel point
+/// (`bake --vertex-rays`): META `texels.vertex_rays` says so; nothing when
+/// they are the same.
+pub fn note_vertex_rays(bundle: &mut Bundle, vertex_rays: u32, rays: u32) {
+    if vertex_rays != rays {
+        bundle.meta["texels"]["vertex_rays"] = json!(vertex_rays);
+    }
+}
+
 /// Texel mode: adds the atlas and each covered texel's transfer to a bundle
 /// [`make_bundle_stored`] made, stored as the vertices are (`choices`, from
 /// [`StorageRequest::choose_with_texels`]: the vertices' choice and the

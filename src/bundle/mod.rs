@@ -37,8 +37,8 @@ mod tests;
 use std::path::Path;
 
 pub use assemble::{
-    add_texel_transfer, bundle_meta, conventions, encode_transfer_bundle, make_bundle, make_bundle_stored, storage_meta, StorageRequest,
-    AUTO_QUANTIZE_BUDGET,
+    add_texel_transfer, bundle_meta, conventions, encode_transfer_bundle, make_bundle, make_bundle_stored, note_vertex_rays, storage_meta,
+    StorageRequest, AUTO_QUANTIZE_BUDGET,
 };
 pub use container::{
     Codec, Compression, EncodeOptions, SectionInfo, ALIGN, ENTRY_LEN, FORMAT_MAJOR, FORMAT_MINOR, HEADER_LEN, MAGIC, STORED_CRC_SINCE_MINOR,

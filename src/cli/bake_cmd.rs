@@ -51,6 +51,8 @@ pub struct TexelRequest {
     pub unwrap: bool,
     /// Texel size per chart, picked by a pilot within a budget (`--texel-levels`, `--max-error`).
     pub density: Option<bake::texel_density::DensityRequest>,
+    /// Rays per vertex sample point (`--vertex-rays`; `None`: the texels' `--rays`).
+    pub vertex_rays: Option<u32>,
 }
 
 /// What the user asked of adaptive refinement ([`crate::refine`]); the
@@ -350,8 +352,10 @@ fn bake_texels_to_bundle(
             }
         };
         let atlas_seconds = clock.elapsed().as_secs_f64();
+        let vertex_rays = request.vertex_rays.unwrap_or(config.params.rays);
         let (result, texels) =
-            bake::texels::bake_texels(mesh, &scene, &surfaces, &config.params, atlas, request.points).with_context(|| input.clone())?;
+            bake::texels::bake_texels_with_vertex_rays(mesh, &scene, &surfaces, &config.params, atlas, request.points, vertex_rays)
+                .with_context(|| input.clone())?;
         Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds, density))
     })??;
     let (result, texels, surfaces, build_seconds, atlas_seconds, density) = baked;
@@ -384,6 +388,7 @@ fn bake_texels_to_bundle(
     if let Some(density) = &texel_report.density {
         bundle.meta["texels"]["density"] = density.meta();
     }
+    crate::bundle::note_vertex_rays(&mut bundle, request.vertex_rays.unwrap_or(config.params.rays), config.params.rays);
     let encoded =
         crate::bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choices.as_ref().map(|c| &c.0), &config.output);

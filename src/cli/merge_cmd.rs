@@ -172,6 +172,8 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
                         let mut bundle = bundle::make_bundle_stored(&b.mesh, &result, &key.params, b.meta, choices.as_ref().map(|c| &c.0));
                         let points = key.texels.as_ref().map_or(0, |t| t.points_per_texel);
                         bundle::add_texel_transfer(&mut bundle, t, &result, choices.as_ref(), &atlas_source, points);
+                        let vertex_rays = key.texels.as_ref().map_or(key.params.rays, |t| t.vertex_rays);
+                        bundle::note_vertex_rays(&mut bundle, vertex_rays, key.params.rays);
                         super::bake_cmd::warn_texels_over_budget(choices.as_ref().map(|c| &c.1), output);
                         (bundle, choices.map(|c| c.0))
                     }

@@ -82,6 +82,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
                     fractions: false,
                     covered_texels: plan.texels().len() as u32,
                     atlas_crc: shards::atlas_crc(&atlas),
+                    vertex_rays: request.vertex_rays.unwrap_or(config.params.rays),
                 });
                 Some((atlas, plan))
             }
@@ -231,6 +232,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             fractions: config.texel_fractions,
             covered_texels: plan.texel_count() as u32,
             atlas_crc: shards::atlas_crc(atlas),
+            vertex_rays: 0,
         });
         let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &suns, &key, texel_plan.as_ref(), shard)?;
         let atlas = atlas.zip(texel_plan.map(|plan| plan.texels().to_vec()));

@@ -425,6 +425,8 @@ pub struct HitFile {
 pub struct TexelHits {
     pub texels: Range<u32>,
     pub points: Range<u64>,
+    /// Rays per texel point (the vertices' may be fewer, `--vertex-rays`).
+    pub rays: u32,
     /// Bit p % 32 of word p / 32: texel point `points.start + p` was rejected.
     pub rejected: Vec<u32>,
     pub records: Vec<u64>,
@@ -461,6 +463,7 @@ impl HitFile {
                 }
                 w.u64(t.points.start)?;
                 w.u64(t.points.end)?;
+                w.u32(t.rays)?;
                 w.u32s(&t.rejected)?;
                 w.u64s(&t.records)?;
             }
@@ -483,10 +486,11 @@ impl HitFile {
             true => {
                 let texels = read_range32(&mut r, "texel range", u32::MAX)?;
                 let points = read_range64(&mut r, "texel point range", u64::MAX)?;
+                let rays = r.u32("texel rays")?;
                 let count = points.end - points.start;
                 let rejected = r.u32s(count.div_ceil(32), "rejected texel points")?;
                 let records = r.u64s(count.saturating_mul(rays as u64), "texel hit records")?;
-                Some(TexelHits { texels, points, rejected, records })
+                Some(TexelHits { texels, points, rays, rejected, records })
             }
         };
         r.finish()?;
@@ -959,7 +963,7 @@ mod tests {
             rays: 2,
             rejected: vec![0b010],
             records: vec![1, 2, 3 | crate::bake::gather::BACK_SIDE, 4, u64::MAX, u64::MAX],
-            texels: Some(TexelHits { texels: 1..2, points: 4..6, rejected: vec![0b01], records: vec![7, 8, 2 << 32, u64::MAX] }),
+            texels: Some(TexelHits { texels: 1..2, points: 4..6, rays: 2, rejected: vec![0b01], records: vec![7, 8, 2 << 32, u64::MAX] }),
         };
         let layer = LayerFile {
             identity: identity(),
@@ -1082,7 +1086,7 @@ mod tests {
         assert!(HitFile::decode(&hits).unwrap_err().contains("names triangle 3 of a mesh of 3"));
         let bad_texel_hits = HitFile {
             records: vec![u64::MAX, 0],
-            texels: Some(TexelHits { texels: 0..1, points: 0..1, rejected: vec![0], records: vec![0, 4 << 32] }),
+            texels: Some(TexelHits { texels: 0..1, points: 0..1, rays: 2, rejected: vec![0], records: vec![0, 4 << 32] }),
             ..bad_hits
         };
         let mut hits = Vec::new();

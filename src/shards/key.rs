@@ -48,6 +48,9 @@ pub struct TexelKey {
     pub covered_texels: u32,
     /// [`atlas_crc`] of the atlas.
     pub atlas_crc: u32,
+    /// Transfer bakes: rays per vertex sample point (`--vertex-rays`; the
+    /// texels take the block's rays); 0 in a sun key.
+    pub vertex_rays: u32,
 }
 
 /// CRC-32 of an atlas: its size, texel size, UVs, vertex sources, indices
@@ -247,6 +250,9 @@ impl TransferKey {
             if texels.as_ref().is_some_and(|t| t.fractions) {
                 return Err("texel fractions are a sun bake's, not a transfer's".into());
             }
+            if let Some(t) = texels.as_ref().filter(|t| t.vertex_rays == 0 || t.vertex_rays > crate::sampling::MAX_RAYS_PER_POINT) {
+                return Err(format!("{} rays per vertex point is outside 1..={}", t.vertex_rays, crate::sampling::MAX_RAYS_PER_POINT));
+            }
             let params = BakeParams {
                 order,
                 rays,
@@ -347,6 +353,9 @@ impl SunKey {
             let day_crc = r.u32("day CRC")?;
             let window_patterns = read_patterns(r)?;
             let texels = read_texel_key(r)?;
+            if texels.as_ref().is_some_and(|t| t.vertex_rays != 0) {
+                return Err("rays per vertex point are a transfer bake's, not a sun bake's".into());
+            }
             Ok(SunKey { params, window_patterns, steps, day_crc, texels })
         })
     }
@@ -379,6 +388,7 @@ fn put_texel_key(out: &mut Vec<u8>, texels: Option<&TexelKey>) {
             out.extend_from_slice(&t.covered_texels.to_le_bytes());
             out.extend_from_slice(&t.atlas_crc.to_le_bytes());
             out.extend_from_slice(&[t.fractions as u8, 0, 0, 0]);
+            out.extend_from_slice(&t.vertex_rays.to_le_bytes());
         }
     }
 }
@@ -398,7 +408,8 @@ fn read_texel_key(r: &mut Reader) -> Result<Option<TexelKey>, String> {
     if r.take(3, "reserved")? != [0, 0, 0] {
         return Err("reserved bytes are not zero".into());
     }
-    Ok(Some(TexelKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc }))
+    let vertex_rays = r.u32("vertex rays")?;
+    Ok(Some(TexelKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc, vertex_rays }))
 }
 
 fn texel_fields(texels: Option<&TexelKey>) -> Vec<(&'static str, String)> {
@@ -407,6 +418,7 @@ fn texel_fields(texels: Option<&TexelKey>) -> Vec<(&'static str, String)> {
         ("texel fractions", texels.is_some_and(|t| t.fractions).to_string()),
         ("covered texels", texels.map_or(0, |t| t.covered_texels).to_string()),
         ("atlas", texels.map_or("none".into(), |t| format!("CRC-32 {:08x}", t.atlas_crc))),
+        ("vertex rays", texels.map_or(0, |t| t.vertex_rays).to_string()),
     ]
 }
 
@@ -434,7 +446,8 @@ mod tests {
         assert_eq!(TransferKey::decode(&block).unwrap(), key);
         let other = TransferKey { params: BakeParams { rays: 32, ..key.params }, ..key.clone() };
         assert_eq!(first_difference(&other.fields(), &key.fields()).unwrap(), "rays 32 here, 64 in");
-        let texel_key = TexelKey { texel_size: 0.02, points_per_texel: 16, fractions: false, covered_texels: 99, atlas_crc: 0xabc };
+        let texel_key =
+            TexelKey { texel_size: 0.02, points_per_texel: 16, fractions: false, covered_texels: 99, atlas_crc: 0xabc, vertex_rays: 8 };
         let texel_mode = TransferKey { params: BakeParams { denoise: 1.5, ..key.params }, texels: Some(texel_key), ..key.clone() };
         assert_eq!(TransferKey::decode(&texel_mode.encode()).unwrap(), texel_mode);
         assert_eq!(first_difference(&key.fields(), &texel_mode.fields()).unwrap(), "denoise 0 here, 1.5 in");
@@ -452,7 +465,8 @@ mod tests {
             texels: None,
         };
         assert_eq!(SunKey::decode(&sun.encode()).unwrap(), sun);
-        let texels = TexelKey { texel_size: 0.05, points_per_texel: 4, fractions: true, covered_texels: 1234, atlas_crc: 0xfeed };
+        let texels =
+            TexelKey { texel_size: 0.05, points_per_texel: 4, fractions: true, covered_texels: 1234, atlas_crc: 0xfeed, vertex_rays: 0 };
         let with_texels = SunKey { texels: Some(texels.clone()), ..sun.clone() };
         let block = with_texels.encode();
         assert_eq!(block.len() % 4, 0);

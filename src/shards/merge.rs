@@ -722,7 +722,8 @@ mod tests {
     #[test]
     fn texel_rows_that_do_not_tile_the_covered_texels_are_refused() {
         use crate::shards::{TexelKey, TexelSunPart};
-        let texel_key = TexelKey { texel_size: 0.1, points_per_texel: 4, fractions: false, covered_texels: 5, atlas_crc: 9 };
+        let texel_key =
+            TexelKey { texel_size: 0.1, points_per_texel: 4, fractions: false, covered_texels: 5, atlas_crc: 9, vertex_rays: 0 };
         let key = SunKey {
             params: crate::bake::SunParams::default(),
             window_patterns: Vec::new(),

@@ -344,13 +344,16 @@ mod tests {
             let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
             let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
             let params = BakeParams { rays: 16, seed: 4, bounces: 2, mode, store_bounces: true, adaptive, ..BakeParams::default() };
-            let (whole, whole_texels) = crate::bake::texels::bake_texels(&mesh, &scene, &surfaces, &params, atlas.clone(), 3).unwrap();
+            // The vertices with fewer rays than the texels (`--vertex-rays`).
+            let (whole, whole_texels) =
+                crate::bake::texels::bake_texels_with_vertex_rays(&mesh, &scene, &surfaces, &params, atlas.clone(), 3, 8).unwrap();
             let texel_key = TexelKey {
                 texel_size: atlas.texel_size,
                 points_per_texel: 3,
                 fractions: false,
                 covered_texels: whole_texels.texels.len() as u32,
                 atlas_crc: atlas_crc(&atlas),
+                vertex_rays: 8,
             };
             let key = key_of(params, Some(texel_key));
             for &count in counts {

@@ -85,7 +85,9 @@ pub fn bake_transfer_shard(
     pilot: Option<PilotInput>,
 ) -> Result<RoundOutput, ShardError> {
     let started = Instant::now();
-    let params = crate::bake::BakeParams { quiet, ..key.params };
+    // Texel mode: the vertices take their own rays (`--vertex-rays`), the texels the key's.
+    let vertex_rays = key.texels.as_ref().map_or(key.params.rays, |t| t.vertex_rays);
+    let params = crate::bake::BakeParams { quiet, rays: vertex_rays, ..key.params };
     let adaptive = params.adaptive > 0.0 && matches!(params.sampling, crate::bake::Sampling::Interior { .. });
     let round = match stage {
         Stage::Pilot => 0,
@@ -169,13 +171,13 @@ pub fn bake_transfer_shard(
     // their points found inside geometry and the texels' previous bounce,
     // which vertices and texels alike gather at hits on atlas triangles.
     let mut texels = texels.filter(|_| stage != Stage::Pilot).map(|texel_plan| {
-        let costs = texel_plan.state.costs(params.rays);
+        let costs = texel_plan.state.costs();
         let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
         (texel_plan, range)
     });
     if let (Some((texel_plan, range)), Some(input)) = (&mut texels, &input) {
         let points = texel_plan.state.point_range(range.clone());
-        let (hits, layer) = check_texel_inputs(input, range.clone(), points.clone(), texel_plan.texels().len())?;
+        let (hits, layer) = check_texel_inputs(input, range.clone(), points.clone(), texel_plan.texels().len(), key.params.rays)?;
         for local in 0..points.end - points.start {
             texel_plan.state.rejected[(points.start + local) as usize] = hits.is_rejected(local);
         }
@@ -294,11 +296,12 @@ fn trace_texels(
     input: Option<&RoundInput>,
     shard: Shard,
 ) -> Result<(TexelRoundPart, Option<TexelHits>), ShardError> {
-    let params = plan.params;
     let state = &mut texel_plan.state;
+    let params = &state.params(plan);
     let points = state.point_range(range.clone());
     let cached = input.and_then(|i| i.hits.texels.as_ref()).map(|h| HitRecords { records: &h.records, first_point: points.start });
-    let pass = plan.pass(round, source, &[], cached, record);
+    let mut pass = plan.pass(round, source, &[], cached, record);
+    pass.params = params;
     let label = format!("shard {shard}, texels, round {round}/{}", params.bounces);
     let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
     let sums = state.trace_range(&pass, range.clone(), &progress);
@@ -321,7 +324,7 @@ fn trace_texels(
         for (local, _) in rejected.iter().enumerate().filter(|(_, &r)| r) {
             bits[local / 32] |= 1 << (local % 32);
         }
-        TexelHits { texels: part.texels.clone(), points, rejected: bits, records: sums.hits }
+        TexelHits { texels: part.texels.clone(), points, rays: params.rays, rejected: bits, records: sums.hits }
     });
     Ok((part, hits))
 }
@@ -333,6 +336,7 @@ fn check_texel_inputs<'a>(
     range: std::ops::Range<usize>,
     points: std::ops::Range<u64>,
     covered: usize,
+    rays: u32,
 ) -> Result<(&'a TexelHits, &'a TexelLayer), ShardError> {
     let hits =
         input.hits.texels.as_ref().ok_or_else(|| {
@@ -342,6 +346,12 @@ fn check_texel_inputs<'a>(
         return Err(ShardError::mismatch(
             input.hits_path,
             format!("holds the hit records of texels {:?}, but this shard traces texels {range:?}", hits.texels),
+        ));
+    }
+    if hits.rays != rays {
+        return Err(ShardError::mismatch(
+            input.hits_path,
+            format!("holds {} rays per texel point, but this bake traces {rays}", hits.rays),
         ));
     }
     let layer = input
@@ -381,6 +391,12 @@ fn check_inputs(
                 "holds shard {}/{}'s hit records (items {:?}), not shard {shard}'s (items {items:?})",
                 hits.shard, shard.count, hits.items
             ),
+        ));
+    }
+    if hits.rays != plan.params.rays {
+        return Err(ShardError::mismatch(
+            input.hits_path,
+            format!("holds {} rays per point, but this bake traces {}", hits.rays, plan.params.rays),
         ));
     }
     if let Some(d) = identity_difference(&layer.identity, identity, super::FileKind::Layer) {

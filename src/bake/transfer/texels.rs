@@ -31,6 +31,7 @@ use crate::atlas::Atlas;
 use crate::bake::gather::RowBuffer;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::bake::texel_lookup::TexelLookup;
+use crate::bake::BakeParams;
 use crate::sampling::{hash_seed, sample_2d, square_to_triangle, DirectionPattern};
 
 const TAG_TEXEL_POSITION: u32 = 0x5054_0001;
@@ -268,6 +269,8 @@ pub(crate) struct TexelState {
     /// Per texel, its chart (that of its first triangle).
     pub(crate) chart: Vec<u32>,
     pub(crate) width: u32,
+    /// Rays per texel point (`BakeParams::rays`; the vertices' plan may take fewer).
+    pub(crate) rays_per_point: u32,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
     /// Wall seconds of each bounce's texel pass.
@@ -284,8 +287,10 @@ pub(crate) struct TexelState {
 }
 
 impl TexelState {
-    pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, pattern: DirectionPattern, seed: u32) -> TexelState {
-        let points = TexelPoints::new(atlas, coverage, points_per_texel, pattern, seed);
+    /// The texels of `atlas` (`coverage`) with `points_per_texel` points of
+    /// `params.rays` rays each.
+    pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, params: &BakeParams) -> TexelState {
+        let points = TexelPoints::new(atlas, coverage, points_per_texel, params.pattern, params.seed);
         let chart = texel_charts(atlas, coverage);
         TexelState {
             lookup: Arc::new(TexelLookup::new(atlas, &coverage.texels, &chart)),
@@ -303,9 +308,15 @@ impl TexelState {
             back_dc: Vec::new(),
             chart,
             width: atlas.width,
+            rays_per_point: params.rays,
             rays: 0,
             traced: 0,
         }
+    }
+
+    /// The parameters of the texels' passes: the plan's, with the texels' rays per point.
+    pub(crate) fn params(&self, plan: &Plan) -> BakeParams {
+        BakeParams { rays: self.rays_per_point, ..*plan.params }
     }
 
     /// Bounce `bounce` of the texels, gathering from `source` (bounce − 1)
@@ -313,7 +324,7 @@ impl TexelState {
     /// the hit cache beside the vertices' `vertex_cache_bytes`; later bounces
     /// gather from them (same bytes as re-tracing). Returns its seconds.
     pub(crate) fn run_bounce(&mut self, plan: &Plan, source: &SourceRows, bounce: u32, vertex_cache_bytes: u64) -> f64 {
-        let params = plan.params;
+        let params = &self.params(plan);
         let cache_bytes = self.points.len() as u64 * params.rays as u64 * 8;
         let record = bounce == 0 && params.bounces > 0 && cache_bytes + vertex_cache_bytes <= params.hit_cache_bytes;
         if bounce == 0 && params.bounces > 0 && !record && !params.quiet {
@@ -324,7 +335,8 @@ impl TexelState {
         }
         let records = std::mem::take(&mut self.hits);
         let cached = (!records.is_empty()).then_some(HitRecords { records: &records, first_point: 0 });
-        let pass = plan.pass(bounce, source, &[], cached, record);
+        let mut pass = plan.pass(bounce, source, &[], cached, record);
+        pass.params = params;
         self.run(&pass, plan.channels, params.store_bounces);
         if self.hits.is_empty() {
             self.hits = records;
@@ -396,9 +408,9 @@ impl TexelState {
 /// A sharded bake's texels (each shard traces a range of them; see
 /// `crate::shards`): the same points, passes and sums as a whole bake's.
 impl TexelState {
-    /// Each covered texel's cost, its points × `rays` (shards split the texels by it).
-    pub(crate) fn costs(&self, rays: u32) -> Vec<u64> {
-        self.points.start.windows(2).map(|w| (w[1] - w[0]) as u64 * rays as u64).collect()
+    /// Each covered texel's cost, its points × rays (shards split the texels by it).
+    pub(crate) fn costs(&self) -> Vec<u64> {
+        self.points.start.windows(2).map(|w| (w[1] - w[0]) as u64 * self.rays_per_point as u64).collect()
     }
 
     /// The sample points of covered texels `texels`, as point indices.
@@ -489,6 +501,7 @@ mod tests {
             back_dc: Vec::new(),
             chart,
             width: w,
+            rays_per_point: 1,
             rays: 0,
             traced: 0,
             lookup: Arc::new(TexelLookup::empty()),
