@@ -121,6 +121,30 @@ mod tests {
         assert!(error.contains("4294967296 sample points") && error.contains("samples per vertex"), "{error}");
     }
 
+    /// Spheres passing through each other: a point's inside verdict comes
+    /// from the same 32 probe directions whatever `--rays` is; with fewer
+    /// rays the probe-only ones are traced a short reach (twice the reject
+    /// distance), and the points rejected are the same.
+    #[test]
+    fn the_inside_verdict_does_not_depend_on_the_rays() {
+        let mut mesh = shapes::icosphere(3);
+        for x in [0.7f32, 1.4] {
+            let mut other = shapes::icosphere(3);
+            shapes::transform(&mut other, 1.0, glam::Vec3::new(x, 0.1 * x, 0.0));
+            shapes::append(&mut mesh, &other);
+        }
+        let rejected = |rays: u32| {
+            let params = BakeParams { order: 2, rays, seed: 4, adaptive: 0.0, ..BakeParams::default() };
+            let stats = bake_mesh(&mesh, &params, &[]).unwrap().0.stats;
+            (stats.points_rejected, stats.vertices_without_samples, stats.points)
+        };
+        let full = rejected(32);
+        assert!(full.0 > full.2 / 10, "the fixture has points inside geometry: {full:?}");
+        for rays in [1, 8, 31] {
+            assert_eq!(rejected(rays), full, "{rays} rays");
+        }
+    }
+
     /// A plane of 8 triangles whose first `windows` are windows and whose
     /// next `degenerate` ones are collapsed to a point.
     fn plane_with(windows: usize, degenerate: usize) -> (Mesh, Vec<String>) {

@@ -541,6 +541,10 @@ impl Pass<'_> {
         // The rays go to the scene a batch at a time (so it can walk several
         // at once): the probe rays first, whose verdict may end the point,
         // then the rest. Results are added in ray order, as one at a time would.
+        // A ray that only probes asks for a back face closer than the reject
+        // distance: traced no further than twice that (and past any tie
+        // there), it finds the same closest hit wherever the verdict reads it.
+        let probe_reach = 2.0 * self.reject_distance + 8.0 * self.scene.tie_distance;
         for batch in [0..probe, probe..cosine_rays] {
             if batch.is_empty() {
                 continue;
@@ -549,7 +553,8 @@ impl Pass<'_> {
             for k in batch.clone() {
                 let direction = self.direction(point, k);
                 let origin = self.scene.offset_origin(point.position, point.face_normal, direction);
-                scratch.queries.push(RayQuery { origin, direction, t_max: f32::INFINITY });
+                let t_max = if k >= ray_count { probe_reach } else { f32::INFINITY };
+                scratch.queries.push(RayQuery { origin, direction, t_max });
             }
             traced += scratch.queries.len() as u64;
             // Bounce 0 in open mode needs only occlusion, unless hits are recorded or probed.
