@@ -13,6 +13,7 @@
 //! The reference is the baked transfer itself (sampling noise is not counted).
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::quantize;
 use super::types::Quantization;
@@ -164,12 +165,35 @@ pub fn measure(
     lightings: &[Lighting],
     noise: Option<&[f64]>,
 ) -> Candidate {
+    measure_against(transfer, order, channels, storage, lightings, noise, None)
+}
+
+/// [`measure`], with the baked transfer's shading under each lighting
+/// given when it was computed once for several storages.
+fn measure_against(
+    transfer: &[f32],
+    order: usize,
+    channels: usize,
+    storage: &Storage,
+    lightings: &[Lighting],
+    noise: Option<&[f64]>,
+    shaded: Option<&[Vec<[f64; 3]>]>,
+) -> Candidate {
     let reduced = reduce(transfer, order, channels, storage);
     let stored = round_trip(&reduced, storage);
     let quantization_max_abs = reduced.iter().zip(&stored).map(|(a, b)| (*a as f64 - *b as f64).abs()).fold(0.0, f64::max);
-    let per_lighting: Vec<f64> = lightings
-        .iter()
-        .map(|l| relative_rms(&shade(transfer, order, channels, &l.sh), &shade(&stored, storage.order, storage.channels, &l.sh)))
+    // Each lighting's sums run in vertex order on one thread, so the error
+    // (recorded in META) does not depend on the thread count.
+    let per_lighting: Vec<f64> = (0..lightings.len())
+        .into_par_iter()
+        .map(|k| {
+            let sh = &lightings[k].sh;
+            let stored_shading = shade(&stored, storage.order, storage.channels, sh);
+            match shaded {
+                Some(shaded) => relative_rms(&shaded[k], &stored_shading),
+                None => relative_rms(&shade(transfer, order, channels, sh), &stored_shading),
+            }
+        })
         .collect();
     let shaded_error = per_lighting.iter().copied().fold(0.0, f64::max);
     let total_error = noise.map(|n| per_lighting.iter().zip(n).map(|(s, n)| s.hypot(*n)).fold(0.0, f64::max));
@@ -188,7 +212,7 @@ pub fn noise_errors(transfer: &[f32], order: usize, channels: usize, noise: &[f3
         return None;
     }
     let errors = lightings
-        .iter()
+        .par_iter()
         .map(|l| {
             let (mut spread, mut norm) = (0.0f64, 0.0f64);
             for (v, rgb) in shade(transfer, order, channels, &l.sh).iter().enumerate() {
@@ -274,7 +298,14 @@ pub fn choose_within_total(
     lightings: &[Lighting],
     noise: Option<&[f64]>,
 ) -> Choice {
-    let measured: Vec<Candidate> = storages.iter().map(|s| measure(transfer, order, channels, s, lightings, noise)).collect();
+    // The baked shading once per lighting for every candidate, while it takes
+    // at most 512 MiB (24 bytes a vertex and lighting); else each recomputes it.
+    let vertices = transfer.len() / (channels * sh::coeff_count(order)).max(1);
+    let shaded: Option<Vec<Vec<[f64; 3]>>> = (storages.len() > 1 && vertices * lightings.len() * 24 <= 512 << 20)
+        .then(|| lightings.par_iter().map(|l| shade(transfer, order, channels, &l.sh)).collect());
+    let measured: Vec<Candidate> =
+        storages.par_iter().map(|s| measure_against(transfer, order, channels, s, lightings, noise, shaded.as_deref())).collect();
+    drop(shaded);
     let counted = |c: &Candidate| c.total_error.unwrap_or(c.shaded_error);
     let fitting = measured
         .iter()
@@ -291,6 +322,29 @@ pub fn choose_within_total(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The choice measures its candidates in parallel against the baked
+    /// shading computed once: every candidate is what [`measure`] alone
+    /// gives, to the bit, on one thread and on two.
+    #[test]
+    fn a_choice_measures_each_candidate_as_measure_does_on_any_thread_count() {
+        let (order, channels) = (3, 3);
+        let transfer = smooth_transfer(2_000, order, channels);
+        let noise = vec![0.01f32; 2_000];
+        let lightings = reference_lightings(order);
+        let noise = noise_errors(&transfer, order, channels, &noise, &lightings);
+        let storages = candidates(order, channels, &[Quantization::F16, Quantization::F16Tinted, Quantization::I16PerVertexScale]);
+        let alone: Vec<String> = storages
+            .iter()
+            .map(|s| serde_json::to_string(&measure(&transfer, order, channels, s, &lightings, noise.as_deref())).unwrap())
+            .collect();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let choice = pool.install(|| choose_within_total(&transfer, order, channels, &storages, 0.02, &lightings, noise.as_deref()));
+            let measured: Vec<String> = choice.measured.iter().map(|c| serde_json::to_string(c).unwrap()).collect();
+            assert_eq!(measured, alone, "{threads} thread(s)");
+        }
+    }
 
     fn smooth_transfer(vertices: usize, order: usize, channels: usize) -> Vec<f32> {
         let n = sh::coeff_count(order);

@@ -269,8 +269,10 @@ pub fn bake_to_bundle(mesh: &Mesh, config: &BakeConfig, extra_meta: serde_json::
         }
         None => (std::borrow::Cow::Borrowed(mesh), result),
     };
-    let (encoded, choice) = encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage)
-        .with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
+    // The storage choice measures its candidates on the bake's threads.
+    let (encoded, choice) =
+        super::with_threads(config.threads, || encode_transfer_bundle(&stored_mesh, &result, &config.params, extra_meta, &config.storage))?
+            .with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choice.as_ref(), &config.output);
     staged.stage_bytes(&config.output, &encoded).with_context(|| format!("cannot write {}", config.output.display()))?;
     let bundle_bytes = encoded.len() as u64;
@@ -380,7 +382,7 @@ fn bake_texels_to_bundle(
     let write_start = std::time::Instant::now();
     let meta = bundle_meta(extra_meta, &config.window_patterns, &config.one_sided_patterns, &surfaces);
     // One storage for vertices and texels, within the budget on each.
-    let choices = config.storage.choose_with_texels(&result, &texels);
+    let choices = super::with_threads(config.threads, || config.storage.choose_with_texels(&result, &texels))?;
     let mut texel_report = texel_report;
     texel_report.storage = choices.as_ref().map(|(_, on_texels)| storage_meta(on_texels, &result));
     let mut bundle = crate::bundle::make_bundle_stored(mesh, &result, &config.params, meta, choices.as_ref().map(|c| &c.0));
