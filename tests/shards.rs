@@ -346,6 +346,8 @@ fn sharded_texel_transfer_merges_into_the_single_process_bundle() {
     let expected_few = single("few.prtb", &few, "2");
     let f = prtbake::bundle::read_bundle(&dir.path("few.prtb")).unwrap();
     assert_eq!(f.meta["texels"]["vertex_rays"], 4, "{}", f.meta);
+    let shown = run(&["inspect", s(&dir.path("few.prtb"))]);
+    assert!(shown.contains("vertices baked with 4 rays a point"), "{shown}");
     // A third of the vertices' rays (adaptive allocation places its extra points by what they found).
     let vertex_rays = |m: &serde_json::Value| m["stats"]["rays_per_bounce"][0].as_u64().unwrap() as f64;
     assert!((3.0 * vertex_rays(&f.meta) / vertex_rays(&b.meta) - 1.0).abs() < 0.01, "{} vs {}", f.meta["stats"], b.meta["stats"]);

@@ -107,6 +107,9 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         let whose = recorded("atlas").and_then(|v| v.as_str()).map(|s| format!(" of {s}")).unwrap_or_default();
         println!("  texels: {}{whose}; {}, {transfer}{sun_bits}", atlas_summary(a), covered_summary(a, t.texels.len()));
         print_density(recorded("density"));
+        if let Some(rays) = b.meta.pointer("/texels/vertex_rays").and_then(|r| r.as_u64()) {
+            println!("    vertices baked with {rays} rays a point (--vertex-rays), the texels with the params' rays");
+        }
     }
     if let Some((s, own)) = b.sun.as_ref().and_then(|s| s.texel_atlas.as_ref().map(|own| (s, own))) {
         let what = if s.texel_fractions.is_empty() { "sun bits" } else { "sun bits and lit shares" };
