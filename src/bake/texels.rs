@@ -65,24 +65,11 @@ pub fn bake_texels(
 }
 
 /// [`bake_texels`] with `vertex_rays` rays per vertex sample point, the
-/// texels keeping `params.rays`. The picture reads the texels; the vertices
+/// texels keeping `params.rays` (the picture reads the texels; the vertices
 /// serve tools that read vertices and, from bounce 1 on, the back sides of
-/// faces, so a texel bake may spend fewer rays on them.
-pub fn bake_texels_with_vertex_rays(
-    mesh: &Mesh,
-    scene: &Scene,
-    surfaces: &Surfaces,
-    params: &BakeParams,
-    atlas: Atlas,
-    points_per_texel: u32,
-    vertex_rays: u32,
-) -> Result<(TransferResult, TexelTransfer), BakeError> {
-    bake_texels_for(mesh, scene, surfaces, params, atlas, points_per_texel, vertex_rays, None)
-}
-
-/// [`bake_texels_with_vertex_rays`] with the vertices of the triangles of
-/// `receivers` only (`Some(all false)`: the texels alone, as a pilot that
-/// reads no vertex needs them).
+/// faces, so a texel bake may spend fewer rays on them), and with the
+/// vertices of the triangles of `receivers` only (`Some(all false)`: the
+/// texels alone, as a pilot that reads no vertex needs them).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn bake_texels_for(
     mesh: &Mesh,
@@ -355,8 +342,7 @@ mod tests {
         let surfaces = Surfaces::resolve(&mesh, &[]).unwrap();
         let scene = Scene::build(&mesh, BuildQuality::Sah).unwrap();
         let atlas = Atlas::unwrap(&mesh, 0.05).unwrap();
-        let run =
-            |vertex_rays: u32| bake_texels_with_vertex_rays(&mesh, &scene, &surfaces, &params, atlas.clone(), 4, vertex_rays).unwrap();
+        let run = |vertex_rays: u32| bake_texels_for(&mesh, &scene, &surfaces, &params, atlas.clone(), 4, vertex_rays, None).unwrap();
         let ((all_v, all_t), (few_v, few_t)) = (run(64), run(8));
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&few_t.bounces[0]), bits(&all_t.bounces[0]), "the texels' bounce 0");

@@ -356,7 +356,7 @@ fn bake_texels_to_bundle(
         let atlas_seconds = clock.elapsed().as_secs_f64();
         let vertex_rays = request.vertex_rays.unwrap_or(config.params.rays);
         let (result, texels) =
-            bake::texels::bake_texels_with_vertex_rays(mesh, &scene, &surfaces, &config.params, atlas, request.points, vertex_rays)
+            bake::texels::bake_texels_for(mesh, &scene, &surfaces, &config.params, atlas, request.points, vertex_rays, None)
                 .with_context(|| input.clone())?;
         Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds, density))
     })??;

@@ -346,7 +346,7 @@ mod tests {
             let params = BakeParams { rays: 16, seed: 4, bounces: 2, mode, store_bounces: true, adaptive, ..BakeParams::default() };
             // The vertices with fewer rays than the texels (`--vertex-rays`).
             let (whole, whole_texels) =
-                crate::bake::texels::bake_texels_with_vertex_rays(&mesh, &scene, &surfaces, &params, atlas.clone(), 3, 8).unwrap();
+                crate::bake::texels::bake_texels_for(&mesh, &scene, &surfaces, &params, atlas.clone(), 3, 8, None).unwrap();
             let texel_key = TexelKey {
                 texel_size: atlas.texel_size,
                 points_per_texel: 3,
