@@ -126,7 +126,7 @@ struct BakeArgs {
     /// Texel mode: also bake transfer per texel of a lightmap atlas at this size in world units,
     /// for light that vertices cannot hold (slat and contact shadows on big triangles): the
     /// mesh's own atlas (glTF TEXCOORD_1) when it has one, else one unwrapped by xatlas. The
-    /// vertices are baked as without it. Not with --shard, --refine, --view-box.
+    /// vertices are baked as without it. Not with --refine, --view-box.
     #[arg(long, value_name = "L")]
     texel_size: Option<f32>,
     /// With --texel-size: sample points per texel, spread over its footprint by area.
@@ -140,11 +140,18 @@ struct BakeArgs {
     /// bounce 1 on, the back sides of faces, so fewer rays there cut a texel bake's time.
     #[arg(long, value_name = "N", requires = "texel_size")]
     vertex_rays: Option<u32>,
+    /// With --texel-size: after the texels' bounce 0, add about FACTOR × their points where the
+    /// light is noisiest (a texel's points grow as √area × the spread of its neighbourhood), the
+    /// base points' rays kept. 0 = off. Not with --shard.
+    #[arg(long, value_name = "FACTOR", default_value_t = 0.0, requires = "texel_size", conflicts_with_all = ["shard", "plan_shards"])]
+    texel_adaptive: f32,
     /// With --texel-size L and --max-error E: a texel size per chart, from L to 2^(N-1)·L (N in
     /// 2..=4). A pilot bake on an atlas of the coarsest texels measures each chart, and the charts
     /// whose light changes most get finer texels until the estimated resolution error (relative L2
-    /// of the texels' DC) is within E. Unwrapped atlases only. Not with --shard.
-    #[arg(long, value_name = "N", requires_all = ["texel_size", "max_error"], conflicts_with_all = ["shard", "plan_shards"])]
+    /// of the texels' DC) is within E. Unwrapped atlases only. With --shard every shard runs the
+    /// pilot in round 0 (and the pilot stage) and keeps the choice with its hit records for the
+    /// later rounds.
+    #[arg(long, value_name = "N", requires_all = ["texel_size", "max_error"])]
     texel_levels: Option<u32>,
     /// Where rays start: inside triangles (default) or at vertices (leaks shadows; for comparison).
     #[arg(long, value_enum, default_value_t = SamplingArg::Interior)]
@@ -469,8 +476,9 @@ struct SunArgs {
     /// With --texel-size L and --max-error E: a texel size per chart of the new atlas, from L to
     /// 2^(N-1)·L (N in 2..=4). A pilot on an atlas of the coarsest texels (4 points each) measures
     /// each chart, and the charts where shadow edges pass get finer texels until the estimated
-    /// error of the texels' lit shares (relative L2 over texels and steps) is within E. Not with --shard.
-    #[arg(long, value_name = "N", requires_all = ["texel_size", "max_error"], conflicts_with_all = ["shard", "plan_shards"])]
+    /// error of the texels' lit shares (relative L2 over texels and steps) is within E. With
+    /// --shard every shard runs the pilot and sizes the same charts.
+    #[arg(long, value_name = "N", requires_all = ["texel_size", "max_error"])]
     texel_levels: Option<u32>,
     /// With --texel-levels: the budget of the texels' resolution error (e.g. 0.1 = 10%).
     #[arg(long, value_name = "E", requires = "texel_levels")]
@@ -865,7 +873,17 @@ fn bake_config(a: BakeArgs) -> anyhow::Result<cli::bake_cmd::BakeConfig> {
                 anyhow::bail!("--vertex-rays {n}: expected 1..={}", prtbake::sampling::MAX_RAYS_PER_POINT);
             }
             let density = texel_density(a.texel_levels, a.max_error)?;
-            Some(cli::bake_cmd::TexelRequest { size, points: a.texel_points, unwrap: a.unwrap, density, vertex_rays: a.vertex_rays })
+            if !(0.0..=16.0).contains(&a.texel_adaptive) {
+                anyhow::bail!("--texel-adaptive {}: expected 0..=16 (extra points per base point)", a.texel_adaptive);
+            }
+            Some(cli::bake_cmd::TexelRequest {
+                size,
+                points: a.texel_points,
+                unwrap: a.unwrap,
+                density,
+                vertex_rays: a.vertex_rays,
+                adaptive: a.texel_adaptive,
+            })
         }
         None => None,
     };

@@ -1009,11 +1009,72 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
     assert!(!refused.exists(), "the refused sun run wrote its output");
 }
 
+/// `--texel-adaptive F`: extra texel points where bounce 0 is noisiest, the
+/// same bytes on 1 and 2 threads, recorded (META `texels.adaptive` and
+/// `texels.points_added`, the report line, `inspect`); the vertices are
+/// the same bits as without it; out of range or with `--shard` it is
+/// refused (exit 2, nothing written).
+#[test]
+fn texel_adaptive_points_are_deterministic_recorded_and_refused_where_they_cannot_apply() {
+    let dir = Scratch::new("texel-adaptive");
+    let obj = dir.path("room.obj");
+    prtbake::mesh::write_obj(&obj, &prtbake::verify::shapes::room_with_walls_running_past()).unwrap();
+    let bake = |out: &str, extra: &[&str]| {
+        let out = dir.path(out);
+        let mut args =
+            vec!["bake", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--rays", "8", "--bounces", "1", "--texel-size", "0.25"];
+        args.extend(extra);
+        (prtbake(&args), out)
+    };
+    let (o, one) = bake("one.prtb", &["--texel-adaptive", "1", "--threads", "1", "--quiet"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, two) = bake("two.prtb", &["--texel-adaptive", "1", "--threads", "2", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "adaptive texel bundles differ across thread counts");
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (points, added) = (report["texels"]["points"].as_u64().unwrap(), report["texels"]["points_added"].as_u64().unwrap());
+    let (o, plain) = bake("plain.prtb", &["--threads", "1", "--json"]);
+    assert!(o.status.success());
+    let plain_report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let base = plain_report["texels"]["points"].as_u64().unwrap();
+    assert_eq!(points, base + added);
+    assert!(added > 0 && added <= base, "{added} points added to {base}");
+    let (adaptive, plain) = (prtbake::bundle::read_bundle(&one).unwrap(), prtbake::bundle::read_bundle(&plain).unwrap());
+    assert_eq!(adaptive.meta["texels"]["points_added"].as_u64(), Some(added));
+    assert_eq!(adaptive.meta["texels"]["adaptive"].as_f64(), Some(1.0));
+    assert!(plain.meta["texels"].get("points_added").is_none() && plain.meta["texels"].get("adaptive").is_none());
+    // Bounce 0 of the vertices reads no texel: the same bits; the texels differ.
+    let layer0 = |b: &prtbake::bundle::Bundle| b.transfer.as_ref().unwrap().layers[0].data.clone();
+    let texels0 = |b: &prtbake::bundle::Bundle| b.texels.as_ref().unwrap().transfer.as_ref().unwrap().layers[0].data.clone();
+    assert_ne!(texels0(&adaptive), texels0(&plain), "the extra points changed no texel");
+    let (o, direct_a) = bake("direct-a.prtb", &["--texel-adaptive", "1", "--bounces", "0", "--quiet"]);
+    assert!(o.status.success());
+    let (_, direct_p) = bake("direct-p.prtb", &["--bounces", "0", "--quiet"]);
+    let (direct_a, direct_p) = (prtbake::bundle::read_bundle(&direct_a).unwrap(), prtbake::bundle::read_bundle(&direct_p).unwrap());
+    assert_eq!(layer0(&direct_a), layer0(&direct_p), "the vertices' direct light changed");
+    let shown = prtbake(&["inspect", one.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&shown.stdout);
+    assert!(text.contains(&format!("{added} texel points added")) && text.contains("--texel-adaptive 1"), "{text}");
+    for (extra, what) in [
+        (vec!["--texel-adaptive", "17"], "0..=16"),
+        (vec!["--texel-adaptive=-1"], "0..=16"),
+        (vec!["--texel-adaptive", "1", "--shard", "0/2"], "--shard"),
+    ] {
+        let (o, out) = bake("refused.prtb", &extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(what), "{extra:?}: {err}");
+        assert!(!out.exists(), "{extra:?} wrote its output");
+    }
+    let o = prtbake(&["bake", obj.to_str().unwrap(), "-o", dir.path("no-texels.prtb").to_str().unwrap(), "--texel-adaptive", "1"]);
+    assert_eq!(o.status.code(), Some(2), "--texel-adaptive without --texel-size was accepted");
+}
+
 /// `--texel-levels N --max-error E`: `bake` and `sun` size each chart's
 /// texels with a pilot, the same bytes on 1 and 2 threads, and record the
 /// choice (META `texels.density`, `sun.texels.density`, the report line);
-/// the charts' texel sizes span the levels. Without the budget, with
-/// `--shard`, with N outside 2..=4, and on a mesh's own atlas without
+/// the charts' texel sizes span the levels. Without the budget, with N
+/// outside 2..=4, and on a mesh's own atlas without
 /// `--unwrap` it is refused (exit 2, nothing written).
 #[test]
 fn texel_levels_are_deterministic_recorded_and_refused_where_they_cannot_apply() {
@@ -1066,8 +1127,6 @@ fn texel_levels_are_deterministic_recorded_and_refused_where_they_cannot_apply()
         ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "3"], "--max-error"),
         ("bake", &obj, vec!["--texel-size", "0.05", "--texel-levels", "5", "--max-error", "0.1"], "2..=4"),
         ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "1", "--max-error", "0.1"], "2..=4"),
-        ("bake", &obj, vec!["--texel-size", "0.05", "--texel-levels", "2", "--max-error", "0.1", "--shard", "0/2"], "--shard"),
-        ("sun", &obj, vec!["--texel-size", "0.05", "--texel-levels", "2", "--max-error", "0.1", "--shard", "0/2"], "--shard"),
         // A finest size refused as a uniform atlas would be, though the pilot's 8× coarser one fits.
         ("bake", &obj, vec!["--texel-size", "0.0002", "--texel-levels", "4", "--max-error", "0.1"], "0.0002 would need"),
         ("bake", &glb, vec!["--texel-size", "0.1", "--texel-levels", "2", "--max-error", "0.1"], "--unwrap"),

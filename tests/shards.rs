@@ -233,8 +233,10 @@ fn sharded_texel_sun_merges_into_the_single_process_bundle() {
         "--quiet",
     ]);
     let common = ["--window", "glass", "--steps", "12", "--seed", "3", "--quiet"];
-    let cases: [(&str, &Path, &[&str], &str); 4] = [
+    let cases: [(&str, &Path, &[&str], &str); 5] = [
         ("mesh", &mesh, &["--texel-size", "0.06", "--texel-fractions"], "\"TSUN\""),
+        // A texel size per chart: every shard runs the pilot and sizes the same charts.
+        ("levels", &mesh, &["--texel-size", "0.04", "--texel-levels", "2", "--max-error", "0.05"], "\"TSUN\""),
         ("vertex-bundle", &vertex_bundle, &["--texel-size", "0.06"], "\"TSUN\""),
         ("texel-bundle", &texel_bundle, &["--texel-fractions"], "\"TSUN\""),
         ("sun-atlas", &texel_bundle, &["--texel-size", "0.04", "--texel-fractions"], "\"TSAB\""),
@@ -355,6 +357,25 @@ fn sharded_texel_transfer_merges_into_the_single_process_bundle() {
     std::fs::create_dir(&work).unwrap();
     let merged = sharded_bake(&work, &mesh, &few, 2, 2);
     assert!(std::fs::read(&merged).unwrap() == expected_few, "2 shards with --vertex-rays 4: the merged texel bundle differs");
+    // A texel size per chart (`--texel-levels`): every shard's round 0 (and
+    // pilot stage) runs the pilot, later rounds repack the atlas by the
+    // levels kept with their hit records; the merge carries META `texels.density`.
+    let levels: Vec<&str> = texel_args.iter().map(|&a| if a == "0.5" { "0.05" } else { a }).chain(["--texel-levels", "2"]).collect();
+    let expected_levels = single("levels.prtb", &levels, "2");
+    let l = prtbake::bundle::read_bundle(&dir.path("levels.prtb")).unwrap();
+    let per_level = &l.meta["texels"]["density"]["charts_per_level"];
+    assert!(per_level[0].as_u64() > Some(0) && per_level[1].as_u64() > Some(0), "both sizes in use: {}", l.meta["texels"]);
+    let work = dir.path("texels-levels");
+    std::fs::create_dir(&work).unwrap();
+    let merged = sharded_bake(&work, &mesh, &levels, 2, 2);
+    assert!(std::fs::read(&merged).unwrap() == expected_levels, "2 shards with --texel-levels: the merged texel bundle differs");
+    // Round 1 given hit records of a bake without the levels: named.
+    let (x, r0, pilot, few_dir) = (work.join("x.prtp"), work.join("r0.prtl"), work.join("pilot.prta"), dir.path("texels-few"));
+    let mut a = vec!["bake", s(&mesh), "-o", s(&x), "--shard", "0/2", "--round", "1"];
+    a.extend(["--layer", s(&r0), "--pilot", s(&pilot), "--shard-dir", s(&few_dir)]);
+    a.extend(&levels);
+    let e = refused(&a);
+    assert!(e.contains("hits-0-of-2.prth: shard 0/2's hit records hold no chart levels"), "{e}");
     // Per vertex, denoised by the merge.
     let vertex_args: Vec<&str> = texel_args[..texel_args.len() - 6].iter().copied().chain(["--denoise", "1"]).collect();
     let expected = single("vertex.prtb", &vertex_args, "2");

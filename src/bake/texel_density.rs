@@ -51,6 +51,11 @@ pub struct DensityReport {
     pub coarsest_error: f64,
     pub texel_area: f64,
     pub finest_texel_area: f64,
+    /// Per chart of the pilot's atlas, its level ([`DensityChoice::levels`]):
+    /// what a sharded bake's later rounds repack the pilot's atlas by
+    /// ([`atlas_at_levels`]); not in the bundle.
+    #[serde(skip)]
+    pub chart_levels: Vec<u8>,
 }
 
 impl DensityReport {
@@ -126,6 +131,7 @@ impl DensityRequest {
             coarsest_error: choice.coarsest_error,
             texel_area: choice.texel_area,
             finest_texel_area: choice.finest_texel_area,
+            chart_levels: choice.levels.clone(),
         }
     }
 }
@@ -135,6 +141,23 @@ fn unwrap_pilot(mesh: &Mesh, finest: f32, request: &DensityRequest) -> Result<At
     // Every chart may end at the finest size: refused where a uniform atlas at it would be.
     Atlas::check_texel_count(mesh, finest).map_err(|e| BakeError::Params(e.to_string()))?;
     Atlas::unwrap(mesh, request.pilot_size(finest)).map_err(|e| BakeError::Params(format!("pilot atlas: {e}")))
+}
+
+/// The atlas a transfer density choice of `levels` made (per chart of the
+/// pilot's atlas, [`DensityReport::chart_levels`]), without the pilot's
+/// bake: the pilot's atlas unwrapped again and repacked. A sharded bake's
+/// later rounds, which trace nothing, make their atlas so.
+pub fn atlas_at_levels(mesh: &Mesh, finest: f32, request: &DensityRequest, levels: &[u8]) -> Result<Atlas, BakeError> {
+    let pilot = unwrap_pilot(mesh, finest, request)?;
+    if levels.len() != pilot.chart_count as usize || levels.iter().any(|&l| u32::from(l) >= request.levels) {
+        return Err(BakeError::Params(format!(
+            "{} chart levels for a pilot atlas of {} charts at {} levels",
+            levels.len(),
+            pilot.chart_count,
+            request.levels
+        )));
+    }
+    pilot.with_chart_scales(levels).map_err(|e| BakeError::Params(format!("repacking the atlas: {e}")))
 }
 
 fn repack(pilot: &Atlas, detail: &ChartDetail, request: &DensityRequest) -> Result<(Atlas, DensityChoice), BakeError> {
@@ -174,8 +197,7 @@ pub fn transfer_density_atlas(
         surfaces,
         &pilot_params,
         pilot_atlas.clone(),
-        points_per_texel,
-        pilot_params.rays,
+        super::texels::TexelSampling::uniform(points_per_texel, pilot_params.rays),
         Some(&no_vertices),
     )?;
     let detail = transfer_chart_detail(&pilot, vertices.channels, crate::sh::coeff_count(vertices.order));

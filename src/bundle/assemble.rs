@@ -123,6 +123,9 @@ pub fn add_texel_transfer(
         "rays": texels.rays,
         "meaning": "mean of the transfer over the texel's footprint on its triangles, parts inside geometry left out; bounces ≥ 1 (of vertices and texels) read the previous bounce at a hit bilinearly from the texels of the hit's chart, from the hit triangle's vertices on back sides",
     });
+    if texels.points_added > 0 {
+        bundle.meta["texels"]["points_added"] = json!(texels.points_added);
+    }
     if let Some((_, on_texels)) = choices {
         bundle.meta["texels"]["storage"] = storage_meta(on_texels, result);
     }

@@ -53,6 +53,8 @@ pub struct TexelRequest {
     pub density: Option<bake::texel_density::DensityRequest>,
     /// Rays per vertex sample point (`--vertex-rays`; `None`: the texels' `--rays`).
     pub vertex_rays: Option<u32>,
+    /// Extra texel points where bounce 0 finds noise, per base point (`--texel-adaptive`).
+    pub adaptive: f32,
 }
 
 /// What the user asked of adaptive refinement ([`crate::refine`]); the
@@ -198,6 +200,8 @@ pub struct TexelReport {
     pub charts: u32,
     pub covered: usize,
     pub points: u64,
+    /// Of `points`, those `--texel-adaptive` added.
+    pub points_added: u64,
     pub points_rejected: u64,
     pub rays: u64,
     pub rays_traced: u64,
@@ -355,9 +359,9 @@ fn bake_texels_to_bundle(
         };
         let atlas_seconds = clock.elapsed().as_secs_f64();
         let vertex_rays = request.vertex_rays.unwrap_or(config.params.rays);
+        let sampling = bake::texels::TexelSampling { points: request.points, vertex_rays, adaptive: request.adaptive };
         let (result, texels) =
-            bake::texels::bake_texels_for(mesh, &scene, &surfaces, &config.params, atlas, request.points, vertex_rays, None)
-                .with_context(|| input.clone())?;
+            bake::texels::bake_texels_for(mesh, &scene, &surfaces, &config.params, atlas, sampling, None).with_context(|| input.clone())?;
         Ok((result, texels, surfaces, scene.build_time.as_secs_f64(), atlas_seconds, density))
     })??;
     let (result, texels, surfaces, build_seconds, atlas_seconds, density) = baked;
@@ -370,6 +374,7 @@ fn bake_texels_to_bundle(
         charts: texels.atlas.chart_count,
         covered: texels.texels.len(),
         points: texels.points,
+        points_added: texels.points_added,
         points_rejected: texels.points_rejected,
         rays: texels.rays,
         rays_traced: texels.rays_traced,
@@ -391,6 +396,9 @@ fn bake_texels_to_bundle(
         bundle.meta["texels"]["density"] = density.meta();
     }
     crate::bundle::note_vertex_rays(&mut bundle, request.vertex_rays.unwrap_or(config.params.rays), config.params.rays);
+    if request.adaptive > 0.0 {
+        bundle.meta["texels"]["adaptive"] = serde_json::json!(request.adaptive);
+    }
     let encoded =
         crate::bundle::encode_bundle(&bundle).with_context(|| format!("{}: cannot encode the bundle", config.output.display()))?;
     warn_over_budget(choices.as_ref().map(|c| &c.0), &config.output);
@@ -588,7 +596,7 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
     if let Some(t) = &report.texels {
         let seconds: f64 = t.seconds_per_bounce.iter().sum();
         println!(
-            "texels: {} covered of {} × {} ({} charts of {}, {} per texel), {} points ({} inside geometry), {} rays traced in {:.2}s ({:.2} Mrays/s); the vertices' figures above are their own",
+            "texels: {} covered of {} × {} ({} charts of {}, {} per texel), {} points ({}{} inside geometry), {} rays traced in {:.2}s ({:.2} Mrays/s); the vertices' figures above are their own",
             t.covered,
             t.width,
             t.height,
@@ -596,6 +604,7 @@ pub fn print_report(report: &BakeReport, as_json: bool) -> anyhow::Result<()> {
             t.atlas,
             t.texel_size,
             t.points,
+            if t.points_added > 0 { format!("{} added by --texel-adaptive, ", t.points_added) } else { String::new() },
             t.points_rejected,
             t.rays_traced,
             seconds,

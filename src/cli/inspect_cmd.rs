@@ -110,6 +110,10 @@ pub fn run(path: &Path, as_json: bool) -> anyhow::Result<()> {
         if let Some(rays) = b.meta.pointer("/texels/vertex_rays").and_then(|r| r.as_u64()) {
             println!("    vertices baked with {rays} rays a point (--vertex-rays), the texels with the params' rays");
         }
+        if let Some(added) = b.meta.pointer("/texels/points_added").and_then(|r| r.as_u64()) {
+            let factor = b.meta.pointer("/texels/adaptive").and_then(|f| f.as_f64()).unwrap_or(0.0);
+            println!("    {added} texel points added where bounce 0 was noisiest (--texel-adaptive {factor})");
+        }
     }
     if let Some((s, own)) = b.sun.as_ref().and_then(|s| s.texel_atlas.as_ref().map(|own| (s, own))) {
         let what = if s.texel_fractions.is_empty() { "sun bits" } else { "sun bits and lit shares" };

@@ -149,6 +149,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
                 _ => return Err(frame_error("its bundle frame's atlas does not go with the parts' texel mode".into()).into()),
             };
             let atlas_source = b.meta.pointer("/texels/atlas").and_then(|a| a.as_str()).unwrap_or("xatlas").to_string();
+            let density = b.meta.pointer("/texels/density").cloned();
             let encoded = super::with_threads(config.threads, || -> anyhow::Result<_> {
                 let mut texels = texels;
                 // `--denoise`: the filters a whole bake runs after its last bounce, vertices and texels.
@@ -172,6 +173,9 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
                         let mut bundle = bundle::make_bundle_stored(&b.mesh, &result, &key.params, b.meta, choices.as_ref().map(|c| &c.0));
                         let points = key.texels.as_ref().map_or(0, |t| t.points_per_texel);
                         bundle::add_texel_transfer(&mut bundle, t, &result, choices.as_ref(), &atlas_source, points);
+                        if let Some(density) = &density {
+                            bundle.meta["texels"]["density"] = density.clone();
+                        }
                         let vertex_rays = key.texels.as_ref().map_or(key.params.rays, |t| t.vertex_rays);
                         bundle::note_vertex_rays(&mut bundle, vertex_rays, key.params.rays);
                         super::bake_cmd::warn_texels_over_budget(choices.as_ref().map(|c| &c.1), output);

@@ -13,8 +13,8 @@ use serde_json::json;
 
 use super::bake_cmd::{check_windows, load_for_bake, BakeConfig};
 use super::sun_cmd::{
-    check_texel_request, day_steps, encode_sun_output, load_sun_input, new_atlas_source_name, sun_atlas, sun_meta, sun_surfaces,
-    texel_points, texel_sun_meta, texel_sun_plan, SunConfig,
+    check_texel_request, day_steps, encode_sun_output, load_sun_input, new_atlas_source_name, sun_meta, sun_surfaces, texel_points,
+    texel_sun_meta, texel_sun_plan, SunConfig,
 };
 use super::Output;
 use crate::atlas::Atlas;
@@ -25,6 +25,50 @@ use crate::bundle::{self, Bundle, SunSeries, SunStep};
 use crate::shards::{self, FileKind, Shard, ShardRun, Stage, SunKey, TexelKey, TransferKey};
 use crate::sky;
 use crate::trace::{BuildQuality, Scene};
+
+/// `--texel-levels` in a shard: the atlas whose charts the pilot sized,
+/// and the choice. A run with a BVH (the pilot stage, round 0) runs the
+/// pilot as a whole bake does, each shard the same; later rounds trace
+/// nothing and repack by the levels round 0 kept with their hit records.
+#[allow(clippy::too_many_arguments)]
+fn density_atlas(
+    mesh: &crate::mesh::Mesh,
+    config: &BakeConfig,
+    scene: &Scene,
+    surfaces: &crate::bake::Surfaces,
+    request: &super::bake_cmd::TexelRequest,
+    levels: &crate::bake::texel_density::DensityRequest,
+    files: &shards::run::RoundFiles,
+    run: &ShardRun,
+) -> anyhow::Result<(Atlas, shards::ChartLevels)> {
+    let input = config.input.display();
+    super::bake_cmd::check_density_atlas(mesh, request.unwrap, &config.input)?;
+    match files.chart_levels() {
+        None => {
+            let (atlas, report) = crate::bake::texel_density::transfer_density_atlas(
+                mesh,
+                scene,
+                surfaces,
+                &config.params,
+                request.size,
+                request.points,
+                levels,
+            )
+            .with_context(|| format!("{input}: --texel-levels"))?;
+            Ok((atlas, shards::ChartLevels { levels: report.chart_levels.clone(), meta: report.meta().to_string() }))
+        }
+        Some(None) => anyhow::bail!(
+            "{}: shard {}'s hit records hold no chart levels: its round 0 was not baked with --texel-levels",
+            run.hits_path(&config.output).display(),
+            run.shard
+        ),
+        Some(Some(kept)) => {
+            let atlas = crate::bake::texel_density::atlas_at_levels(mesh, request.size, levels, &kept.levels)
+                .with_context(|| format!("{input}: --texel-levels, the levels kept in {}", run.hits_path(&config.output).display()))?;
+            Ok((atlas, kept.clone()))
+        }
+    }
+}
 
 /// Extensions of a part, a hit-record file and a merged layer.
 pub const PART_FORMAT: &[&str] = &["prtp"];
@@ -64,17 +108,22 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     };
     let mesh = &loaded.mesh;
     let input = config.input.display().to_string();
-    let (mut output, surfaces, build_seconds, atlas) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+    let (mut output, surfaces, build_seconds, atlas, density) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let surfaces = super::bake_cmd::surfaces_of(mesh, config)?;
         check_windows(config, &surfaces)?;
+        let scene = run.scene(mesh).with_context(|| input.clone())?;
         // Texel mode: every shard unwraps the same atlas and makes the same texel points.
+        let mut density: Option<shards::ChartLevels> = None;
         let mut texels = match &config.texels {
             Some(request) => {
-                anyhow::ensure!(
-                    request.density.is_none(),
-                    "--texel-levels with --shard: the pilot that sizes the charts runs in one process"
-                );
-                let atlas = Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?;
+                let atlas = match &request.density {
+                    None => Atlas::for_mesh(mesh, request.size, request.unwrap).with_context(|| format!("{input}: --texel-size"))?,
+                    Some(levels) => {
+                        let (atlas, chosen) = density_atlas(mesh, config, &scene, &surfaces, request, levels, &files, run)?;
+                        density = Some(chosen);
+                        atlas
+                    }
+                };
                 let plan = TexelTransferPlan::new(mesh, &atlas, request.points, &config.params).with_context(|| input.clone())?;
                 key.texels = Some(TexelKey {
                     texel_size: atlas.texel_size,
@@ -88,10 +137,13 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             }
             None => None,
         };
-        let scene = run.scene(mesh).with_context(|| input.clone())?;
         let plan = texels.as_mut().map(|(_, plan)| plan);
-        let output = run.bake(mesh, &scene, &surfaces, &key, plan, config.params.quiet, files, &config.output)?;
-        Ok((output, surfaces, scene.build_time.as_secs_f64(), texels))
+        let mut output = run.bake(mesh, &scene, &surfaces, &key, plan, config.params.quiet, files, &config.output)?;
+        // Round 0 keeps the pilot's choice with this shard's hit records, for its later rounds.
+        if let Some(texel_hits) = output.hits.as_mut().and_then(|h| h.texels.as_mut()) {
+            texel_hits.density = density.clone();
+        }
+        Ok((output, surfaces, scene.build_time.as_secs_f64(), texels, density))
     })??;
     if run.stage() == Stage::Round(bounces) && shard.index == 0 {
         // The last merge makes the bundle from this: the mesh and the metadata a whole bake records.
@@ -100,6 +152,9 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             (Some((atlas, plan)), Some(request)) => {
                 // The atlas and its covered texels; the merge puts in their transfer (zeros here) and META `texels`.
                 meta["texels"] = json!({ "atlas": super::bake_cmd::atlas_source_name(mesh, request.unwrap) });
+                if let Some(d) = &density {
+                    meta["texels"]["density"] = serde_json::from_str(&d.meta).context("the density META")?;
+                }
                 let zeros = vec![0.0; plan.texels().len() * output.part.channels as usize * output.part.coeffs as usize];
                 let layers = vec![bundle::TransferLayer { kind: bundle::LayerKind::Total, data: zeros }];
                 let transfer = bundle::Transfer {
@@ -210,16 +265,19 @@ fn placeholder_stats(steps: &[SunStep]) -> SunStats {
 pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
     let mut input = load_sun_input(config, PART_FORMAT, false)?;
     check_texel_request(config, &input)?;
-    anyhow::ensure!(config.texel_density.is_none(), "--texel-levels with --shard: the pilot that sizes the charts runs in one process");
     let config = &super::sun_cmd::with_bundle_windows(config, &input)?;
     let points_per_texel = texel_points(config, &input);
     let started = std::time::Instant::now();
-    let (part, steps, atlas) = super::with_threads(config.threads, || -> anyhow::Result<_> {
+    let (part, steps, atlas, density) = super::with_threads(config.threads, || -> anyhow::Result<_> {
         let steps = day_steps(config, &input)?;
         let suns = sky::day_directions(&steps);
         let surfaces = sun_surfaces(config, &input.mesh)?;
         let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(|| config.input.display().to_string())?;
-        let atlas = sun_atlas(config, &input)?.map(|(atlas, _)| atlas);
+        // `--texel-levels`: every shard runs the pilot and sizes the same charts.
+        let (atlas, density) = match super::sun_cmd::sun_texel_atlas(config, &input, &scene, &surfaces, &suns)? {
+            Some((atlas, _, density)) => (Some(atlas), density),
+            None => (None, None),
+        };
         let texel_plan = atlas.as_ref().map(|a| texel_sun_plan(config, &input, a, points_per_texel, &suns)).transpose()?;
         let mut meta = sun_meta(config, &input.frame, &placeholder_stats(&steps), input.was_bundle());
         if let Some(m) = meta.as_object_mut() {
@@ -236,7 +294,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
         });
         let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &suns, &key, texel_plan.as_ref(), shard)?;
         let atlas = atlas.zip(texel_plan.map(|plan| plan.texels().to_vec()));
-        Ok((part, steps, atlas))
+        Ok((part, steps, atlas, density))
     })??;
     let mut part = part;
     if shard.index == 0 {
@@ -263,6 +321,11 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             if input.sun_atlas_of_its_own() {
                 // TSAT: the sun's texels are not the texel transfer's (as `sun` in one process).
                 meta["texels"]["own_atlas"] = json!(true);
+            }
+            if let Some(density) = &density {
+                meta["texels"]["density"] = density.meta();
+            }
+            if input.sun_atlas_of_its_own() {
                 series.texel_atlas = Some(crate::bundle::TexelAtlas { atlas, texels });
             } else {
                 input.atlas = Some((atlas, texels));

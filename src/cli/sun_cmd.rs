@@ -380,6 +380,36 @@ pub fn check_texel_request(config: &SunConfig, input: &SunInput) -> anyhow::Resu
 /// bundle's own (0 s), else a new one at `--texel-size` (beside texel
 /// transfer, its charts repacked when its size is theirs over 1, 2, 4 or
 /// 8); none per vertex.
+/// The atlas of the sun's texels with its seconds: [`sun_atlas`], or with
+/// `--texel-levels` the one its pilot sizes per chart, and its report. A
+/// whole bake and every shard (each with its own pilot) call this alike.
+pub fn sun_texel_atlas(
+    config: &SunConfig,
+    input: &SunInput,
+    scene: &Scene,
+    surfaces: &bake::Surfaces,
+    suns: &[Option<glam::Vec3>],
+) -> anyhow::Result<Option<(crate::atlas::Atlas, f64, Option<bake::texel_density::DensityReport>)>> {
+    Ok(match (&input.atlas, config.texel_size, &config.texel_density) {
+        (None, Some(finest), Some(density)) => {
+            let started = Instant::now();
+            let (atlas, report) = bake::texel_density::sun_density_atlas(
+                &input.mesh,
+                scene,
+                surfaces,
+                suns,
+                &config.params,
+                finest,
+                density,
+                input.charts_from.as_ref(),
+            )
+            .with_context(|| format!("{}: --texel-levels", config.input.display()))?;
+            Some((atlas, started.elapsed().as_secs_f64(), Some(report)))
+        }
+        _ => sun_atlas(config, input)?.map(|(atlas, seconds)| (atlas, seconds, None)),
+    })
+}
+
 pub fn sun_atlas(config: &SunConfig, input: &SunInput) -> anyhow::Result<Option<(crate::atlas::Atlas, f64)>> {
     let started = Instant::now();
     Ok(match (&input.atlas, config.texel_size) {
@@ -504,24 +534,7 @@ pub fn sun_to_bundle(config: &SunConfig) -> anyhow::Result<SunReport> {
             }
             let scene = Scene::build(&input.mesh, BuildQuality::Sah).with_context(in_input)?;
             let masks = bake::bake_sun_masks(&input.mesh, &scene, &surfaces, &suns, &config.params).with_context(in_input)?;
-            let atlas = match (&input.atlas, config.texel_size, &config.texel_density) {
-                (None, Some(finest), Some(density)) => {
-                    let started = Instant::now();
-                    let (atlas, report) = bake::texel_density::sun_density_atlas(
-                        &input.mesh,
-                        &scene,
-                        &surfaces,
-                        &suns,
-                        &config.params,
-                        finest,
-                        density,
-                        input.charts_from.as_ref(),
-                    )
-                    .with_context(|| format!("{}: --texel-levels", config.input.display()))?;
-                    Some((atlas, started.elapsed().as_secs_f64(), Some(report)))
-                }
-                _ => sun_atlas(config, &input)?.map(|(atlas, seconds)| (atlas, seconds, None)),
-            };
+            let atlas = sun_texel_atlas(config, &input, &scene, &surfaces, &suns)?;
             let texel_masks = match atlas {
                 None => None,
                 Some((atlas, atlas_seconds, density)) => {

@@ -11,7 +11,7 @@
 use std::io::Write;
 
 /// Format version written; readers accept any minor of this major.
-pub const MAJOR: u16 = 8;
+pub const MAJOR: u16 = 9;
 pub const MINOR: u16 = 0;
 pub const HEADER_LEN: usize = 16;
 pub const TRAILER_LEN: usize = 12;

@@ -430,6 +430,18 @@ pub struct TexelHits {
     /// Bit p % 32 of word p / 32: texel point `points.start + p` was rejected.
     pub rejected: Vec<u32>,
     pub records: Vec<u64>,
+    /// `--texel-levels`: the charts' levels round 0's pilot chose, which
+    /// later rounds (no BVH, no pilot) repack the atlas by, and META
+    /// `texels.density` as JSON, which the last round's frame carries.
+    pub density: Option<ChartLevels>,
+}
+
+/// A density choice as a shard's hit records keep it (`TexelHits::density`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChartLevels {
+    /// Per chart of the pilot's atlas, its level (0 = the pilot's texel size).
+    pub levels: Vec<u8>,
+    pub meta: String,
 }
 
 impl TexelHits {
@@ -466,6 +478,14 @@ impl HitFile {
                 w.u32(t.rays)?;
                 w.u32s(&t.rejected)?;
                 w.u64s(&t.records)?;
+                match &t.density {
+                    None => w.u32(0)?,
+                    Some(d) => {
+                        w.u32(1)?;
+                        w.blob(&d.levels)?;
+                        w.string(&d.meta)?;
+                    }
+                }
             }
         }
         w.finish()
@@ -490,7 +510,18 @@ impl HitFile {
                 let count = points.end - points.start;
                 let rejected = r.u32s(count.div_ceil(32), "rejected texel points")?;
                 let records = r.u64s(count.saturating_mul(rays as u64), "texel hit records")?;
-                Some(TexelHits { texels, points, rays, rejected, records })
+                let density = match flag_u32(r.u32("density flag")?, "density")? {
+                    false => None,
+                    true => {
+                        let levels = r.blob("chart levels")?.to_vec();
+                        let meta = r.string("density META")?;
+                        if serde_json::from_str::<serde_json::Value>(&meta).map_or(true, |m| !m.is_object()) {
+                            return Err("the density META is not a JSON object".into());
+                        }
+                        Some(ChartLevels { levels, meta })
+                    }
+                };
+                Some(TexelHits { texels, points, rays, rejected, records, density })
             }
         };
         r.finish()?;
@@ -963,7 +994,14 @@ mod tests {
             rays: 2,
             rejected: vec![0b010],
             records: vec![1, 2, 3 | crate::bake::gather::BACK_SIDE, 4, u64::MAX, u64::MAX],
-            texels: Some(TexelHits { texels: 1..2, points: 4..6, rays: 2, rejected: vec![0b01], records: vec![7, 8, 2 << 32, u64::MAX] }),
+            texels: Some(TexelHits {
+                texels: 1..2,
+                points: 4..6,
+                rays: 2,
+                rejected: vec![0b01],
+                records: vec![7, 8, 2 << 32, u64::MAX],
+                density: Some(ChartLevels { levels: vec![0, 2, 1], meta: r#"{"levels":3}"#.into() }),
+            }),
         };
         let layer = LayerFile {
             identity: identity(),
@@ -1086,7 +1124,7 @@ mod tests {
         assert!(HitFile::decode(&hits).unwrap_err().contains("names triangle 3 of a mesh of 3"));
         let bad_texel_hits = HitFile {
             records: vec![u64::MAX, 0],
-            texels: Some(TexelHits { texels: 0..1, points: 0..1, rays: 2, rejected: vec![0], records: vec![0, 4 << 32] }),
+            texels: Some(TexelHits { texels: 0..1, points: 0..1, rays: 2, rejected: vec![0], records: vec![0, 4 << 32], density: None }),
             ..bad_hits
         };
         let mut hits = Vec::new();

@@ -419,6 +419,7 @@ pub fn merged_texel_transfer(
         noise: merged.noise,
         front_share,
         points: merged.points,
+        points_added: 0,
         points_rejected: merged.points_rejected,
         rays: merged.rays,
         rays_traced: merged.rays_traced,

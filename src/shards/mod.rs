@@ -38,7 +38,9 @@ use std::path::PathBuf;
 use crate::mesh::Mesh;
 
 pub use codec::FileKind;
-pub use files::{HitFile, Identity, LayerFile, PilotFile, SunPart, TexelHits, TexelLayer, TexelRoundPart, TexelSunPart, TransferPart};
+pub use files::{
+    ChartLevels, HitFile, Identity, LayerFile, PilotFile, SunPart, TexelHits, TexelLayer, TexelRoundPart, TexelSunPart, TransferPart,
+};
 pub use key::{atlas_crc, SunKey, TexelKey, TransferKey};
 pub use merge::{merge_sun_parts, merge_transfer, merged_texel_transfer, MergedSun, TransferMerge};
 pub use round::{bake_sun_shard, bake_transfer_shard, PilotInput, RoundInput, RoundOutput, Stage};
@@ -345,8 +347,16 @@ mod tests {
             let scene = crate::trace::Scene::build(&mesh, crate::trace::BuildQuality::Sah).unwrap();
             let params = BakeParams { rays: 16, seed: 4, bounces: 2, mode, store_bounces: true, adaptive, ..BakeParams::default() };
             // The vertices with fewer rays than the texels (`--vertex-rays`).
-            let (whole, whole_texels) =
-                crate::bake::texels::bake_texels_for(&mesh, &scene, &surfaces, &params, atlas.clone(), 3, 8, None).unwrap();
+            let (whole, whole_texels) = crate::bake::texels::bake_texels_for(
+                &mesh,
+                &scene,
+                &surfaces,
+                &params,
+                atlas.clone(),
+                crate::bake::texels::TexelSampling::uniform(3, 8),
+                None,
+            )
+            .unwrap();
             let texel_key = TexelKey {
                 texel_size: atlas.texel_size,
                 points_per_texel: 3,

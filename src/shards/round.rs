@@ -324,7 +324,7 @@ fn trace_texels(
         for (local, _) in rejected.iter().enumerate().filter(|(_, &r)| r) {
             bits[local / 32] |= 1 << (local % 32);
         }
-        TexelHits { texels: part.texels.clone(), points, rays: params.rays, rejected: bits, records: sums.hits }
+        TexelHits { texels: part.texels.clone(), points, rays: params.rays, rejected: bits, records: sums.hits, density: None }
     });
     Ok((part, hits))
 }

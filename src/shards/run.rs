@@ -23,6 +23,14 @@ pub struct RoundFiles {
     pilot: Option<(PilotFile, u32)>,
 }
 
+impl RoundFiles {
+    /// A later round's (`None` in round 0 and the pilot stage): the chart
+    /// levels round 0's `--texel-levels` pilot chose, as this shard's hit records keep them.
+    pub fn chart_levels(&self) -> Option<Option<&super::files::ChartLevels>> {
+        self.layer.as_ref().map(|(_, _, hits)| hits.texels.as_ref().and_then(|t| t.density.as_ref()))
+    }
+}
+
 /// What `bake --shard` asks of one run.
 #[derive(Clone, Debug)]
 pub struct ShardRun {

@@ -29,6 +29,7 @@ mod layers;
 mod normalise;
 pub(crate) mod plan;
 mod run;
+pub(crate) mod texel_adaptive;
 pub(crate) mod texels;
 mod update;
 

@@ -52,48 +52,112 @@ pub(crate) struct TexelPoint {
 pub(crate) struct TexelPoints {
     pub(crate) start: Vec<u32>,
     pub(crate) points: Vec<TexelPoint>,
+    /// Per texel, the index its first point here has among all of the
+    /// texel's points (its direction seed counts from it); empty: 0.
+    pub(crate) first_index: Vec<u32>,
 }
 
 impl TexelPoints {
     pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, pattern: DirectionPattern, seed: u32) -> TexelPoints {
+        let per_texel: Vec<Vec<TexelPoint>> =
+            (0..coverage.len()).into_par_iter().map(|i| texel_points(atlas, coverage, i, points_per_texel, pattern, seed, 0..1)).collect();
+        TexelPoints::from_rows(per_texel, Vec::new())
+    }
+
+    /// The extra points of texels whose points grow `factors[i]` times
+    /// (`--texel-adaptive`): each footprint part's samples past the base
+    /// ones, weighted as a share of the grown texel's.
+    pub(crate) fn extra(
+        atlas: &Atlas,
+        coverage: &Coverage,
+        points_per_texel: u32,
+        pattern: DirectionPattern,
+        seed: u32,
+        factors: &[u32],
+        base: &TexelPoints,
+    ) -> TexelPoints {
         let per_texel: Vec<Vec<TexelPoint>> = (0..coverage.len())
             .into_par_iter()
-            .map(|i| {
-                let entries = coverage.start[i] as usize..coverage.start[i + 1] as usize;
-                let texel = coverage.texels[i];
-                let (x, y) = (texel % atlas.width, texel / atlas.width);
-                let total: f32 = coverage.area[entries.clone()].iter().sum();
-                let mut points = Vec::new();
-                for e in entries {
-                    let t = coverage.triangle[e];
-                    let uv = atlas.triangle_uv(t as usize);
-                    let fan = Fan::of(&clip_to_texel(uv, x, y));
-                    let count = ((points_per_texel as f32 * coverage.area[e] / total).round() as u32).max(1);
-                    let weight = coverage.area[e] / count as f32;
-                    let stream = hash_seed(&[seed, TAG_TEXEL_POSITION, texel, t]);
-                    for k in 0..count {
-                        let (u, v) = sample_2d(pattern, k, 0, stream);
-                        let p = fan.point(u, v);
-                        let bary = barycentric(uv, p);
-                        points.push(TexelPoint { triangle: t, bary, weight });
-                    }
-                }
-                points
+            .map(|i| match factors[i] {
+                0 | 1 => Vec::new(),
+                k => texel_points(atlas, coverage, i, points_per_texel, pattern, seed, 1..k),
             })
             .collect();
-        let mut start = Vec::with_capacity(per_texel.len() + 1);
+        let first_index = base.start.windows(2).map(|w| w[1] - w[0]).collect();
+        TexelPoints::from_rows(per_texel, first_index)
+    }
+
+    fn from_rows(rows: Vec<Vec<TexelPoint>>, first_index: Vec<u32>) -> TexelPoints {
+        let mut start = Vec::with_capacity(rows.len() + 1);
         let mut points = Vec::new();
         start.push(0u32);
-        for p in per_texel {
+        for p in rows {
             points.extend(p);
             start.push(points.len() as u32);
         }
-        TexelPoints { start, points }
+        TexelPoints { start, points, first_index }
     }
 
     pub(crate) fn len(&self) -> usize {
         self.points.len()
     }
+
+    /// Each texel's base points then its extras, as one set; `order` maps
+    /// each point of it to its place in `self` (< len) or in `extra`.
+    fn joined(&self, extra: &TexelPoints) -> (TexelPoints, Vec<u32>) {
+        let base_len = self.len() as u32;
+        let mut start = Vec::with_capacity(self.start.len());
+        let mut points = Vec::with_capacity(self.len() + extra.len());
+        let mut order = Vec::with_capacity(self.len() + extra.len());
+        start.push(0u32);
+        for t in 0..self.start.len() - 1 {
+            for p in self.start[t]..self.start[t + 1] {
+                points.push(self.points[p as usize]);
+                order.push(p);
+            }
+            for p in extra.start[t]..extra.start[t + 1] {
+                points.push(extra.points[p as usize]);
+                order.push(base_len + p);
+            }
+            start.push(points.len() as u32);
+        }
+        (TexelPoints { start, points, first_index: Vec::new() }, order)
+    }
+}
+
+/// Covered texel `i`'s points: per footprint part of `c` base points (its
+/// share of `points_per_texel` by area, at least one), samples
+/// `multiples.start · c .. multiples.end · c` of the part's Sobol stream,
+/// each standing for the part's area over `multiples.end · c`.
+fn texel_points(
+    atlas: &Atlas,
+    coverage: &Coverage,
+    i: usize,
+    points_per_texel: u32,
+    pattern: DirectionPattern,
+    seed: u32,
+    multiples: Range<u32>,
+) -> Vec<TexelPoint> {
+    let entries = coverage.start[i] as usize..coverage.start[i + 1] as usize;
+    let texel = coverage.texels[i];
+    let (x, y) = (texel % atlas.width, texel / atlas.width);
+    let total: f32 = coverage.area[entries.clone()].iter().sum();
+    let mut points = Vec::new();
+    for e in entries {
+        let t = coverage.triangle[e];
+        let uv = atlas.triangle_uv(t as usize);
+        let fan = Fan::of(&clip_to_texel(uv, x, y));
+        let count = ((points_per_texel as f32 * coverage.area[e] / total).round() as u32).max(1);
+        let weight = coverage.area[e] / (count * multiples.end) as f32;
+        let stream = hash_seed(&[seed, TAG_TEXEL_POSITION, texel, t]);
+        for k in count * multiples.start..count * multiples.end {
+            let (u, v) = sample_2d(pattern, k, 0, stream);
+            let p = fan.point(u, v);
+            let bary = barycentric(uv, p);
+            points.push(TexelPoint { triangle: t, bary, weight });
+        }
+    }
+    points
 }
 
 /// A convex polygon as the fan of triangles from its first corner, each
@@ -192,6 +256,7 @@ pub(crate) fn run_texel_pass(
             let mut scratch = Scratch { basis: vec![0.0f32; pass.coeffs], ..Scratch::default() };
             let mut hits = Vec::with_capacity(pass.record_count((points.start[range.end] - points.start[range.start]) as usize));
             for (local, texel) in range.clone().enumerate() {
+                let first_index = points.first_index.get(texel).copied().unwrap_or(0);
                 for (k, p) in (points.start[texel]..points.start[texel + 1]).enumerate() {
                     if bounce > 0 && rejected[p as usize] {
                         continue;
@@ -214,7 +279,7 @@ pub(crate) fn run_texel_pass(
                         position: pa * b[0] + pb * b[1] + pc * b[2],
                         normal: (na * b[0] + nb * b[1] + nc * b[2]).normalize_or(face_normal),
                         face_normal,
-                        seed: hash_seed(&[pass.params.seed, TAG_TEXEL_DIRECTION, texel_ids[texel], k as u32]),
+                        seed: hash_seed(&[pass.params.seed, TAG_TEXEL_DIRECTION, texel_ids[texel], first_index + k as u32]),
                     };
                     result.fill(0.0);
                     let point_traced = pass.trace_point(&point, bounce, bounce == 0, &mut result, &mut scratch, &mut hits);
@@ -271,6 +336,14 @@ pub(crate) struct TexelState {
     pub(crate) width: u32,
     /// Rays per texel point (`BakeParams::rays`; the vertices' plan may take fewer).
     pub(crate) rays_per_point: u32,
+    /// `--texel-adaptive`: extra points, as a share of the base points,
+    /// placed after bounce 0's base pass ([`super::texel_adaptive`]).
+    pub(crate) adaptive: f32,
+    /// Of `points`, those adaptive allocation added.
+    pub(crate) points_added: u64,
+    /// The atlas and its coverage, kept while extra points are still to be placed.
+    footprints: Option<Box<(Atlas, Coverage)>>,
+    points_per_texel: u32,
     pub(crate) rays: u64,
     pub(crate) traced: u64,
     /// Wall seconds of each bounce's texel pass.
@@ -288,8 +361,9 @@ pub(crate) struct TexelState {
 
 impl TexelState {
     /// The texels of `atlas` (`coverage`) with `points_per_texel` points of
-    /// `params.rays` rays each.
-    pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, params: &BakeParams) -> TexelState {
+    /// `params.rays` rays each, and `adaptive` × as many more where bounce
+    /// 0 finds the most noise.
+    pub(crate) fn new(atlas: &Atlas, coverage: &Coverage, points_per_texel: u32, adaptive: f32, params: &BakeParams) -> TexelState {
         let points = TexelPoints::new(atlas, coverage, points_per_texel, params.pattern, params.seed);
         let chart = texel_charts(atlas, coverage);
         TexelState {
@@ -309,6 +383,10 @@ impl TexelState {
             chart,
             width: atlas.width,
             rays_per_point: params.rays,
+            adaptive,
+            points_added: 0,
+            footprints: (adaptive > 0.0).then(|| Box::new((atlas.clone(), coverage.clone()))),
+            points_per_texel,
             rays: 0,
             traced: 0,
         }
@@ -325,7 +403,7 @@ impl TexelState {
     /// gather from them (same bytes as re-tracing). Returns its seconds.
     pub(crate) fn run_bounce(&mut self, plan: &Plan, source: &SourceRows, bounce: u32, vertex_cache_bytes: u64) -> f64 {
         let params = &self.params(plan);
-        let cache_bytes = self.points.len() as u64 * params.rays as u64 * 8;
+        let cache_bytes = self.planned_points() * params.rays as u64 * 8;
         let record = bounce == 0 && params.bounces > 0 && cache_bytes + vertex_cache_bytes <= params.hit_cache_bytes;
         if bounce == 0 && params.bounces > 0 && !record && !params.quiet {
             eprintln!(
@@ -347,11 +425,14 @@ impl TexelState {
     /// Runs bounce `pass.bounce` over the texels and adds its layer
     /// (widened to `channels`) to the total; keeps it when `store`.
     fn run(&mut self, pass: &Pass, channels: usize, store: bool) {
-        let rays = self.points.len() as u64 * pass.params.rays as u64;
+        let points = if pass.bounce == 0 { self.planned_points() } else { self.points.len() as u64 };
         let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
         let clock = std::time::Instant::now();
-        let progress = crate::bake::progress::Progress::start(label, rays, pass.params.quiet);
+        let progress = crate::bake::progress::Progress::start(label, points * pass.params.rays as u64, pass.params.quiet);
         let mut sums = run_texel_pass(pass, &self.points, &self.texels, 0..self.texels.len(), &mut self.rejected, &progress);
+        if pass.bounce == 0 {
+            self.add_points(pass, &mut sums, &progress);
+        }
         drop(progress);
         if !sums.hits.is_empty() {
             self.hits = std::mem::take(&mut sums.hits);
@@ -391,6 +472,94 @@ impl TexelState {
 }
 
 impl TexelState {
+    /// Points bounce 0 traces at most: the base points and the extras.
+    fn planned_points(&self) -> u64 {
+        let base = self.points.len() as u64 - self.points_added;
+        if self.footprints.is_some() {
+            base + (f64::from(self.adaptive) * base as f64) as u64
+        } else {
+            self.points.len() as u64
+        }
+    }
+
+    /// `--texel-adaptive`: after bounce 0's base pass (`sums`), places the
+    /// extra points ([`super::texel_adaptive`]), traces them and adds them
+    /// texel by texel (the base sums scaled to the grown texel's weights).
+    /// The points become one set, each texel's base points then its extras,
+    /// which later bounces run over as they are.
+    fn add_points(&mut self, pass: &Pass, sums: &mut TexelSums, progress: &crate::bake::progress::Progress) {
+        let Some(footprints) = self.footprints.take() else { return };
+        let (atlas, coverage) = &*footprints;
+        let stride = pass.channels * pass.coeffs;
+        let neighbours = same_chart_neighbours(&self.texels, self.width, &self.chart);
+        let pilot = super::texel_adaptive::TexelPilot {
+            weights: &sums.weights,
+            dc_sums: sums.sums.iter().step_by(stride).map(|&s| f64::from(s)).collect(),
+            moments: &sums.moments,
+            counts: self.points.start.windows(2).map(|w| w[1] - w[0]).collect(),
+            areas: texel_world_areas(pass.mesh, atlas, coverage),
+            neighbours: &neighbours,
+        };
+        let budget = (f64::from(self.adaptive) * self.points.len() as f64) as u64;
+        let factors = super::texel_adaptive::factors(&pilot, budget);
+        let params = pass.params;
+        let extra = TexelPoints::extra(atlas, coverage, self.points_per_texel, params.pattern, params.seed, &factors, &self.points);
+        if extra.len() == 0 {
+            return;
+        }
+        let mut extra_rejected = vec![false; extra.len()];
+        let extra_sums = run_texel_pass(pass, &extra, &self.texels, 0..self.texels.len(), &mut extra_rejected, progress);
+        for (i, &k) in factors.iter().enumerate() {
+            let row = i * stride..(i + 1) * stride;
+            if k > 1 {
+                let share = 1.0 / k as f32;
+                sums.sums[row.clone()].iter_mut().for_each(|s| *s *= share);
+                sums.weights[i] *= share;
+                sums.moments[i] = sums.moments[i].scaled(1.0 / f64::from(k));
+            }
+            sums.sums[row.clone()].iter_mut().zip(&extra_sums.sums[row]).for_each(|(s, e)| *s += e);
+            sums.weights[i] += extra_sums.weights[i];
+            sums.moments[i].merge(&extra_sums.moments[i]);
+        }
+        sums.rays += extra_sums.rays;
+        sums.traced += extra_sums.traced;
+        let (mut joined, order) = self.points.joined(&extra);
+        // A grown texel's base points stand for its parts' areas over the grown counts, as its extras do.
+        for t in 0..self.texels.len() {
+            let row = joined.start[t] as usize..joined.start[t + 1] as usize;
+            let extras: Vec<(u32, f32)> = joined.points[row.clone()]
+                .iter()
+                .zip(&order[row.clone()])
+                .filter(|(_, &o)| o as usize >= self.points.len())
+                .map(|(p, _)| (p.triangle, p.weight))
+                .collect();
+            for (p, &o) in joined.points[row.clone()].iter_mut().zip(&order[row]) {
+                if (o as usize) < self.points.len() {
+                    if let Some(&(_, w)) = extras.iter().find(|(t, _)| *t == p.triangle) {
+                        p.weight = w;
+                    }
+                }
+            }
+        }
+        let base_len = self.points.len();
+        self.rejected = order
+            .iter()
+            .map(|&o| if (o as usize) < base_len { self.rejected[o as usize] } else { extra_rejected[o as usize - base_len] })
+            .collect();
+        if !sums.hits.is_empty() {
+            let rays = params.rays as usize;
+            let records = |o: u32| {
+                let (all, p) = if (o as usize) < base_len { (&sums.hits, o as usize) } else { (&extra_sums.hits, o as usize - base_len) };
+                &all[p * rays..(p + 1) * rays]
+            };
+            let mut hits = Vec::with_capacity(order.len() * rays);
+            order.iter().for_each(|&o| hits.extend_from_slice(records(o)));
+            sums.hits = hits;
+        }
+        self.points_added = extra.len() as u64;
+        self.points = joined;
+    }
+
     /// What the next bounce gathers at hits on atlas triangles: this
     /// bounce's texels (once; `None` after the last bounce).
     pub(crate) fn take_source(&mut self) -> Option<TexelRows> {
@@ -437,9 +606,55 @@ impl TexelState {
     }
 }
 
+/// Each covered texel's footprint in world area: its parts' atlas areas
+/// scaled by their triangles' world area over atlas area.
+fn texel_world_areas(mesh: &crate::mesh::Mesh, atlas: &Atlas, coverage: &Coverage) -> Vec<f64> {
+    let scale: Vec<f64> = (0..atlas.triangle_count())
+        .map(|t| {
+            let [a, b, c] = mesh.triangle_positions(t);
+            let world = 0.5 * f64::from((b - a).cross(c - a).length());
+            let uv = atlas.triangle_uv(t).map(|q| q.as_dvec2());
+            let texels = polygon_area(&uv);
+            if texels > 0.0 {
+                world / texels
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    (0..coverage.len())
+        .map(|i| {
+            (coverage.start[i] as usize..coverage.start[i + 1] as usize)
+                .map(|e| f64::from(coverage.area[e]) * scale[coverage.triangle[e] as usize])
+                .sum()
+        })
+        .collect()
+}
+
 /// Each covered texel's chart (that of its first triangle).
 pub(crate) fn texel_charts(atlas: &Atlas, coverage: &Coverage) -> Vec<u32> {
     (0..coverage.len()).map(|i| atlas.triangle_chart[coverage.triangle[coverage.start[i] as usize] as usize]).collect()
+}
+
+/// Each covered texel's covered 8-neighbours in its own chart, as indices
+/// into `texels` (ids `y * width + x`, ascending).
+pub(crate) fn same_chart_neighbours(texels: &[u32], width: u32, chart: &[u32]) -> Vec<Vec<u32>> {
+    let index_of = |id: u32| texels.binary_search(&id).ok();
+    texels
+        .iter()
+        .enumerate()
+        .map(|(i, &id)| {
+            let (x, y) = ((id % width) as i64, (id / width) as i64);
+            [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)]
+                .iter()
+                .map(|&(dx, dy)| (x + dx, y + dy))
+                .filter(|&(u, v)| u >= 0 && v >= 0 && u < width as i64)
+                .filter_map(|(u, v)| index_of((v * width as i64 + u) as u32))
+                .filter(|&j| chart[j] == chart[i])
+                .map(|j| j as u32)
+                .collect()
+        })
+        .collect()
 }
 
 /// The rows `--denoise` filters in place.
@@ -455,20 +670,11 @@ pub(crate) struct TexelRowsMut<'a> {
 /// (`weights`) as its weight.
 pub(crate) fn denoise_texels(texels: &[u32], width: u32, chart: &[u32], weights: &[f32], rows: TexelRowsMut, stride: usize, k: f32) {
     let n = texels.len();
-    let index_of = |id: u32| texels.binary_search(&id).ok();
-    let mut pairs = Vec::with_capacity(n * 8);
-    for (i, &id) in texels.iter().enumerate() {
-        let (x, y) = ((id % width) as i64, (id / width) as i64);
-        for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
-            let (u, v) = (x + dx, y + dy);
-            if u < 0 || v < 0 || u >= width as i64 {
-                continue;
-            }
-            if let Some(j) = index_of((v * width as i64 + u) as u32).filter(|&j| chart[j] == chart[i]) {
-                pairs.push((i as u32, j as u32));
-            }
-        }
-    }
+    let pairs: Vec<(u32, u32)> = same_chart_neighbours(texels, width, chart)
+        .into_iter()
+        .enumerate()
+        .flat_map(|(i, around)| around.into_iter().map(move |j| (i as u32, j)))
+        .collect();
     let neighbours = crate::bake::denoise::Neighbours::from_pairs(n, pairs);
     crate::bake::denoise::filter_receivers(&neighbours, weights, |_, _| true, rows.total, rows.bounces, rows.noise, stride, k);
 }
@@ -492,7 +698,7 @@ mod tests {
         let n = texels.len();
         let state = TexelState {
             texels,
-            points: TexelPoints { start: vec![0; n + 1], points: Vec::new() },
+            points: TexelPoints { start: vec![0; n + 1], points: Vec::new(), first_index: Vec::new() },
             rejected: Vec::new(),
             weights: vec![1.0; n],
             total,
@@ -502,6 +708,10 @@ mod tests {
             chart,
             width: w,
             rays_per_point: 1,
+            adaptive: 0.0,
+            points_added: 0,
+            footprints: None,
+            points_per_texel: 1,
             rays: 0,
             traced: 0,
             lookup: Arc::new(TexelLookup::empty()),
