@@ -142,8 +142,8 @@ struct BakeArgs {
     vertex_rays: Option<u32>,
     /// With --texel-size: after the texels' bounce 0, add about FACTOR × their points where the
     /// light is noisiest (a texel's points grow as √area × the spread of its neighbourhood), the
-    /// base points' rays kept. 0 = off. Not with --shard.
-    #[arg(long, value_name = "FACTOR", default_value_t = 0.0, requires = "texel_size", conflicts_with_all = ["shard", "plan_shards"])]
+    /// base points' rays kept. 0 = off. Sharded, it adds the pilot stage (--round pilot).
+    #[arg(long, value_name = "FACTOR", default_value_t = 0.0, requires = "texel_size")]
     texel_adaptive: f32,
     /// With --texel-size L and --max-error E: a texel size per chart, from L to 2^(N-1)·L (N in
     /// 2..=4). A pilot bake on an atlas of the coarsest texels measures each chart, and the charts
@@ -162,7 +162,8 @@ struct BakeArgs {
     /// Adaptive allocation: after bounce 0's points, add about FACTOR × as many
     /// where their spread shows the most noise (a vertex's effective points grow
     /// as its noise; docs/speed-accuracy.md). 0 = off. Interior sampling only
-    /// [default: 0.25; 0 with --sampling vertex]. Sharded, it adds a pilot stage (--round pilot).
+    /// [default: 0.25; 0 with --sampling vertex]. Sharded, it (or --texel-adaptive) adds a pilot
+    /// stage (--round pilot).
     #[arg(long, value_name = "FACTOR")]
     adaptive: Option<f32>,
     /// Colour channels: 1, 3, or auto (1 when every material is grey).
@@ -1237,7 +1238,10 @@ fn run(command: Command) -> anyhow::Result<Outcome> {
             let threads_given = args.threads.is_some();
             let config = bake_config(args)?;
             match (plan, &config.shard) {
-                (Some(n), _) => cli::shard_cmd::print_plan(n, &config.output, Some(&config.params), threads_given).map(|_| Outcome::Ok),
+                (Some(n), _) => {
+                    let bake = (config.params.bounces, cli::shard_cmd::has_pilot_stage(&config));
+                    cli::shard_cmd::print_plan(n, &config.output, Some(bake), threads_given).map(|_| Outcome::Ok)
+                }
                 (None, Some(shard)) => cli::shard_cmd::run_transfer(&config, shard).map(|_| Outcome::Ok),
                 (None, None) => cli::bake_cmd::run(&config).map(|_| Outcome::Ok),
             }

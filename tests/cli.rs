@@ -1012,7 +1012,7 @@ fn texel_bakes_are_deterministic_inspected_and_refused_where_they_cannot_apply()
 /// `--texel-adaptive F`: extra texel points where bounce 0 is noisiest, the
 /// same bytes on 1 and 2 threads, recorded (META `texels.adaptive` and
 /// `texels.points_added`, the report line, `inspect`); the vertices are
-/// the same bits as without it; out of range or with `--shard` it is
+/// the same bits as without it; out of range it is
 /// refused (exit 2, nothing written).
 #[test]
 fn texel_adaptive_points_are_deterministic_recorded_and_refused_where_they_cannot_apply() {
@@ -1055,11 +1055,7 @@ fn texel_adaptive_points_are_deterministic_recorded_and_refused_where_they_canno
     let shown = prtbake(&["inspect", one.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&shown.stdout);
     assert!(text.contains(&format!("{added} texel points added")) && text.contains("--texel-adaptive 1"), "{text}");
-    for (extra, what) in [
-        (vec!["--texel-adaptive", "17"], "0..=16"),
-        (vec!["--texel-adaptive=-1"], "0..=16"),
-        (vec!["--texel-adaptive", "1", "--shard", "0/2"], "--shard"),
-    ] {
+    for (extra, what) in [(vec!["--texel-adaptive", "17"], "0..=16"), (vec!["--texel-adaptive=-1"], "0..=16")] {
         let (o, out) = bake("refused.prtb", &extra);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");

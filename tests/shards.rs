@@ -68,7 +68,7 @@ fn sharded_bake(dir: &Path, mesh: &Path, args: &[&str], bounces: u32, n: u32) ->
     let bundle = dir.join("merged.prtb");
     // Adaptive allocation (unless --adaptive 0): the pilot stage, merged into the pilot every round reads.
     let pilot = dir.join("pilot.prta");
-    let adaptive = !args.windows(2).any(|w| w == ["--adaptive", "0"]);
+    let adaptive = !args.windows(2).any(|w| w == ["--adaptive", "0"]) || args.contains(&"--texel-adaptive");
     if adaptive {
         let pilot_part = |k: u32| dir.join(format!("pilot-{k}.prtp"));
         for k in shuffled(n, 50) {
@@ -357,6 +357,18 @@ fn sharded_texel_transfer_merges_into_the_single_process_bundle() {
     std::fs::create_dir(&work).unwrap();
     let merged = sharded_bake(&work, &mesh, &few, 2, 2);
     assert!(std::fs::read(&merged).unwrap() == expected_few, "2 shards with --vertex-rays 4: the merged texel bundle differs");
+    // Extra texel points (`--texel-adaptive`) placed by the pilot stage's
+    // merged texels, with the vertices' adaptive allocation and without it.
+    for (name, extra) in [("grown", &["--texel-adaptive", "1"][..]), ("grown-only", &["--texel-adaptive", "0.5", "--adaptive", "0"][..])] {
+        let args: Vec<&str> = texel_args.iter().copied().chain(extra.iter().copied()).collect();
+        let expected = single(&format!("{name}.prtb"), &args, "2");
+        let g = prtbake::bundle::read_bundle(&dir.path(&format!("{name}.prtb"))).unwrap();
+        assert!(g.meta["texels"]["points_added"].as_u64() > Some(0), "{name}: {}", g.meta["texels"]);
+        let work = dir.path(&format!("texels-{name}"));
+        std::fs::create_dir(&work).unwrap();
+        let merged = sharded_bake(&work, &mesh, &args, 2, 2);
+        assert!(std::fs::read(&merged).unwrap() == expected, "{name}, 2 shards: the merged texel bundle differs");
+    }
     // A texel size per chart (`--texel-levels`): every shard's round 0 (and
     // pilot stage) runs the pilot, later rounds repack the atlas by the
     // levels kept with their hit records; the merge carries META `texels.density`.

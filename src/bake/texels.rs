@@ -184,14 +184,57 @@ pub(crate) fn check_texel_inputs(mesh: &Mesh, atlas: &Atlas, points_per_texel: u
 /// traces a range of texels in each round.
 pub struct TexelTransferPlan {
     pub(crate) state: TexelState,
+    /// After [`TexelTransferPlan::grow`]: what round 0 traces of the grown texels.
+    pub(crate) growth: Option<super::transfer::texels::Growth>,
 }
 
 impl TexelTransferPlan {
-    /// The plan of `atlas` (unwrapped from `mesh`) with `points_per_texel` points a texel.
-    pub fn new(mesh: &Mesh, atlas: &Atlas, points_per_texel: u32, params: &BakeParams) -> Result<TexelTransferPlan, BakeError> {
+    /// The plan of `atlas` (unwrapped from `mesh`) with `points_per_texel`
+    /// points a texel and `adaptive` × as many placed by the merged pilot
+    /// ([`TexelTransferPlan::grow`]).
+    pub fn new(
+        mesh: &Mesh,
+        atlas: &Atlas,
+        points_per_texel: u32,
+        adaptive: f32,
+        params: &BakeParams,
+    ) -> Result<TexelTransferPlan, BakeError> {
         check_texel_inputs(mesh, atlas, points_per_texel)?;
         let coverage = Coverage::of(atlas);
-        Ok(TexelTransferPlan { state: TexelState::new(atlas, &coverage, points_per_texel, 0.0, params) })
+        Ok(TexelTransferPlan { state: TexelState::new(atlas, &coverage, points_per_texel, adaptive, params), growth: None })
+    }
+
+    /// Whether extra texel points are to be placed (`--texel-adaptive`): the bake has a pilot stage.
+    pub fn is_adaptive(&self) -> bool {
+        self.state.adaptive > 0.0
+    }
+
+    /// `--texel-adaptive`: grows the texels as a whole bake does after its
+    /// base pass, from the merged pilot's per-texel sums (Σ w, Σ w·DC, DC
+    /// moments); round 0 then traces the base points and the extras of its
+    /// range ([`TexelState::trace_grown`]), later rounds the joined set.
+    pub fn grow(
+        &mut self,
+        mesh: &Mesh,
+        weights: &[f32],
+        dc_sums: &[f32],
+        moments: &[[f64; 4]],
+        params: &BakeParams,
+    ) -> Result<(), BakeError> {
+        let n = self.state.texels.len();
+        if weights.len() != n || dc_sums.len() != n || moments.len() != n {
+            return Err(BakeError::Params(format!("the pilot holds {} texels, the atlas covers {n}", weights.len())));
+        }
+        let moments: Vec<crate::bake::noise::Moments> = moments.iter().map(|&m| crate::bake::noise::Moments::from_array(m)).collect();
+        let dc_sums = dc_sums.iter().map(|&s| f64::from(s)).collect();
+        self.growth = self.state.grow(mesh, weights, dc_sums, &moments, params);
+        self.state.rejected = vec![false; self.state.points.len()];
+        Ok(())
+    }
+
+    /// Of the points, those the pilot added.
+    pub fn points_added(&self) -> u64 {
+        self.state.points_added
     }
 
     /// The covered texels (`y * width + x`, ascending).

@@ -150,6 +150,7 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
             };
             let atlas_source = b.meta.pointer("/texels/atlas").and_then(|a| a.as_str()).unwrap_or("xatlas").to_string();
             let density = b.meta.pointer("/texels/density").cloned();
+            let points_added = b.meta.pointer("/texels/points_added").and_then(|p| p.as_u64()).unwrap_or(0);
             let encoded = super::with_threads(config.threads, || -> anyhow::Result<_> {
                 let mut texels = texels;
                 // `--denoise`: the filters a whole bake runs after its last bounce, vertices and texels.
@@ -172,12 +173,16 @@ fn merge_transfer(config: &MergeConfig, parts: &[(PathBuf, TransferPart)]) -> an
                         let choices = storage.choose_with_texels(&result, &t);
                         let mut bundle = bundle::make_bundle_stored(&b.mesh, &result, &key.params, b.meta, choices.as_ref().map(|c| &c.0));
                         let points = key.texels.as_ref().map_or(0, |t| t.points_per_texel);
+                        let t = crate::bake::texels::TexelTransfer { points_added, ..t };
                         bundle::add_texel_transfer(&mut bundle, t, &result, choices.as_ref(), &atlas_source, points);
                         if let Some(density) = &density {
                             bundle.meta["texels"]["density"] = density.clone();
                         }
                         let vertex_rays = key.texels.as_ref().map_or(key.params.rays, |t| t.vertex_rays);
                         bundle::note_vertex_rays(&mut bundle, vertex_rays, key.params.rays);
+                        if let Some(adaptive) = key.texels.as_ref().map(|t| t.adaptive).filter(|&a| a > 0.0) {
+                            bundle.meta["texels"]["adaptive"] = serde_json::json!(adaptive);
+                        }
                         super::bake_cmd::warn_texels_over_budget(choices.as_ref().map(|c| &c.1), output);
                         (bundle, choices.map(|c| c.0))
                     }

@@ -81,7 +81,7 @@ pub const PILOT_FORMAT: &[&str] = &["prta"];
 /// [`ShardRun`]'s library calls (inputs, bake, write).
 pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
     let (shard, round, bounces) = (run.shard, run.round, config.params.bounces);
-    run.check(bounces, config.params.adaptive > 0.0)?;
+    run.check(bounces, has_pilot_stage(config))?;
     if config.view_box.is_some() {
         anyhow::bail!("--view-box with --shard: sharded bakes store every triangle (bake the view box in one process)");
     }
@@ -124,7 +124,8 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
                         atlas
                     }
                 };
-                let plan = TexelTransferPlan::new(mesh, &atlas, request.points, &config.params).with_context(|| input.clone())?;
+                let plan = TexelTransferPlan::new(mesh, &atlas, request.points, request.adaptive, &config.params)
+                    .with_context(|| input.clone())?;
                 key.texels = Some(TexelKey {
                     texel_size: atlas.texel_size,
                     points_per_texel: request.points,
@@ -132,6 +133,7 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
                     covered_texels: plan.texels().len() as u32,
                     atlas_crc: shards::atlas_crc(&atlas),
                     vertex_rays: request.vertex_rays.unwrap_or(config.params.rays),
+                    adaptive: request.adaptive,
                 });
                 Some((atlas, plan))
             }
@@ -152,6 +154,9 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
             (Some((atlas, plan)), Some(request)) => {
                 // The atlas and its covered texels; the merge puts in their transfer (zeros here) and META `texels`.
                 meta["texels"] = json!({ "atlas": super::bake_cmd::atlas_source_name(mesh, request.unwrap) });
+                if plan.points_added() > 0 {
+                    meta["texels"]["points_added"] = json!(plan.points_added());
+                }
                 if let Some(d) = &density {
                     meta["texels"]["density"] = serde_json::from_str(&d.meta).context("the density META")?;
                 }
@@ -238,7 +243,17 @@ pub fn run_transfer(config: &BakeConfig, run: &ShardRun) -> anyhow::Result<()> {
 /// and the plan a launcher needs, one `key=value` per line: the shard count,
 /// for a transfer bake its bounces (rounds 0..=B) and whether it has a pilot
 /// stage, and whether `--threads` was given.
-pub fn print_plan(shards: u32, output: &Path, params: Option<&crate::bake::BakeParams>, threads_given: bool) -> anyhow::Result<()> {
+/// Whether a sharded transfer bake has the pilot stage: adaptive allocation
+/// of the vertices' points (interior sampling) or of the texels'.
+pub fn has_pilot_stage(config: &BakeConfig) -> bool {
+    let p = &config.params;
+    let vertices = p.adaptive > 0.0 && matches!(p.sampling, crate::bake::Sampling::Interior { .. });
+    vertices || config.texels.as_ref().is_some_and(|t| t.adaptive > 0.0)
+}
+
+/// `--plan-shards N`: the plan a scheduler script reads (`scripts/shard-args.sh`);
+/// `bake` is `(bounces, whether it has the pilot stage)`, `None` for `sun`.
+pub fn print_plan(shards: u32, output: &Path, bake: Option<(u32, bool)>, threads_given: bool) -> anyhow::Result<()> {
     if shards == 0 {
         anyhow::bail!("--plan-shards 0: a sharded bake has at least one shard");
     }
@@ -246,9 +261,8 @@ pub fn print_plan(shards: u32, output: &Path, params: Option<&crate::bake::BakeP
         anyhow::bail!("{}: a sharded bake's output is the merged bundle; name it .prtb", output.display());
     }
     println!("shards={shards}");
-    if let Some(p) = params {
-        let pilot = p.adaptive > 0.0 && matches!(p.sampling, crate::bake::Sampling::Interior { .. });
-        println!("bounces={}", p.bounces);
+    if let Some((bounces, pilot)) = bake {
+        println!("bounces={bounces}");
         println!("pilot={}", u8::from(pilot));
     }
     println!("threads_given={}", u8::from(threads_given));
@@ -291,6 +305,7 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             covered_texels: plan.texel_count() as u32,
             atlas_crc: shards::atlas_crc(atlas),
             vertex_rays: 0,
+            adaptive: 0.0,
         });
         let part = shards::bake_sun_shard(&input.mesh, &scene, &surfaces, &suns, &key, texel_plan.as_ref(), shard)?;
         let atlas = atlas.zip(texel_plan.map(|plan| plan.texels().to_vec()));

@@ -371,7 +371,11 @@ impl TransferPart {
         let late = VertexRows::read(&mut r, "late contributions", stride, round == 0, tracks_noise, vertex_count)?;
         let texels = TexelRoundPart::read(&mut r, stride, round)?;
         if pilot && texels.is_some() {
-            return Err("a pilot part holds texel rows: the pilot stage samples vertices only".into());
+            // Only `--texel-adaptive` places texel points by the pilot stage.
+            let texel_adaptive = super::TransferKey::decode(&identity.key).ok().and_then(|k| k.texels).is_some_and(|t| t.adaptive > 0.0);
+            if !texel_adaptive {
+                return Err("a pilot part holds texel rows, and its bake places no texel points by them (no --texel-adaptive)".into());
+            }
         }
         let frame = r.blob("bundle frame")?.to_vec();
         r.finish()?;
@@ -765,6 +769,16 @@ pub struct PilotFile {
     pub weights: Vec<f32>,
     pub dc_sums: Vec<f32>,
     pub moments: Vec<[f64; 4]>,
+    /// `--texel-adaptive`: the same per covered texel, of its base points.
+    pub texels: Option<TexelPilotRows>,
+}
+
+/// A merged pilot's texels: per covered texel Σ w, Σ w·DC and the DC moments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelPilotRows {
+    pub weights: Vec<f32>,
+    pub dc_sums: Vec<f32>,
+    pub moments: Vec<[f64; 4]>,
 }
 
 impl PilotFile {
@@ -775,6 +789,16 @@ impl PilotFile {
         w.f32s(&self.weights)?;
         w.f32s(&self.dc_sums)?;
         write_moments(&mut w, &self.moments)?;
+        match &self.texels {
+            None => w.u32(0)?,
+            Some(t) => {
+                w.u32(1)?;
+                w.u64(t.weights.len() as u64)?;
+                w.f32s(&t.weights)?;
+                w.f32s(&t.dc_sums)?;
+                write_moments(&mut w, &t.moments)?;
+            }
+        }
         w.finish()
     }
 
@@ -787,11 +811,23 @@ impl PilotFile {
         let weights = r.f32s(v, "weights")?;
         let dc_sums = r.f32s(v, "DC sums")?;
         let moments = read_moments(&mut r, v, "moments")?;
+        let texels = match flag_u32(r.u32("texel flag")?, "texel")? {
+            false => None,
+            true => {
+                let n = r.u64("covered texels")?;
+                let weights = r.f32s(n, "texel weights")?;
+                let dc_sums = r.f32s(n, "texel DC sums")?;
+                let moments = read_moments(&mut r, n, "texel moments")?;
+                Some(TexelPilotRows { weights, dc_sums, moments })
+            }
+        };
         r.finish()?;
-        if weights.iter().chain(&dc_sums).any(|x| !x.is_finite()) || weights.iter().any(|&w| w < 0.0) {
+        let texel_values = texels.iter().flat_map(|t| t.weights.iter().chain(&t.dc_sums));
+        let all_weights = weights.iter().chain(texels.iter().flat_map(|t| &t.weights));
+        if weights.iter().chain(&dc_sums).chain(texel_values).any(|x| !x.is_finite()) || all_weights.into_iter().any(|&w| w < 0.0) {
             return Err("a weight or DC sum is not finite, or a weight is negative".into());
         }
-        Ok((PilotFile { identity, points, weights, dc_sums, moments }, crc))
+        Ok((PilotFile { identity, points, weights, dc_sums, moments, texels }, crc))
     }
 }
 

@@ -51,6 +51,8 @@ pub struct TexelKey {
     /// Transfer bakes: rays per vertex sample point (`--vertex-rays`; the
     /// texels take the block's rays); 0 in a sun key.
     pub vertex_rays: u32,
+    /// Transfer bakes: extra texel points per base point (`--texel-adaptive`); 0 in a sun key.
+    pub adaptive: f32,
 }
 
 /// CRC-32 of an atlas: its size, texel size, UVs, vertex sources, indices
@@ -353,8 +355,8 @@ impl SunKey {
             let day_crc = r.u32("day CRC")?;
             let window_patterns = read_patterns(r)?;
             let texels = read_texel_key(r)?;
-            if texels.as_ref().is_some_and(|t| t.vertex_rays != 0) {
-                return Err("rays per vertex point are a transfer bake's, not a sun bake's".into());
+            if texels.as_ref().is_some_and(|t| t.vertex_rays != 0 || t.adaptive != 0.0) {
+                return Err("rays per vertex point and texel adaptive allocation are a transfer bake's, not a sun bake's".into());
             }
             Ok(SunKey { params, window_patterns, steps, day_crc, texels })
         })
@@ -389,6 +391,7 @@ fn put_texel_key(out: &mut Vec<u8>, texels: Option<&TexelKey>) {
             out.extend_from_slice(&t.atlas_crc.to_le_bytes());
             out.extend_from_slice(&[t.fractions as u8, 0, 0, 0]);
             out.extend_from_slice(&t.vertex_rays.to_le_bytes());
+            out.extend_from_slice(&t.adaptive.to_le_bytes());
         }
     }
 }
@@ -409,7 +412,11 @@ fn read_texel_key(r: &mut Reader) -> Result<Option<TexelKey>, String> {
         return Err("reserved bytes are not zero".into());
     }
     let vertex_rays = r.u32("vertex rays")?;
-    Ok(Some(TexelKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc, vertex_rays }))
+    let adaptive = r.f32("texel adaptive")?;
+    if !(0.0..=16.0).contains(&adaptive) {
+        return Err(format!("texel adaptive allocation {adaptive} is outside 0..=16"));
+    }
+    Ok(Some(TexelKey { texel_size, points_per_texel, fractions, covered_texels, atlas_crc, vertex_rays, adaptive }))
 }
 
 fn texel_fields(texels: Option<&TexelKey>) -> Vec<(&'static str, String)> {
@@ -419,6 +426,7 @@ fn texel_fields(texels: Option<&TexelKey>) -> Vec<(&'static str, String)> {
         ("covered texels", texels.map_or(0, |t| t.covered_texels).to_string()),
         ("atlas", texels.map_or("none".into(), |t| format!("CRC-32 {:08x}", t.atlas_crc))),
         ("vertex rays", texels.map_or(0, |t| t.vertex_rays).to_string()),
+        ("texel adaptive", texels.map_or(0.0, |t| t.adaptive).to_string()),
     ]
 }
 
@@ -446,8 +454,15 @@ mod tests {
         assert_eq!(TransferKey::decode(&block).unwrap(), key);
         let other = TransferKey { params: BakeParams { rays: 32, ..key.params }, ..key.clone() };
         assert_eq!(first_difference(&other.fields(), &key.fields()).unwrap(), "rays 32 here, 64 in");
-        let texel_key =
-            TexelKey { texel_size: 0.02, points_per_texel: 16, fractions: false, covered_texels: 99, atlas_crc: 0xabc, vertex_rays: 8 };
+        let texel_key = TexelKey {
+            texel_size: 0.02,
+            points_per_texel: 16,
+            fractions: false,
+            covered_texels: 99,
+            atlas_crc: 0xabc,
+            vertex_rays: 8,
+            adaptive: 0.5,
+        };
         let texel_mode = TransferKey { params: BakeParams { denoise: 1.5, ..key.params }, texels: Some(texel_key), ..key.clone() };
         assert_eq!(TransferKey::decode(&texel_mode.encode()).unwrap(), texel_mode);
         assert_eq!(first_difference(&key.fields(), &texel_mode.fields()).unwrap(), "denoise 0 here, 1.5 in");
@@ -465,8 +480,15 @@ mod tests {
             texels: None,
         };
         assert_eq!(SunKey::decode(&sun.encode()).unwrap(), sun);
-        let texels =
-            TexelKey { texel_size: 0.05, points_per_texel: 4, fractions: true, covered_texels: 1234, atlas_crc: 0xfeed, vertex_rays: 0 };
+        let texels = TexelKey {
+            texel_size: 0.05,
+            points_per_texel: 4,
+            fractions: true,
+            covered_texels: 1234,
+            atlas_crc: 0xfeed,
+            vertex_rays: 0,
+            adaptive: 0.0,
+        };
         let with_texels = SunKey { texels: Some(texels.clone()), ..sun.clone() };
         let block = with_texels.encode();
         assert_eq!(block.len() % 4, 0);

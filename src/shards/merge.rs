@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use super::codec::FileKind;
-use super::files::{Identity, LayerFile, PilotFile, SunPart, TexelLayer, TransferPart};
+use super::files::{Identity, LayerFile, PilotFile, SunPart, TexelLayer, TexelPilotRows, TransferPart};
 use super::key::{first_difference, SunKey, TransferKey};
 use super::ShardError;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
@@ -293,12 +293,14 @@ pub fn merge_transfer(parts: &[(PathBuf, TransferPart)], layer: Option<(&Path, L
         }
         let dc_sums = sums.iter().step_by(stride).copied().collect();
         let moments = moments.iter().map(|m| m.to_array()).collect();
+        let texels = pilot_texels(parts, &order, key.texels.as_ref().is_some_and(|t| t.adaptive > 0.0))?;
         return Ok(TransferMerge::Pilot(PilotFile {
             identity: first.identity.clone(),
             points: reference.point_count,
             weights,
             dc_sums,
             moments,
+            texels,
         }));
     }
     let texels = merge_texel_round(parts, &order, &key, reference, previous.as_mut().map(|p| (p.texels.take(), layer_path)))?;
@@ -425,6 +427,37 @@ pub fn merged_texel_transfer(
         rays_traced: merged.rays_traced,
         seconds_per_bounce: Vec::new(),
     })
+}
+
+/// `--texel-adaptive`: the pilot parts' texel ranges joined in shard order
+/// (end to end over the covered texels) into the merged pilot's per-texel
+/// weights, DC sums and moments; `None` when the bake places no texel points.
+fn pilot_texels(parts: &[(PathBuf, TransferPart)], order: &[usize], adaptive: bool) -> Result<Option<TexelPilotRows>, ShardError> {
+    if !adaptive {
+        return Ok(None);
+    }
+    let mut rows = TexelPilotRows { weights: Vec::new(), dc_sums: Vec::new(), moments: Vec::new() };
+    let mut next = 0u32;
+    let mut count = 0u32;
+    for &i in order {
+        let (path, part) = &parts[i];
+        let Some(t) = &part.texels else {
+            return Err(ShardError::mismatch(path, "is a pilot part without the texels --texel-adaptive places points by"));
+        };
+        let n = t.texels.len();
+        if t.texels.start != next || t.weights.len() != n || t.moments.len() != n || (n > 0 && t.sums.len() % n != 0) {
+            return Err(ShardError::mismatch(path, format!("holds texels {}..{} where {next} was next", t.texels.start, t.texels.end)));
+        }
+        let stride = if n > 0 { t.sums.len() / n } else { 1 };
+        rows.weights.extend_from_slice(&t.weights);
+        rows.dc_sums.extend(t.sums.iter().step_by(stride.max(1)));
+        rows.moments.extend_from_slice(&t.moments);
+        (next, count) = (t.texels.end, t.texel_count);
+    }
+    if next != count {
+        return Err(ShardError::mismatch(&parts[order[0]].0, format!("the pilot parts hold texels 0..{next} of {count}")));
+    }
+    Ok(Some(rows))
 }
 
 /// Texel mode: joins the parts' texel ranges (in shard order, end to end
@@ -723,8 +756,15 @@ mod tests {
     #[test]
     fn texel_rows_that_do_not_tile_the_covered_texels_are_refused() {
         use crate::shards::{TexelKey, TexelSunPart};
-        let texel_key =
-            TexelKey { texel_size: 0.1, points_per_texel: 4, fractions: false, covered_texels: 5, atlas_crc: 9, vertex_rays: 0 };
+        let texel_key = TexelKey {
+            texel_size: 0.1,
+            points_per_texel: 4,
+            fractions: false,
+            covered_texels: 5,
+            atlas_crc: 9,
+            vertex_rays: 0,
+            adaptive: 0.0,
+        };
         let key = SunKey {
             params: crate::bake::SunParams::default(),
             window_patterns: Vec::new(),

@@ -239,12 +239,16 @@ mod tests {
         let scene = crate::trace::Scene::build(mesh, crate::trace::BuildQuality::Sah).unwrap();
         let bounces = key.params.bounces;
         let points_per_texel = key.texels.as_ref().map_or(0, |t| t.points_per_texel);
-        let texel_plan =
-            || texels.map(|atlas| crate::bake::texels::TexelTransferPlan::new(mesh, atlas, points_per_texel, &key.params).unwrap());
+        let texel_adaptive = key.texels.as_ref().map_or(0.0, |t| t.adaptive);
+        let texel_plan = || {
+            texels.map(|atlas| {
+                crate::bake::texels::TexelTransferPlan::new(mesh, atlas, points_per_texel, texel_adaptive, &key.params).unwrap()
+            })
+        };
         let mut layer: Option<(LayerFile, u32)> = None;
         let mut hits: Vec<Option<HitFile>> = vec![None; count as usize];
         // Adaptive allocation: the pilot stage first, merged into the pilot every round reads.
-        let pilot: Option<(PilotFile, u32)> = (key.params.adaptive > 0.0).then(|| {
+        let pilot: Option<(PilotFile, u32)> = (key.params.adaptive > 0.0 || texel_adaptive > 0.0).then(|| {
             let parts: Vec<(PathBuf, TransferPart)> = (0..count)
                 .map(|index| {
                     let shard = Shard { index, count };
@@ -335,12 +339,16 @@ mod tests {
         open_mesh.materials[0].albedo = [0.7, 0.5, 0.3];
         let (mut window_mesh, _) = shapes::integrating_sphere(1, 0.6, 0.7, shapes::Opening::Window);
         window_mesh.materials[0].albedo = [0.7, 0.5, 0.3];
+        // (mesh, mode, vertex adaptive, texel adaptive, shard counts)
         let cases = [
-            (&open_mesh, Mode::Open, 0.0f32, [1u32, 2, 5].as_slice()),
-            (&open_mesh, Mode::Open, 1.0, &[3]),
-            (&window_mesh, Mode::Window, 0.0, &[2]),
+            (&open_mesh, Mode::Open, 0.0f32, 0.0f32, [1u32, 2, 5].as_slice()),
+            (&open_mesh, Mode::Open, 1.0, 0.0, &[3]),
+            (&window_mesh, Mode::Window, 0.0, 0.0, &[2]),
+            // Texel points placed by the pilot stage, with and without the vertices'.
+            (&open_mesh, Mode::Open, 0.0, 1.0, &[1, 3]),
+            (&window_mesh, Mode::Window, 1.0, 0.5, &[2]),
         ];
-        for (mesh, mode, adaptive, counts) in cases {
+        for (mesh, mode, adaptive, texel_adaptive, counts) in cases {
             let mesh = mesh.clone();
             let atlas = crate::atlas::Atlas::unwrap(&mesh, 0.1).unwrap();
             let surfaces = crate::bake::Surfaces::resolve(&mesh, &[]).unwrap();
@@ -353,10 +361,11 @@ mod tests {
                 &surfaces,
                 &params,
                 atlas.clone(),
-                crate::bake::texels::TexelSampling::uniform(3, 8),
+                crate::bake::texels::TexelSampling { adaptive: texel_adaptive, ..crate::bake::texels::TexelSampling::uniform(3, 8) },
                 None,
             )
             .unwrap();
+            assert_eq!(whole_texels.points_added > 0, texel_adaptive > 0.0);
             let texel_key = TexelKey {
                 texel_size: atlas.texel_size,
                 points_per_texel: 3,
@@ -364,10 +373,11 @@ mod tests {
                 covered_texels: whole_texels.texels.len() as u32,
                 atlas_crc: atlas_crc(&atlas),
                 vertex_rays: 8,
+                adaptive: texel_adaptive,
             };
             let key = key_of(params, Some(texel_key));
             for &count in counts {
-                let what = format!("{mode:?}, adaptive {adaptive}, {count} shards");
+                let what = format!("{mode:?}, adaptive {adaptive}, texel adaptive {texel_adaptive}, {count} shards");
                 let (merged, texels) = sharded_with(&mesh, &key, count, Some(&atlas));
                 assert_eq!(bits(&merged.total), bits(&whole.total), "{what}: vertex total");
                 assert_eq!(bits(&merged.front_share), bits(&whole.front_share), "{what}: vertex side shares");

@@ -70,7 +70,8 @@ pub enum Stage {
 ///
 /// In texel mode (`key.texels`, with the plan of the atlas it describes),
 /// every round also traces the shard's range of covered texels, balanced
-/// apart by their points; the pilot stage samples vertices only.
+/// apart by their points; the pilot stage samples the texels' base points
+/// only with `--texel-adaptive`, which places their extra points by it.
 #[allow(clippy::too_many_arguments)]
 pub fn bake_transfer_shard(
     mesh: &Mesh,
@@ -89,13 +90,18 @@ pub fn bake_transfer_shard(
     let vertex_rays = key.texels.as_ref().map_or(key.params.rays, |t| t.vertex_rays);
     let params = crate::bake::BakeParams { quiet, rays: vertex_rays, ..key.params };
     let adaptive = params.adaptive > 0.0 && matches!(params.sampling, crate::bake::Sampling::Interior { .. });
+    // `--texel-adaptive` places texel points by the pilot stage as well.
+    let texel_adaptive = key.texels.as_ref().is_some_and(|t| t.adaptive > 0.0);
     let round = match stage {
         Stage::Pilot => 0,
         Stage::Round(r) => r,
     };
-    match (stage, adaptive, &pilot) {
+    match (stage, adaptive || texel_adaptive, &pilot) {
         (Stage::Pilot, false, _) => {
-            return Err(BakeError::Params("the pilot stage is adaptive allocation's, and this bake has --adaptive 0".into()).into())
+            return Err(BakeError::Params(
+                "the pilot stage is adaptive allocation's, and this bake has --adaptive 0 and no --texel-adaptive".into(),
+            )
+            .into())
         }
         (Stage::Pilot, true, Some(p)) => {
             return Err(ShardError::mismatch(p.path, "is a merged pilot, which the pilot stage makes: give it to rounds 0 and later"))
@@ -107,7 +113,10 @@ pub fn bake_transfer_shard(
             .into())
         }
         (Stage::Round(_), false, Some(p)) => {
-            return Err(ShardError::mismatch(p.path, "is a merged pilot, but this bake has --adaptive 0 and needs none"))
+            return Err(ShardError::mismatch(
+                p.path,
+                "is a merged pilot, but this bake has --adaptive 0 (and no --texel-adaptive) and needs none",
+            ))
         }
         _ => {}
     }
@@ -143,10 +152,12 @@ pub fn bake_transfer_shard(
         if let Some(d) = identity_difference(&p.pilot.identity, &identity, super::FileKind::Pilot) {
             return Err(ShardError::mismatch(p.path, format!("{d} this bake's mesh and arguments: this pilot is another bake's")));
         }
-        let moments: Vec<Moments> = p.pilot.moments.iter().map(|&m| Moments::from_array(m)).collect();
-        let dc = VertexDc { weights: &p.pilot.weights, dc_sums: p.pilot.dc_sums.clone(), moments: &moments };
-        let extra = plan.extra_counts(&dc);
-        base_items = Some((plan.unify(&extra)?, extra));
+        if adaptive {
+            let moments: Vec<Moments> = p.pilot.moments.iter().map(|&m| Moments::from_array(m)).collect();
+            let dc = VertexDc { weights: &p.pilot.weights, dc_sums: p.pilot.dc_sums.clone(), moments: &moments };
+            let extra = plan.extra_counts(&dc);
+            base_items = Some((plan.unify(&extra)?, extra));
+        }
         pilot_crc = p.crc;
     }
     // Shards split the items by their cost in points × rays: the pilot stage
@@ -170,7 +181,23 @@ pub fn bake_transfer_shard(
     // Texel mode: the shard's covered texels, and in later rounds what
     // their points found inside geometry and the texels' previous bounce,
     // which vertices and texels alike gather at hits on atlas triangles.
-    let mut texels = texels.filter(|_| stage != Stage::Pilot).map(|texel_plan| {
+    // The pilot stage traces the texels' base points only where extra
+    // points are to be placed by them; every round grows the texels by the
+    // merged pilot first, so its shards split the grown texels by cost.
+    let texels = texels.filter(|_| stage != Stage::Pilot || texel_adaptive);
+    let mut texels = match (texels, stage, &pilot) {
+        (Some(texel_plan), Stage::Round(_), Some(p)) if texel_adaptive => {
+            let Some(rows) = &p.pilot.texels else {
+                return Err(ShardError::mismatch(p.path, "holds no texels, and this bake places texel points by them (--texel-adaptive)"));
+            };
+            texel_plan
+                .grow(&plan.mesh, &rows.weights, &rows.dc_sums, &rows.moments, &params)
+                .map_err(|e| ShardError::mismatch(p.path, e.to_string()))?;
+            Some(texel_plan)
+        }
+        (texel_plan, ..) => texel_plan,
+    }
+    .map(|texel_plan| {
         let costs = texel_plan.state.costs();
         let range = split_by_cost(&costs, shard.count)[shard.index as usize].clone();
         (texel_plan, range)
@@ -296,6 +323,7 @@ fn trace_texels(
     input: Option<&RoundInput>,
     shard: Shard,
 ) -> Result<(TexelRoundPart, Option<TexelHits>), ShardError> {
+    let growth = texel_plan.growth.take().filter(|_| round == 0);
     let state = &mut texel_plan.state;
     let params = &state.params(plan);
     let points = state.point_range(range.clone());
@@ -304,7 +332,11 @@ fn trace_texels(
     pass.params = params;
     let label = format!("shard {shard}, texels, round {round}/{}", params.bounces);
     let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
-    let sums = state.trace_range(&pass, range.clone(), &progress);
+    // Round 0 of grown texels: the base points and the extras, combined as a whole bake does.
+    let sums = match growth {
+        Some(growth) => state.trace_grown(&pass, &growth, range.clone(), None, &progress),
+        None => state.trace_range(&pass, range.clone(), &progress),
+    };
     drop(progress);
     let rejected: Vec<bool> = state.rejected[points.start as usize..points.end as usize].to_vec();
     let part = TexelRoundPart {

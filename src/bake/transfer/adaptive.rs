@@ -84,24 +84,30 @@ pub(crate) fn extra_counts(mesh: &Mesh, items: &Items, pilot: &VertexDc, budget:
     out
 }
 
-/// The Neyman allocation's extras: the largest λ whose `extra(λ)` stays
-/// within `budget`, by bisection on a log scale (the extra count grows with λ).
+/// The Neyman allocation's extras: those of the largest λ whose `extra(λ)`
+/// stays within `budget`.
 fn neyman(extra: impl Fn(f64) -> Vec<u32>, budget: u64) -> Vec<u32> {
     let total = |e: &[u32]| e.iter().map(|&e| u64::from(e)).sum::<u64>();
+    extra(largest_within(|lambda| total(&extra(lambda)), budget))
+}
+
+/// The largest λ whose `cost(λ)` stays within `budget`, by bisection on a
+/// log scale (the cost grows with λ).
+pub(crate) fn largest_within(cost: impl Fn(f64) -> u64, budget: u64) -> f64 {
     let (mut low, mut high) = (0.0f64, 1.0f64);
-    while total(&extra(high)) < budget && high < 1e30 {
+    while cost(high) < budget && high < 1e30 {
         low = high;
         high *= 16.0;
     }
     for _ in 0..60 {
         let mid = if low > 0.0 { (low * high).sqrt() } else { high / 16.0 };
-        if total(&extra(mid)) <= budget {
+        if cost(mid) <= budget {
             low = mid;
         } else {
             high = mid;
         }
     }
-    extra(low)
+    low
 }
 
 /// The extra points, in whole rotation triples, that grow a triangle of `n`

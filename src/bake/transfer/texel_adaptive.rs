@@ -51,21 +51,7 @@ pub(crate) fn factors(pilot: &TexelPilot, budget: u64) -> Vec<u32> {
     if budget == 0 || wants.iter().all(|&w| w <= 0.0) {
         return vec![1; n];
     }
-    // The largest λ whose extras stay within the budget (they grow with λ).
-    let (mut low, mut high) = (0.0f64, 1.0f64);
-    while extra(&factors_at(high)) <= budget && high < 1e30 {
-        low = high;
-        high *= 16.0;
-    }
-    for _ in 0..60 {
-        let mid = if low > 0.0 { (low * high).sqrt() } else { high / 16.0 };
-        if extra(&factors_at(mid)) <= budget {
-            low = mid;
-        } else {
-            high = mid;
-        }
-    }
-    factors_at(low)
+    factors_at(super::adaptive::largest_within(|lambda| extra(&factors_at(lambda)), budget))
 }
 
 /// The per-point spread of texel `i`'s neighbourhood (itself and its

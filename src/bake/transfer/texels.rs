@@ -359,6 +359,16 @@ pub(crate) struct TexelState {
     next_sides: bool,
 }
 
+/// Grown texels (`--texel-adaptive`) until bounce 0 has traced them: the
+/// base points as first placed, the extras, each texel's factor, and where
+/// each point of the joined set came from (< base length: a base point).
+pub(crate) struct Growth {
+    base: TexelPoints,
+    extra: TexelPoints,
+    factors: Vec<u32>,
+    order: Vec<u32>,
+}
+
 impl TexelState {
     /// The texels of `atlas` (`coverage`) with `points_per_texel` points of
     /// `params.rays` rays each, and `adaptive` × as many more where bounce
@@ -430,8 +440,12 @@ impl TexelState {
         let clock = std::time::Instant::now();
         let progress = crate::bake::progress::Progress::start(label, points * pass.params.rays as u64, pass.params.quiet);
         let mut sums = run_texel_pass(pass, &self.points, &self.texels, 0..self.texels.len(), &mut self.rejected, &progress);
-        if pass.bounce == 0 {
-            self.add_points(pass, &mut sums, &progress);
+        if pass.bounce == 0 && self.footprints.is_some() {
+            let dc_sums = sums.sums.iter().step_by(pass.channels * pass.coeffs).map(|&s| f64::from(s)).collect();
+            if let Some(growth) = self.grow(pass.mesh, &sums.weights.clone(), dc_sums, &sums.moments.clone(), pass.params) {
+                let base_rejected = std::mem::replace(&mut self.rejected, vec![false; self.points.len()]);
+                sums = self.trace_grown(pass, &growth, 0..self.texels.len(), Some((sums, base_rejected)), &progress);
+            }
         }
         drop(progress);
         if !sums.hits.is_empty() {
@@ -482,82 +496,115 @@ impl TexelState {
         }
     }
 
-    /// `--texel-adaptive`: after bounce 0's base pass (`sums`), places the
-    /// extra points ([`super::texel_adaptive`]), traces them and adds them
-    /// texel by texel (the base sums scaled to the grown texel's weights).
-    /// The points become one set, each texel's base points then its extras,
-    /// which later bounces run over as they are.
-    fn add_points(&mut self, pass: &Pass, sums: &mut TexelSums, progress: &crate::bake::progress::Progress) {
-        let Some(footprints) = self.footprints.take() else { return };
+    /// `--texel-adaptive`: places the extra points by bounce 0's base sums
+    /// per texel (Σ w, Σ w·DC and the DC moments: a whole bake's base pass,
+    /// or a sharded bake's merged pilot) and makes the points one set, each
+    /// texel's base points then its extras, which later bounces run over as
+    /// they are. Returns what bounce 0 needs to trace the grown texels
+    /// ([`TexelState::trace_grown`]); `None` when nothing grows.
+    pub(crate) fn grow(
+        &mut self,
+        mesh: &crate::mesh::Mesh,
+        weights: &[f32],
+        dc_sums: Vec<f64>,
+        moments: &[Moments],
+        params: &BakeParams,
+    ) -> Option<Growth> {
+        let footprints = self.footprints.take()?;
         let (atlas, coverage) = &*footprints;
-        let stride = pass.channels * pass.coeffs;
         let neighbours = same_chart_neighbours(&self.texels, self.width, &self.chart);
         let pilot = super::texel_adaptive::TexelPilot {
-            weights: &sums.weights,
-            dc_sums: sums.sums.iter().step_by(stride).map(|&s| f64::from(s)).collect(),
-            moments: &sums.moments,
+            weights,
+            dc_sums,
+            moments,
             counts: self.points.start.windows(2).map(|w| w[1] - w[0]).collect(),
-            areas: texel_world_areas(pass.mesh, atlas, coverage),
+            areas: texel_world_areas(mesh, atlas, coverage),
             neighbours: &neighbours,
         };
         let budget = (f64::from(self.adaptive) * self.points.len() as f64) as u64;
         let factors = super::texel_adaptive::factors(&pilot, budget);
-        let params = pass.params;
         let extra = TexelPoints::extra(atlas, coverage, self.points_per_texel, params.pattern, params.seed, &factors, &self.points);
         if extra.len() == 0 {
-            return;
+            return None;
         }
-        let mut extra_rejected = vec![false; extra.len()];
-        let extra_sums = run_texel_pass(pass, &extra, &self.texels, 0..self.texels.len(), &mut extra_rejected, progress);
-        for (i, &k) in factors.iter().enumerate() {
-            let row = i * stride..(i + 1) * stride;
-            if k > 1 {
-                let share = 1.0 / k as f32;
-                sums.sums[row.clone()].iter_mut().for_each(|s| *s *= share);
-                sums.weights[i] *= share;
-                sums.moments[i] = sums.moments[i].scaled(1.0 / f64::from(k));
-            }
-            sums.sums[row.clone()].iter_mut().zip(&extra_sums.sums[row]).for_each(|(s, e)| *s += e);
-            sums.weights[i] += extra_sums.weights[i];
-            sums.moments[i].merge(&extra_sums.moments[i]);
-        }
-        sums.rays += extra_sums.rays;
-        sums.traced += extra_sums.traced;
         let (mut joined, order) = self.points.joined(&extra);
         // A grown texel's base points stand for its parts' areas over the grown counts, as its extras do.
+        let base_len = self.points.len();
         for t in 0..self.texels.len() {
             let row = joined.start[t] as usize..joined.start[t + 1] as usize;
             let extras: Vec<(u32, f32)> = joined.points[row.clone()]
                 .iter()
                 .zip(&order[row.clone()])
-                .filter(|(_, &o)| o as usize >= self.points.len())
+                .filter(|(_, &o)| o as usize >= base_len)
                 .map(|(p, _)| (p.triangle, p.weight))
                 .collect();
             for (p, &o) in joined.points[row.clone()].iter_mut().zip(&order[row]) {
-                if (o as usize) < self.points.len() {
+                if (o as usize) < base_len {
                     if let Some(&(_, w)) = extras.iter().find(|(t, _)| *t == p.triangle) {
                         p.weight = w;
                     }
                 }
             }
         }
-        let base_len = self.points.len();
-        self.rejected = order
-            .iter()
-            .map(|&o| if (o as usize) < base_len { self.rejected[o as usize] } else { extra_rejected[o as usize - base_len] })
-            .collect();
-        if !sums.hits.is_empty() {
-            let rays = params.rays as usize;
-            let records = |o: u32| {
-                let (all, p) = if (o as usize) < base_len { (&sums.hits, o as usize) } else { (&extra_sums.hits, o as usize - base_len) };
-                &all[p * rays..(p + 1) * rays]
-            };
-            let mut hits = Vec::with_capacity(order.len() * rays);
-            order.iter().for_each(|&o| hits.extend_from_slice(records(o)));
-            sums.hits = hits;
-        }
         self.points_added = extra.len() as u64;
-        self.points = joined;
+        let base = std::mem::replace(&mut self.points, joined);
+        Some(Growth { base, extra, factors, order })
+    }
+
+    /// Bounce 0 of grown texels over covered texels `range`: the base points
+    /// with their own weights (`base`: already traced over the range, with
+    /// the base points' verdicts; else traced here), then the extras; each
+    /// texel's base sums scaled by 1 / its factor and its extras added, as
+    /// the grown weights would sum them. Sets the joined points' verdicts
+    /// of the range and returns their hit records in the joined order.
+    pub(crate) fn trace_grown(
+        &mut self,
+        pass: &Pass,
+        growth: &Growth,
+        range: Range<usize>,
+        base: Option<(TexelSums, Vec<bool>)>,
+        progress: &crate::bake::progress::Progress,
+    ) -> TexelSums {
+        let (mut sums, base_rejected) = base.unwrap_or_else(|| {
+            let mut rejected = vec![false; growth.base.len()];
+            let sums = run_texel_pass(pass, &growth.base, &self.texels, range.clone(), &mut rejected, progress);
+            (sums, rejected)
+        });
+        let mut extra_rejected = vec![false; growth.extra.len()];
+        let extra = run_texel_pass(pass, &growth.extra, &self.texels, range.clone(), &mut extra_rejected, progress);
+        let stride = sums.sums.len() / range.len().max(1);
+        for (local, &k) in growth.factors[range.clone()].iter().enumerate() {
+            let row = local * stride..(local + 1) * stride;
+            if k > 1 {
+                let share = 1.0 / k as f32;
+                sums.sums[row.clone()].iter_mut().for_each(|s| *s *= share);
+                sums.weights[local] *= share;
+                sums.moments[local] = sums.moments[local].scaled(1.0 / f64::from(k));
+            }
+            sums.sums[row.clone()].iter_mut().zip(&extra.sums[row]).for_each(|(s, e)| *s += e);
+            sums.weights[local] += extra.weights[local];
+            sums.moments[local].merge(&extra.moments[local]);
+        }
+        sums.rays += extra.rays;
+        sums.traced += extra.traced;
+        let base_len = growth.base.len();
+        let (base_first, extra_first) = (growth.base.start[range.start] as usize, growth.extra.start[range.start] as usize);
+        let rays = pass.record_count(1);
+        let joined = self.points.start[range.start] as usize..self.points.start[range.end] as usize;
+        let mut hits = Vec::with_capacity(joined.len() * rays);
+        for j in joined {
+            let o = growth.order[j] as usize;
+            let (rejected, records) = if o < base_len {
+                (base_rejected[o], sums.hits.get((o - base_first) * rays..(o - base_first + 1) * rays))
+            } else {
+                let e = o - base_len;
+                (extra_rejected[e], extra.hits.get((e - extra_first) * rays..(e - extra_first + 1) * rays))
+            };
+            self.rejected[j] = rejected;
+            hits.extend_from_slice(records.unwrap_or_default());
+        }
+        sums.hits = hits;
+        sums
     }
 
     /// What the next bounce gathers at hits on atlas triangles: this
