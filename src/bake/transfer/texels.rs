@@ -442,7 +442,7 @@ impl TexelState {
         let mut sums = run_texel_pass(pass, &self.points, &self.texels, 0..self.texels.len(), &mut self.rejected, &progress);
         if pass.bounce == 0 && self.footprints.is_some() {
             let dc_sums = sums.sums.iter().step_by(pass.channels * pass.coeffs).map(|&s| f64::from(s)).collect();
-            if let Some(growth) = self.grow(pass.mesh, &sums.weights.clone(), dc_sums, &sums.moments.clone(), pass.params) {
+            if let Some(growth) = self.grow(pass.mesh, &sums.weights, dc_sums, &sums.moments, pass.params) {
                 let base_rejected = std::mem::replace(&mut self.rejected, vec![false; self.points.len()]);
                 sums = self.trace_grown(pass, &growth, 0..self.texels.len(), Some((sums, base_rejected)), &progress);
             }
