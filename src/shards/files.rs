@@ -1095,17 +1095,30 @@ mod tests {
                 fractions: (0..16).collect(),
             }),
         };
+        // A merged pilot of vertex and texel sums (`--texel-adaptive`).
+        let pilot = PilotFile {
+            identity: identity(),
+            points: 12,
+            weights: vec![1.0, 0.5, 0.0, 2.0, 1.0],
+            dc_sums: vec![0.25, 0.125, 0.0, 1.0, 0.5],
+            moments: vec![[1.0, 0.5, 0.25, 0.0]; 5],
+            texels: Some(TexelPilotRows { weights: vec![0.75, 1.0], dc_sums: vec![0.5, 0.25], moments: vec![[0.5, 0.25, 0.125, 0.0]; 2] }),
+        };
         let mut hit_bytes = Vec::new();
         hits.write_to(&mut hit_bytes).unwrap();
         let mut layer_bytes = Vec::new();
         let crc = layer.write_to(&mut layer_bytes).unwrap();
-        let files: [(Vec<u8>, fn(&[u8]) -> bool); 4] = [
+        let mut pilot_bytes = Vec::new();
+        let pilot_crc = pilot.write_to(&mut pilot_bytes).unwrap();
+        let files: [(Vec<u8>, fn(&[u8]) -> bool); 5] = [
             (part().to_bytes(), |b| TransferPart::decode(b).is_ok_and(|p| p == part())),
             (hit_bytes, |b| HitFile::decode(b).is_ok()),
             (layer_bytes.clone(), |b| LayerFile::decode(b).is_ok()),
             (sun.to_bytes(), |b| SunPart::decode(b).is_ok()),
+            (pilot_bytes.clone(), |b| PilotFile::decode(b).is_ok()),
         ];
         assert_eq!(LayerFile::decode(&layer_bytes).unwrap(), (layer, crc));
+        assert_eq!(PilotFile::decode(&pilot_bytes).unwrap(), (pilot, pilot_crc));
         assert_eq!(HitFile::decode(&files[1].0).unwrap(), hits);
         assert!(hits.is_rejected(1) && !hits.is_rejected(0));
         assert_eq!(SunPart::decode(&files[3].0).unwrap(), sun);
