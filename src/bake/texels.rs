@@ -204,11 +204,6 @@ impl TexelTransferPlan {
         Ok(TexelTransferPlan { state: TexelState::new(atlas, &coverage, points_per_texel, adaptive, params), growth: None })
     }
 
-    /// Whether extra texel points are to be placed (`--texel-adaptive`): the bake has a pilot stage.
-    pub fn is_adaptive(&self) -> bool {
-        self.state.adaptive > 0.0
-    }
-
     /// `--texel-adaptive`: grows the texels as a whole bake does after its
     /// base pass, from the merged pilot's per-texel sums (Σ w, Σ w·DC, DC
     /// moments); round 0 then traces the base points and the extras of its

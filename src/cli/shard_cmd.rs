@@ -333,14 +333,12 @@ pub fn run_sun(config: &SunConfig, shard: Shard) -> anyhow::Result<()> {
             let new_source = input.atlas.is_none().then(|| new_atlas_source_name(config, &input));
             let stats = TexelSunStats { texels: texels.len() as u64, points_per_texel, ..TexelSunStats::default() };
             meta["texels"] = texel_sun_meta(&atlas, &stats, config.texel_fractions, new_source);
-            if input.sun_atlas_of_its_own() {
-                // TSAT: the sun's texels are not the texel transfer's (as `sun` in one process).
-                meta["texels"]["own_atlas"] = json!(true);
-            }
             if let Some(density) = &density {
                 meta["texels"]["density"] = density.meta();
             }
             if input.sun_atlas_of_its_own() {
+                // TSAT: the sun's texels are not the texel transfer's (as `sun` in one process).
+                meta["texels"]["own_atlas"] = json!(true);
                 series.texel_atlas = Some(crate::bundle::TexelAtlas { atlas, texels });
             } else {
                 input.atlas = Some((atlas, texels));

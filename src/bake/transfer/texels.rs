@@ -572,7 +572,7 @@ impl TexelState {
         });
         let mut extra_rejected = vec![false; growth.extra.len()];
         let extra = run_texel_pass(pass, &growth.extra, &self.texels, range.clone(), &mut extra_rejected, progress);
-        let stride = sums.sums.len() / range.len().max(1);
+        let stride = pass.channels * pass.coeffs;
         for (local, &k) in growth.factors[range.clone()].iter().enumerate() {
             let row = local * stride..(local + 1) * stride;
             if k > 1 {
