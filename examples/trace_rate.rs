@@ -4,8 +4,11 @@
 //!
 //! cargo run --release --example trace_rate -- [MESH|cabin] [--rays-per-point N] [--points N]
 //!     [--threads T] [--runs R] [--export DIR] [--build sah|ploc] [--portable] [--share G] [--sort]
-//!     [--compare-batching]
+//!     [--compare-batching] [--rays LOG]
 //!
+//! `--rays LOG` traces instead the rays a bake logged (`PRTBAKE_LOG_RAYS`,
+//! `prtbake::trace::ray_log`), each with the query it was traced with, in
+//! the logged batches of one point's rays, and prints the seconds.
 //! `--share G` and `--sort` reorder the workload to measure coherence
 //! (docs/performance.md); the baker does neither.
 //! Prints min / median / max Mrays/s over R runs for occlusion and closest
@@ -48,6 +51,12 @@ fn main() {
         scene.set_traversal(prtbake::trace::Traversal::Portable);
     }
     let build = start.elapsed().as_secs_f64();
+    if let Some(log) = args.iter().position(|a| a == "--rays").and_then(|i| args.get(i + 1)) {
+        if let Some(dir) = &export {
+            export_triangles(&mesh, dir);
+        }
+        return trace_logged(&scene, log, threads, runs, build);
+    }
 
     // Sample points: centroids of an even spread of triangles, in mesh order.
     // `--share G`: G consecutive points use one direction set (the first
@@ -135,19 +144,95 @@ fn main() {
     }
 
     if let Some(dir) = export {
-        std::fs::create_dir_all(&dir).unwrap();
-        let mut tris = std::io::BufWriter::new(std::fs::File::create(dir.join("triangles.f32")).unwrap());
-        for t in 0..mesh.triangle_count() {
-            for p in mesh.triangle_positions(t) {
-                tris.write_all(bytemuck_vec3(p).as_slice()).unwrap();
-            }
-        }
+        export_triangles(&mesh, &dir);
         let mut r = std::io::BufWriter::new(std::fs::File::create(dir.join("rays.f32")).unwrap());
         for (o, d) in &rays {
             r.write_all(bytemuck_vec3(*o).as_slice()).unwrap();
             r.write_all(bytemuck_vec3(*d).as_slice()).unwrap();
         }
         println!("exported {} triangles and {} rays to {}", mesh.triangle_count(), rays.len(), dir.display());
+    }
+}
+
+/// Writes the mesh's triangles for `benches/embree_compare.py` (9 f32 each).
+fn export_triangles(mesh: &Mesh, dir: &std::path::Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut tris = std::io::BufWriter::new(std::fs::File::create(dir.join("triangles.f32")).unwrap());
+    for t in 0..mesh.triangle_count() {
+        for p in mesh.triangle_positions(t) {
+            tris.write_all(bytemuck_vec3(p).as_slice()).unwrap();
+        }
+    }
+}
+
+/// Traces a bake's logged rays, each batch (a point's consecutive rays of
+/// one query, at most 64) through the batch API, on `threads` threads.
+fn trace_logged(scene: &Scene, log: &str, threads: usize, runs: usize, build: f64) {
+    use prtbake::trace::ray_log::{decode, LoggedQuery};
+    let bytes = std::fs::read(log).unwrap_or_else(|e| panic!("{log}: {e}"));
+    let rays = decode(&bytes).unwrap_or_else(|| panic!("{log}: not a ray log (whole 32-byte records)"));
+    let mut batches: Vec<(LoggedQuery, Vec<RayQuery>)> = Vec::new();
+    for (query, kind) in rays.iter().copied() {
+        match batches.last_mut() {
+            Some((k, batch)) if *k == kind && batch.len() < 64 => batch.push(query),
+            _ => batches.push((kind, vec![query])),
+        }
+    }
+    let closest = rays.iter().filter(|r| r.1 == LoggedQuery::ClosestHit).count();
+    println!(
+        "{log}: {} rays ({closest} closest hit, {} occlusion) in {} batches; BVH build {build:.3}s, {:?}",
+        rays.len(),
+        rays.len() - closest,
+        batches.len(),
+        scene.batching()
+    );
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    // Each query's batches in one parallel pass, so each gets its own time.
+    for kind in [LoggedQuery::ClosestHit, LoggedQuery::Occlusion] {
+        let of_kind: Vec<&Vec<RayQuery>> = batches.iter().filter(|(k, _)| *k == kind).map(|(_, q)| q).collect();
+        let count: usize = of_kind.iter().map(|q| q.len()).sum();
+        if count == 0 {
+            continue;
+        }
+        let mut seconds: Vec<f64> = (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                let hits: usize = pool.install(|| {
+                    of_kind
+                        .par_chunks(64)
+                        .map(|chunk| {
+                            chunk
+                                .iter()
+                                .map(|q| match kind {
+                                    LoggedQuery::ClosestHit => {
+                                        let mut out = vec![None; q.len()];
+                                        scene.closest_hits(q, &mut out);
+                                        out.iter().filter(|h| h.is_some()).count()
+                                    }
+                                    LoggedQuery::Occlusion => {
+                                        let mut out = vec![false; q.len()];
+                                        scene.occluded_each(q, &mut out);
+                                        out.iter().filter(|&&o| o).count()
+                                    }
+                                })
+                                .sum::<usize>()
+                        })
+                        .sum()
+                });
+                std::hint::black_box(hits);
+                t.elapsed().as_secs_f64()
+            })
+            .collect();
+        seconds.sort_by(f64::total_cmp);
+        let median = seconds[seconds.len() / 2];
+        println!(
+            "logged {:<11} {threads} thread(s): {count} rays, min {:.3}  median {:.3}  max {:.3} s, {:.3} Mrays/s (median)",
+            format!("{kind:?}"),
+            seconds[0],
+            median,
+            seconds[seconds.len() - 1],
+            count as f64 / median / 1e6
+        );
     }
 }
 

@@ -13,6 +13,7 @@ pub mod hugepages;
 pub mod leaf_blocks;
 pub mod packets;
 pub mod queries;
+pub mod ray_log;
 pub mod sah;
 pub mod scene;
 

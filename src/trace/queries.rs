@@ -37,6 +37,7 @@ impl Scene {
     /// the scene's way ([`Scene::batching`]). Same answers, bit for bit.
     pub fn closest_hits(&self, queries: &[RayQuery], out: &mut [Option<Hit>]) {
         assert_eq!(queries.len(), out.len(), "one answer per query");
+        super::ray_log::record(queries, super::ray_log::LoggedQuery::ClosestHit);
         self.run::<ClosestWalk>(queries, out, self.batching.closest_hit);
     }
 
@@ -49,6 +50,7 @@ impl Scene {
     /// scene's way ([`Scene::batching`]).
     pub fn occluded_each(&self, queries: &[RayQuery], out: &mut [bool]) {
         assert_eq!(queries.len(), out.len(), "one answer per query");
+        super::ray_log::record(queries, super::ray_log::LoggedQuery::Occlusion);
         let mut blockers = [None; 64];
         for (queries, out) in queries.chunks(64).zip(out.chunks_mut(64)) {
             let blockers = &mut blockers[..queries.len()];
