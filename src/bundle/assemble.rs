@@ -217,9 +217,10 @@ impl StorageRequest {
 
     /// Texel mode: one storage for the vertices and the texels (the viewer
     /// reads both at one order and channel count), the smallest whose error
-    /// the budget holds on each, the texels measured with their own noise.
-    /// Returns the vertices' choice and the texels' measure of it; `None`
-    /// when both are stored as baked.
+    /// the budget holds on each (or, on one whose noise alone is over it,
+    /// that adds at most [`budget::OVER_BUDGET_SLACK`] to its noise), the
+    /// texels measured with their own noise. Returns the vertices' choice
+    /// and the texels' measure of it; `None` when both are stored as baked.
     pub fn choose_with_texels(
         &self,
         result: &TransferResult,
@@ -232,7 +233,7 @@ impl StorageRequest {
         let lightings = budget::reference_lightings(order);
         let storages = self.storages(order, channels);
         let (on_texels, texel_noise) = self.choose_among(&texels.total, &texels.noise, order, channels, &storages, &lightings);
-        let limit = on_texels.budget.unwrap_or(f64::INFINITY);
+        let limit = on_texels.limit();
         let fitting: Vec<budget::Storage> =
             on_texels.measured.iter().filter(|c| c.total_error.unwrap_or(c.shaded_error) <= limit).map(|c| c.storage).collect();
         let (on_vertices, _) = self.choose_among(&result.total, &result.noise, order, channels, &fitting, &lightings);

@@ -275,6 +275,16 @@ impl Choice {
     pub fn within_budget(&self) -> bool {
         self.budget.is_none_or(|b| self.chosen.total_error.unwrap_or(self.chosen.shaded_error) <= b)
     }
+
+    /// The error a storage had to keep within: the budget, or with the
+    /// noise alone over it, the noise and [`OVER_BUDGET_SLACK`].
+    pub fn limit(&self) -> f64 {
+        match (self.budget, self.noise_error) {
+            (None, _) => f64::INFINITY,
+            (Some(b), Some(n)) if n > b => n * (1.0 + OVER_BUDGET_SLACK),
+            (Some(b), _) => b,
+        }
+    }
 }
 
 /// The smallest storage (bytes per vertex; ties: smaller error) whose shaded
@@ -284,11 +294,20 @@ pub fn choose(transfer: &[f32], order: usize, channels: usize, storages: &[Stora
     choose_within_total(transfer, order, channels, storages, budget, lightings, None)
 }
 
+/// How much a storage may add to the bake's own noise when the noise alone
+/// is over the budget: 1% of it (`sqrt(noise² + storage²) ≤ 1.01 · noise`,
+/// storage error up to 14% of the noise). No storage can meet such a budget;
+/// f32 would keep every bit of a bake whose error is its noise, at up to
+/// 4.5× the bytes of one that adds a hundredth to it.
+pub const OVER_BUDGET_SLACK: f64 = 0.01;
+
 /// [`choose`], the budget counting the total error when `noise` (per
 /// lighting, [`noise_errors`]) is known: the bake's own noise and the
 /// storage's error in quadrature, `sqrt(noise² + storage²)`, the worst over
-/// the lightings. When not even f32 fits (the noise alone is over the
-/// budget), the bake is stored as it is and [`Choice::within_budget`] says so.
+/// the lightings. When nothing fits because the noise alone is over the
+/// budget, the smallest storage that adds at most [`OVER_BUDGET_SLACK`] to
+/// the noise is kept instead (else the bake as it is), and
+/// [`Choice::within_budget`] says the budget was not met.
 pub fn choose_within_total(
     transfer: &[f32],
     order: usize,
@@ -307,15 +326,19 @@ pub fn choose_within_total(
         storages.par_iter().map(|s| measure_against(transfer, order, channels, s, lightings, noise, shaded.as_deref())).collect();
     drop(shaded);
     let counted = |c: &Candidate| c.total_error.unwrap_or(c.shaded_error);
-    let fitting = measured
-        .iter()
-        .filter(|c| counted(c) <= budget)
-        .min_by(|a, b| a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error)));
+    let smallest_within = |limit: f64| {
+        measured
+            .iter()
+            .filter(|c| counted(c) <= limit)
+            .min_by(|a, b| a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error)))
+    };
+    let noise_error = noise.map(|n| n.iter().copied().fold(0.0, f64::max));
+    let over = noise_error.filter(|&n| n > budget);
+    let fitting = smallest_within(budget).or_else(|| over.and_then(|n| smallest_within(n * (1.0 + OVER_BUDGET_SLACK))));
     let chosen = match fitting {
         Some(c) => c.clone(),
         None => measure(transfer, order, channels, &Storage { order, channels, quantization: Quantization::F32 }, lightings, noise),
     };
-    let noise_error = noise.map(|n| n.iter().copied().fold(0.0, f64::max));
     Choice { chosen, budget: Some(budget), measured, noise_error }
 }
 
@@ -344,6 +367,36 @@ mod tests {
             let measured: Vec<String> = choice.measured.iter().map(|c| serde_json::to_string(c).unwrap()).collect();
             assert_eq!(measured, alone, "{threads} thread(s)");
         }
+    }
+
+    /// With the noise alone over the budget, the smallest storage that adds
+    /// at most 1% to the noise is kept, not f32; the choice says the budget
+    /// was missed. Without a measured noise, the budget is storage's alone.
+    #[test]
+    fn over_the_budget_storage_adds_at_most_a_hundredth_to_the_noise() {
+        let (order, channels) = (3, 3);
+        let transfer = smooth_transfer(2_000, order, channels);
+        let lightings = reference_lightings(order);
+        let noise = noise_errors(&transfer, order, channels, &vec![0.05f32; 2_000], &lightings).unwrap();
+        let worst = noise.iter().copied().fold(0.0, f64::max);
+        let all = [Quantization::F16, Quantization::F16Tinted, Quantization::I16PerVertexScale, Quantization::F32];
+        let storages = candidates(order, channels, &all);
+        let limit = worst * (1.0 + OVER_BUDGET_SLACK);
+        let over = choose_within_total(&transfer, order, channels, &storages, worst / 2.0, &lightings, Some(&noise));
+        let total = over.chosen.total_error.unwrap();
+        assert!(!over.within_budget() && total >= worst && total <= limit, "total {total}, noise {worst}");
+        assert_eq!(over.limit(), limit);
+        let f32_bytes = bytes_per_vertex(&Storage { order, channels, quantization: Quantization::F32 });
+        assert!(over.chosen.bytes_per_vertex < f32_bytes, "{:?}", over.chosen.storage);
+        for c in over.measured.iter().filter(|c| c.bytes_per_vertex < over.chosen.bytes_per_vertex) {
+            assert!(c.total_error.unwrap() > limit, "{:?} is smaller and within the slack", c.storage);
+        }
+        // Within the budget the rule is untouched: the budget, not the slack.
+        let loose = choose_within_total(&transfer, order, channels, &storages, 2.0 * worst, &lightings, Some(&noise));
+        assert!(loose.within_budget() && loose.limit() == 2.0 * worst);
+        // No noise measured: a budget of 0 keeps the bake as it is.
+        let exact = choose_within_total(&transfer, order, channels, &storages, 0.0, &lightings, None);
+        assert_eq!(exact.chosen.storage, Storage { order, channels, quantization: Quantization::F32 });
     }
 
     fn smooth_transfer(vertices: usize, order: usize, channels: usize) -> Vec<f32> {

@@ -143,13 +143,13 @@ pub fn check_windows(config: &BakeConfig, surfaces: &bake::Surfaces) -> anyhow::
 }
 
 /// Says on stderr when `--max-error` cannot be met by any storage: the
-/// bake's own estimated noise is over the budget (it is stored as baked).
+/// bake's own estimated noise is over the budget (it is stored in the
+/// least bytes that add at most 1% to that noise).
 pub fn warn_over_budget(choice: Option<&budget::Choice>, output: &std::path::Path) {
     warn_noise_over_budget(choice, output, "the bake's", "more rays or --adaptive lower the noise");
 }
 
-/// Texel mode: warns when the texels' own noise is over `--max-error`
-/// (vertices and texels are then stored as baked).
+/// Texel mode: warns when the texels' own noise is over `--max-error`.
 pub fn warn_texels_over_budget(on_texels: Option<&budget::Choice>, output: &std::path::Path) {
     warn_noise_over_budget(on_texels, output, "the texels'", "more rays or --texel-points lower it");
 }
@@ -157,11 +157,18 @@ pub fn warn_texels_over_budget(on_texels: Option<&budget::Choice>, output: &std:
 fn warn_noise_over_budget(choice: Option<&budget::Choice>, output: &std::path::Path, whose: &str, remedy: &str) {
     let Some(c) = choice else { return };
     if let (false, Some(budget), Some(noise)) = (c.within_budget(), c.budget, c.noise_error) {
+        let kept = &c.chosen.storage;
         eprintln!(
-            "warning: {}: {whose} own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: stored as baked (f32); {remedy}",
+            "warning: {}: {whose} own estimated noise is {:.2}% (worst sky), over --max-error {:.2}%: no storage meets it; stored as {} \
+             (order {}, {} channel(s)), total {:.2}%, at most {}% over the noise; {remedy}",
             output.display(),
             100.0 * noise,
-            100.0 * budget
+            100.0 * budget,
+            kept.quantization.name(),
+            kept.order,
+            kept.channels,
+            100.0 * c.chosen.total_error.unwrap_or(noise),
+            100.0 * budget::OVER_BUDGET_SLACK
         );
     }
 }
