@@ -120,7 +120,9 @@ struct BakeArgs {
     gather_fit: bool,
     /// Filter the baked vertices, guided by the bake's own noise estimate: neighbours whose
     /// difference the noise explains are averaged, edges several standard errors high stay
-    /// (K: strength in standard errors; 0 = off). Not with --shard or --refine.
+    /// (K: strength in standard errors; 0 = off). It pays on finely tessellated meshes, where
+    /// neighbours differ by noise, and costs where big triangles differ by light
+    /// (docs/image-accuracy.md). Not with --shard or --refine.
     #[arg(long, value_name = "K", default_value_t = 0.0)]
     denoise: f32,
     /// Texel mode: also bake transfer per texel of a lightmap atlas at this size in world units,
