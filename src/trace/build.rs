@@ -42,6 +42,7 @@ impl Scene {
     /// they never report a hit). Refuses meshes [`check_extent`] refuses.
     pub fn build(mesh: &Mesh, quality: BuildQuality) -> Result<Scene, SceneError> {
         check_extent(mesh)?;
+        super::ray_log::open();
         let start = Instant::now();
         let triangles: Vec<Triangle> = (0..mesh.triangle_count())
             .map(|t| {

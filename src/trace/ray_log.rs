@@ -39,6 +39,12 @@ fn log() -> Option<&'static Mutex<File>> {
     .as_ref()
 }
 
+/// Opens the log now, if one is asked for: a scene does it when it is
+/// built, so that a warning about the file comes before any progress line.
+pub fn open() {
+    let _ = log();
+}
+
 /// Appends a batch to the log, when there is one.
 #[inline]
 pub fn record(queries: &[RayQuery], query: LoggedQuery) {
