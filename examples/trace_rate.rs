@@ -120,26 +120,16 @@ fn main() {
         rays.len() as u32 / rays_per_point,
         rays_per_point
     );
-    let occlusion = |scene: &Scene, q: &[RayQuery]| {
-        let mut out = vec![false; q.len()];
-        scene.occluded_each(q, &mut out);
-        out.iter().filter(|&&o| o).count()
-    };
-    let closest = |scene: &Scene, q: &[RayQuery]| {
-        let mut out = vec![None; q.len()];
-        scene.closest_hits(q, &mut out);
-        out.iter().filter(|h| h.is_some()).count()
-    };
-    measure("occlusion", &|q| occlusion(&scene, q));
-    measure("closest_hit", &|q| closest(&scene, q));
+    measure("occlusion", &|q| occluded_count(&scene, q));
+    measure("closest_hit", &|q| hit_count(&scene, q));
     // `--compare-batching`: both ways of running a batch, whichever the scene chose.
     if args.iter().any(|a| a == "--compare-batching") {
         for mode in [BatchMode::OneByOne, BatchMode::Interleaved] {
             let mut forced = Scene::build(&mesh, quality).unwrap();
             forced.set_traversal(scene.traversal());
             forced.set_batching(Batching { closest_hit: mode, occlusion: mode });
-            measure(&format!("occlusion {mode:?}"), &|q| occlusion(&forced, q));
-            measure(&format!("closest_hit {mode:?}"), &|q| closest(&forced, q));
+            measure(&format!("occlusion {mode:?}"), &|q| occluded_count(&forced, q));
+            measure(&format!("closest_hit {mode:?}"), &|q| hit_count(&forced, q));
         }
     }
 
@@ -152,6 +142,20 @@ fn main() {
         }
         println!("exported {} triangles and {} rays to {}", mesh.triangle_count(), rays.len(), dir.display());
     }
+}
+
+/// Rays of a batch that hit something (closest hit through the batch API).
+fn hit_count(scene: &Scene, queries: &[RayQuery]) -> usize {
+    let mut out = vec![None; queries.len()];
+    scene.closest_hits(queries, &mut out);
+    out.iter().filter(|h| h.is_some()).count()
+}
+
+/// Rays of a batch that are blocked (occlusion through the batch API).
+fn occluded_count(scene: &Scene, queries: &[RayQuery]) -> usize {
+    let mut out = vec![false; queries.len()];
+    scene.occluded_each(queries, &mut out);
+    out.iter().filter(|&&o| o).count()
 }
 
 /// Writes the mesh's triangles for `benches/embree_compare.py` (9 f32 each).
@@ -204,16 +208,8 @@ fn trace_logged(scene: &Scene, log: &str, threads: usize, runs: usize, build: f6
                             chunk
                                 .iter()
                                 .map(|q| match kind {
-                                    LoggedQuery::ClosestHit => {
-                                        let mut out = vec![None; q.len()];
-                                        scene.closest_hits(q, &mut out);
-                                        out.iter().filter(|h| h.is_some()).count()
-                                    }
-                                    LoggedQuery::Occlusion => {
-                                        let mut out = vec![false; q.len()];
-                                        scene.occluded_each(q, &mut out);
-                                        out.iter().filter(|&&o| o).count()
-                                    }
+                                    LoggedQuery::ClosestHit => hit_count(scene, q),
+                                    LoggedQuery::Occlusion => occluded_count(scene, q),
                                 })
                                 .sum::<usize>()
                         })

@@ -279,11 +279,17 @@ impl Choice {
     /// The error a storage had to keep within: the budget, or with the
     /// noise alone over it, the noise and [`OVER_BUDGET_SLACK`].
     pub fn limit(&self) -> f64 {
-        match (self.budget, self.noise_error) {
-            (None, _) => f64::INFINITY,
-            (Some(b), Some(n)) if n > b => n * (1.0 + OVER_BUDGET_SLACK),
-            (Some(b), _) => b,
-        }
+        self.budget.map_or(f64::INFINITY, |b| limit_within(b, self.noise_error))
+    }
+}
+
+/// The error a storage must keep within under `budget`: the budget, or when
+/// the noise alone is over it (no total can then be within it), the noise
+/// and [`OVER_BUDGET_SLACK`].
+fn limit_within(budget: f64, noise_error: Option<f64>) -> f64 {
+    match noise_error {
+        Some(n) if n > budget => n * (1.0 + OVER_BUDGET_SLACK),
+        _ => budget,
     }
 }
 
@@ -325,16 +331,12 @@ pub fn choose_within_total(
     let measured: Vec<Candidate> =
         storages.par_iter().map(|s| measure_against(transfer, order, channels, s, lightings, noise, shaded.as_deref())).collect();
     drop(shaded);
-    let counted = |c: &Candidate| c.total_error.unwrap_or(c.shaded_error);
-    let smallest_within = |limit: f64| {
-        measured
-            .iter()
-            .filter(|c| counted(c) <= limit)
-            .min_by(|a, b| a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error)))
-    };
     let noise_error = noise.map(|n| n.iter().copied().fold(0.0, f64::max));
-    let over = noise_error.filter(|&n| n > budget);
-    let fitting = smallest_within(budget).or_else(|| over.and_then(|n| smallest_within(n * (1.0 + OVER_BUDGET_SLACK))));
+    let limit = limit_within(budget, noise_error);
+    let fitting = measured
+        .iter()
+        .filter(|c| c.total_error.unwrap_or(c.shaded_error) <= limit)
+        .min_by(|a, b| a.bytes_per_vertex.cmp(&b.bytes_per_vertex).then(a.shaded_error.total_cmp(&b.shaded_error)));
     let chosen = match fitting {
         Some(c) => c.clone(),
         None => measure(transfer, order, channels, &Storage { order, channels, quantization: Quantization::F32 }, lightings, noise),

@@ -1,7 +1,8 @@
 //! An optional log of every ray traced through the batch queries, for
 //! tracing the very same rays with another tracer
-//! (`benches/embree_bake_rays.py`): with `PRTBAKE_LOG_RAYS=FILE` set, each
-//! batch appends its rays to FILE, 32 bytes a ray: origin, direction and
+//! (`benches/embree_bake_rays.py`): with `PRTBAKE_LOG_RAYS=FILE` set (a file
+//! that does not exist yet: it never replaces one), each batch appends its
+//! rays to FILE, 32 bytes a ray: origin, direction and
 //! reach as little-endian f32, then the query (0 closest hit, 1 occlusion)
 //! as a u32. A batch is written whole, so a point's rays stay together; the
 //! order of batches follows the threads. Unset, it costs one load of a
@@ -28,10 +29,11 @@ static LOG: OnceLock<Option<Mutex<File>>> = OnceLock::new();
 fn log() -> Option<&'static Mutex<File>> {
     LOG.get_or_init(|| {
         let path = std::env::var_os("PRTBAKE_LOG_RAYS")?;
-        match File::create(&path) {
+        // A new file only: the log never replaces one (a mesh named by mistake).
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
             Ok(file) => Some(Mutex::new(file)),
             Err(e) => {
-                eprintln!("warning: PRTBAKE_LOG_RAYS={}: cannot create: {e}; no rays are logged", path.to_string_lossy());
+                eprintln!("warning: PRTBAKE_LOG_RAYS={}: cannot create a new file: {e}; no rays are logged", path.to_string_lossy());
                 None
             }
         }
