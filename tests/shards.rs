@@ -368,6 +368,14 @@ fn sharded_texel_transfer_merges_into_the_single_process_bundle() {
         std::fs::create_dir(&work).unwrap();
         let merged = sharded_bake(&work, &mesh, &args, 2, 2);
         assert!(std::fs::read(&merged).unwrap() == expected, "{name}, 2 shards: the merged texel bundle differs");
+        // The pilot stage traces the vertices' points only when their own
+        // allocation reads them; the texels' always.
+        let probe = work.join("probe.prtp");
+        let mut a = vec!["bake", s(&mesh), "-o", s(&probe), "--shard", "0/2", "--round", "pilot", "--json"];
+        a.extend(&args);
+        let shown: serde_json::Value = serde_json::from_str(&run(&a)).unwrap();
+        assert_eq!(shown["rays"].as_u64() == Some(0), name == "grown-only", "{name}: {shown}");
+        assert!(shown["texels"]["rays"].as_u64() > Some(0), "{name}: {shown}");
     }
     // A texel size per chart (`--texel-levels`): every shard's round 0 (and
     // pilot stage) runs the pilot, later rounds repack the atlas by the

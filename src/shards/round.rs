@@ -17,7 +17,7 @@ use crate::bake::noise::{Moments, VertexDc};
 use crate::bake::progress::Progress;
 use crate::bake::sun::SunPlan;
 use crate::bake::texels::TexelTransferPlan;
-use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, SourceRows};
+use crate::bake::transfer::{adaptive_range, run_range, trace_tasks, HitRecords, HitSlots, Plan, RangeSums, SourceRows};
 use crate::bake::{BakeError, Surfaces, TexelSunPlan};
 use crate::mesh::Mesh;
 use crate::trace::Scene;
@@ -215,7 +215,11 @@ pub fn bake_transfer_shard(
         Stage::Pilot => format!("shard {shard}, pilot"),
         Stage::Round(r) => format!("shard {shard}, round {r}/{}", params.bounces),
     };
-    let progress = Progress::start(label, (points.end - points.start) * params.rays as u64, params.quiet);
+    // A pilot stage that only texels read (`--adaptive 0 --texel-adaptive`)
+    // traces no vertex points: nothing reads their pilot rows.
+    let vertices_traced = stage != Stage::Pilot || adaptive;
+    let vertex_rays = if vertices_traced { (points.end - points.start) * params.rays as u64 } else { 0 };
+    let progress = Progress::start(label, vertex_rays, params.quiet);
     let first_items = plan.items.first_items(&plan.receivers());
     let sums = match (&base_items, round) {
         // Adaptive round 0: the base points again (the same bits as the
@@ -226,6 +230,7 @@ pub fn bake_transfer_shard(
             let tasks = trace_tasks(&base_pass, range.clone(), &mut hits, &progress);
             adaptive_range(&plan, base, extra, range.clone(), tasks, hits.records, Some(&first_items), &source, record, &progress)
         }
+        _ if !vertices_traced => RangeSums::empty(&plan.pass(round, &source, &rejected, None, record)),
         _ => {
             let cached = input.as_ref().map(|i| HitRecords { records: &i.hits.records, first_point: points.start });
             let pass = plan.pass(round, &source, &rejected, cached, record);
