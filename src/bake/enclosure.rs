@@ -16,8 +16,11 @@ use crate::sampling::{cosine_hemisphere, sample_2d};
 use crate::trace::scene::Scene;
 
 /// Per side of a point (0 front, 1 back of its face), how many of its rays
-/// escaped to the sky without meeting glass and how many met an opaque surface first.
-#[derive(Default)]
+/// escaped to the sky without meeting glass and how many met an opaque
+/// surface first. The transfer bake sums them over the sample points of one
+/// triangle (or one texel) before it decides: a point's own ~32 rays a side
+/// are too few where a side sees a little open sky through a gap.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Sides {
     pub escaped: [u32; 2],
     pub opaque: [u32; 2],
@@ -37,6 +40,15 @@ impl Sides {
             None => self.escaped[side] += 1,
             Some(t) if surfaces.window_transmittance[t as usize].is_none() => self.opaque[side] += 1,
             Some(_) => {}
+        }
+    }
+
+    /// Adds another point's counts (the verdict pooled over several points).
+    #[inline]
+    pub fn add(&mut self, other: &Sides) {
+        for side in 0..2 {
+            self.escaped[side] += other.escaped[side];
+            self.opaque[side] += other.opaque[side];
         }
     }
 

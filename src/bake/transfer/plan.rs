@@ -4,6 +4,7 @@
 use super::items::*;
 use super::normalise::*;
 use super::run::*;
+use crate::bake::enclosure::Sides;
 use crate::bake::gather::Gather;
 use crate::bake::noise::VertexDc;
 use crate::bake::progress::Progress;
@@ -125,6 +126,7 @@ impl<'a> Plan<'a> {
             record_hits: bounce == 0 && record_hits,
             track_noise: self.items.corners() == 3,
             windows: self.windows.as_ref(),
+            base_sides: None,
         }
     }
 }
@@ -204,8 +206,17 @@ pub(crate) fn adaptive_range(
     // The extra points, as items of their own (samples n..n + e), traced
     // into their unified slots.
     let extra_items = Items::extras(base, extra, &plan.items, range.clone());
+    // Window mode: an extra item's enclosure verdict pools its triangle's base points too.
+    let mut base_sides = vec![Sides::default(); if pass.splits_sides(0) { range.len() } else { 0 }];
+    for (start, task) in &base_tasks {
+        for (local, sides) in task.sides.iter().enumerate() {
+            base_sides[start + local - range.start] = *sides;
+        }
+    }
+    let extra_base_sides: Vec<Sides> = base_sides.iter().zip(range.clone()).filter(|&(_, k)| extra[k] > 0).map(|(s, _)| *s).collect();
     let extra_tasks = {
-        let extra_pass = Pass { items: &extra_items, ..plan.pass(0, source, &[], None, record_hits) };
+        let base_sides = (!base_sides.is_empty()).then_some(&extra_base_sides[..]);
+        let extra_pass = Pass { items: &extra_items, base_sides, ..plan.pass(0, source, &[], None, record_hits) };
         trace_tasks_scattered(&extra_pass, &mut records, unified_start, progress)
     };
     // Per item of the range, its extra item's task and place in the task

@@ -59,8 +59,11 @@ pub(crate) struct Traced {
     pub(crate) back_dc: f32,
     /// Window mode, bounce 0: the DC (first channel) of the light through
     /// glass the point's sides kept, and that of sides found outside the
-    /// enclosure, dropped ([`Sides::outside`]).
+    /// enclosure, dropped ([`Sides::outside`]); set by [`Pass::keep_sides`].
     pub(crate) glass_dc: [f32; 2],
+    /// Window mode, bounce 0: what the point's rays met on each side, for
+    /// the verdict [`Pass::keep_sides`] takes (pooled over the point's item).
+    pub(crate) sides: Sides,
 }
 
 /// One point rays leave from.
@@ -104,6 +107,9 @@ pub(crate) struct Pass<'a> {
     pub(crate) track_noise: bool,
     /// Window triangles to sample directly for bounce 0 (window mode).
     pub(crate) windows: Option<&'a WindowLights>,
+    /// Window mode's bounce 0 over adaptive allocation's extra points: per
+    /// item, what its triangle's base points met, pooled into the extras' verdict.
+    pub(crate) base_sides: Option<&'a [Sides]>,
 }
 
 /// What one task returns: per item and corner, weighted coefficient sums and weights.
@@ -123,6 +129,9 @@ pub(crate) struct TaskOutput {
     pub(crate) moments: Vec<Moments>,
     /// Summed [`Traced::glass_dc`] of the task's points: kept, dropped.
     pub(crate) glass_dc: [f64; 2],
+    /// Window mode's bounce 0 on interior items: per item, what its points
+    /// met on each side, pooled (see [`Pass::keep_sides`]); else empty.
+    pub(crate) sides: Vec<Sides>,
 }
 
 /// Bounce 0's hit records of the points from `first_point` on (a whole
@@ -362,6 +371,23 @@ pub(crate) fn trace_tasks_scattered(
         .collect()
 }
 
+/// Adds one point's estimate `result` to the three corners of item `local`
+/// of a task, with the corner weights `weights`, and its glass light to the task's.
+#[inline]
+fn add_point(out: &mut TaskOutput, local: usize, weights: [f32; 3], traced: &Traced, result: &[f32], stride: usize) {
+    out.glass_dc[0] += traced.glass_dc[0] as f64;
+    out.glass_dc[1] += traced.glass_dc[1] as f64;
+    let dc = result[0];
+    for (corner, w) in weights.into_iter().enumerate() {
+        out.weights[local * 3 + corner] += w;
+        if let Some(moments) = out.moments.get_mut(local * 3 + corner) {
+            moments.add(w, dc, traced.back_dc);
+        }
+        let dst = &mut out.sums[(local * 3 + corner) * stride..][..stride];
+        dst.iter_mut().zip(result).for_each(|(d, r)| *d += w * r);
+    }
+}
+
 impl<'a> Pass<'a> {
     /// The same pass over other items (adaptive allocation's base layout).
     pub(crate) fn with_items(self, items: &'a Items) -> Pass<'a> {
@@ -382,11 +408,14 @@ impl Pass<'_> {
             rays: 0,
             traced: 0,
             glass_dc: [0.0; 2],
+            sides: Vec::new(),
             hits: Vec::new(),
             moments: if self.track_noise { vec![Moments::default(); (end - start) * corners] } else { Vec::new() },
         };
         let mut point_result = vec![0.0f32; stride];
         let mut scratch = Scratch { basis: vec![0.0f32; self.coeffs], ..Scratch::default() };
+        let mut waiting: Vec<([f32; 3], Traced)> = Vec::new();
+        let mut waiting_light: Vec<f32> = Vec::new();
         for item in start..end {
             let local = item - start;
             match self.items {
@@ -401,7 +430,12 @@ impl Pass<'_> {
                             face_normal: normal,
                             seed: hash_seed(&[self.params.seed, TAG_DIRECTION, v as u32, u32::MAX]),
                         };
-                        let traced = self.trace_point(&point, bounce, false, &mut point_result, &mut scratch, &mut out.hits);
+                        let mut traced = self.trace_point(&point, bounce, false, &mut point_result, &mut scratch, &mut out.hits);
+                        if self.splits_sides(bounce) {
+                            let [front, back] = &scratch.side_light;
+                            let own = traced.sides;
+                            self.keep_sides(&own, [front, back], &mut point_result, &mut traced);
+                        }
                         out.traced += traced.rays;
                     }
                     out.rays += self.params.rays as u64;
@@ -417,6 +451,12 @@ impl Pass<'_> {
                     let [na, nb, nc] = [ia, ib, ic].map(|i| self.mesh.normals[i as usize]);
                     let face_normal = self.face_normal(t);
                     let area = triangle_area(self.mesh, t);
+                    // Window mode's bounce 0: the points wait, each side's light
+                    // apart, for the enclosure verdict pooled over the triangle's points.
+                    let pool = self.splits_sides(bounce);
+                    let mut pooled = self.base_sides.map_or(Sides::default(), |base| base[item]);
+                    waiting.clear();
+                    waiting_light.clear();
                     for s in 0..count {
                         let global = first_sample + s;
                         if bounce > 0 && self.rejected[global as usize] {
@@ -438,21 +478,27 @@ impl Pass<'_> {
                         };
                         out.rays += self.params.rays as u64;
                         out.traced += traced.rays;
-                        out.glass_dc[0] += traced.glass_dc[0] as f64;
-                        out.glass_dc[1] += traced.glass_dc[1] as f64;
                         if traced.inside {
                             out.rejected.push(global);
                             continue;
                         }
-                        let dc = point_result[0];
-                        for (corner, w) in point_weights(b, area, weight_count).into_iter().enumerate() {
-                            out.weights[local * 3 + corner] += w;
-                            if let Some(moments) = out.moments.get_mut(local * 3 + corner) {
-                                moments.add(w, dc, traced.back_dc);
-                            }
-                            let dst = &mut out.sums[(local * 3 + corner) * stride..][..stride];
-                            dst.iter_mut().zip(&point_result).for_each(|(d, r)| *d += w * r);
+                        if pool {
+                            pooled.add(&traced.sides);
+                            waiting.push((b, traced));
+                            waiting_light.extend_from_slice(&scratch.side_light[0]);
+                            waiting_light.extend_from_slice(&scratch.side_light[1]);
+                            continue;
                         }
+                        add_point(&mut out, local, point_weights(b, area, weight_count), &traced, &point_result, stride);
+                    }
+                    for (k, (b, mut traced)) in waiting.drain(..).enumerate() {
+                        let light = &waiting_light[2 * k * stride..][..2 * stride];
+                        point_result.fill(0.0);
+                        self.keep_sides(&pooled, [&light[..stride], &light[stride..]], &mut point_result, &mut traced);
+                        add_point(&mut out, local, point_weights(b, area, weight_count), &traced, &point_result, stride);
+                    }
+                    if pool {
+                        out.sides.push(pooled);
                     }
                 }
             }
@@ -526,7 +572,7 @@ impl Pass<'_> {
         // Window mode keeps bounce 0's light of the point's two sides apart,
         // to drop that of a side outside the enclosure (`Sides::outside`)
         // and to tell the back side's share.
-        let split_sides = window_mode && bounce == 0;
+        let split_sides = self.splits_sides(bounce);
         // Bounces ≥ 1 in window mode: the DC the back side's rays gather.
         let mut back_dc = 0.0f32;
         let mut sides = Sides::default();
@@ -627,22 +673,36 @@ impl Pass<'_> {
         if let Some(windows) = sample_windows {
             traced += self.add_window_light(point, windows, if split_sides { None } else { Some(&mut *result) }, scratch);
         }
-        let mut glass_dc = [0.0f32; 2];
-        if split_sides {
-            // Only the sides inside the enclosure keep their light through glass.
-            for side in 0..2 {
-                if params.keep_outside_sides || !sides.outside(side) {
-                    result.iter_mut().zip(&scratch.side_light[side]).for_each(|(r, l)| *r += l);
-                    glass_dc[0] += scratch.side_light[side][0];
-                    if side == 1 {
-                        back_dc = scratch.side_light[1][0];
-                    }
-                } else {
-                    glass_dc[1] += scratch.side_light[side][0];
+        // Window mode's bounce 0 leaves the two sides' light in `scratch`
+        // for `keep_sides`, which adds it to the estimate once the verdict is in.
+        Traced { rays: traced, inside: false, back_dc: back_dc / self.channels as f32, glass_dc: [0.0; 2], sides }
+    }
+
+    /// Window mode, bounce 0: true when [`Pass::trace_point`] leaves each
+    /// side's light apart for [`Pass::keep_sides`].
+    #[inline]
+    pub(crate) fn splits_sides(&self, bounce: u32) -> bool {
+        self.params.mode == Mode::Window && bounce == 0
+    }
+
+    /// Adds to `result` the light of the sides (`light`: front, back) that
+    /// `verdict` finds inside the enclosure (all with `--keep-outside-sides`),
+    /// and sets `traced`'s back-side DC and kept and dropped glass DC.
+    pub(crate) fn keep_sides(&self, verdict: &Sides, light: [&[f32]; 2], result: &mut [f32], traced: &mut Traced) {
+        let mut back_dc = 0.0;
+        traced.glass_dc = [0.0; 2];
+        for side in 0..2 {
+            if self.params.keep_outside_sides || !verdict.outside(side) {
+                result.iter_mut().zip(light[side]).for_each(|(r, l)| *r += l);
+                traced.glass_dc[0] += light[side][0];
+                if side == 1 {
+                    back_dc = light[1][0];
                 }
+            } else {
+                traced.glass_dc[1] += light[side][0];
             }
         }
-        Traced { rays: traced, inside: false, back_dc: back_dc / self.channels as f32, glass_dc }
+        traced.back_dc = back_dc / self.channels as f32;
     }
 
     /// `record` marked [`BACK_SIDE`] when, in window mode, its ray toward

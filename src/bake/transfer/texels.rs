@@ -25,9 +25,10 @@ use rayon::prelude::*;
 
 use super::normalise::{SourceRows, TexelRows};
 use super::plan::Plan;
-use super::run::{HitRecords, Pass, Point, Scratch};
+use super::run::{HitRecords, Pass, Point, Scratch, Traced};
 use crate::atlas::coverage::{clip_to_texel, polygon_area, Coverage};
 use crate::atlas::Atlas;
+use crate::bake::enclosure::Sides;
 use crate::bake::gather::RowBuffer;
 use crate::bake::noise::{add_noise_in_quadrature, Moments, VertexDc};
 use crate::bake::texel_lookup::TexelLookup;
@@ -228,21 +229,28 @@ pub(crate) struct TexelSums {
     pub(crate) rays: u64,
     pub(crate) traced: u64,
     pub(crate) hits: Vec<u64>,
+    /// Window mode's bounce 0: per texel, what its points met on each side,
+    /// pooled into their enclosure verdict; else empty.
+    pub(crate) sides: Vec<Sides>,
 }
 
+/// Traces (or gathers) the points of the covered texels `texels`.
+/// `base_sides` (per texel of the range): what the texel's points traced
+/// before met, pooled into these points' enclosure verdict (grown texels' extras).
 pub(crate) fn run_texel_pass(
     pass: &Pass,
     points: &TexelPoints,
     texel_ids: &[u32],
     texels: Range<usize>,
     rejected: &mut [bool],
+    base_sides: Option<&[Sides]>,
     progress: &crate::bake::progress::Progress,
 ) -> TexelSums {
     let bounce = pass.bounce;
     let stride = pass.channels * pass.coeffs;
     let first = texels.start;
     let texels = texels.len();
-    type Task = (Vec<f32>, Vec<f32>, Vec<Moments>, Vec<u32>, u64, u64, Vec<u64>);
+    type Task = (Vec<f32>, Vec<f32>, Vec<Moments>, Vec<u32>, u64, u64, Vec<u64>, Vec<Sides>);
     let tasks: Vec<Task> = (0..texels.div_ceil(TEXELS_PER_TASK))
         .into_par_iter()
         .map(|task| {
@@ -255,8 +263,17 @@ pub(crate) fn run_texel_pass(
             let mut result = vec![0.0f32; stride];
             let mut scratch = Scratch { basis: vec![0.0f32; pass.coeffs], ..Scratch::default() };
             let mut hits = Vec::with_capacity(pass.record_count((points.start[range.end] - points.start[range.start]) as usize));
+            // Window mode's bounce 0: a texel's points wait, each side's light
+            // apart, for the enclosure verdict pooled over the texel's points.
+            let pool = pass.splits_sides(bounce);
+            let mut waiting: Vec<(f32, Traced)> = Vec::new();
+            let mut waiting_light: Vec<f32> = Vec::new();
+            let mut sides = Vec::new();
             for (local, texel) in range.clone().enumerate() {
                 let first_index = points.first_index.get(texel).copied().unwrap_or(0);
+                let mut pooled = base_sides.map_or(Sides::default(), |base| base[texel - first]);
+                waiting.clear();
+                waiting_light.clear();
                 for (k, p) in (points.start[texel]..points.start[texel + 1]).enumerate() {
                     if bounce > 0 && rejected[p as usize] {
                         continue;
@@ -289,13 +306,31 @@ pub(crate) fn run_texel_pass(
                         inside.push(p);
                         continue;
                     }
+                    if pool {
+                        pooled.add(&point_traced.sides);
+                        waiting.push((tp.weight, point_traced));
+                        waiting_light.extend_from_slice(&scratch.side_light[0]);
+                        waiting_light.extend_from_slice(&scratch.side_light[1]);
+                        continue;
+                    }
                     weights[local] += tp.weight;
                     moments[local].add(tp.weight, result[0], point_traced.back_dc);
                     sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
                 }
+                for (k, (weight, mut point_traced)) in waiting.drain(..).enumerate() {
+                    let light = &waiting_light[2 * k * stride..][..2 * stride];
+                    result.fill(0.0);
+                    pass.keep_sides(&pooled, [&light[..stride], &light[stride..]], &mut result, &mut point_traced);
+                    weights[local] += weight;
+                    moments[local].add(weight, result[0], point_traced.back_dc);
+                    sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += weight * r);
+                }
+                if pool {
+                    sides.push(pooled);
+                }
             }
             progress.add(rays);
-            (sums, weights, moments, inside, rays, traced, hits)
+            (sums, weights, moments, inside, rays, traced, hits, sides)
         })
         .collect();
     let mut out = TexelSums {
@@ -305,8 +340,10 @@ pub(crate) fn run_texel_pass(
         rays: 0,
         traced: 0,
         hits: Vec::new(),
+        sides: Vec::new(),
     };
-    for (sums, weights, moments, inside, rays, traced, hits) in tasks {
+    for (sums, weights, moments, inside, rays, traced, hits, sides) in tasks {
+        out.sides.extend(sides);
         out.sums.extend(sums);
         out.weights.extend(weights);
         out.moments.extend(moments);
@@ -439,7 +476,7 @@ impl TexelState {
         let label = format!("texels, bounce {}/{}", pass.bounce, pass.params.bounces);
         let clock = std::time::Instant::now();
         let progress = crate::bake::progress::Progress::start(label, points * pass.params.rays as u64, pass.params.quiet);
-        let mut sums = run_texel_pass(pass, &self.points, &self.texels, 0..self.texels.len(), &mut self.rejected, &progress);
+        let mut sums = run_texel_pass(pass, &self.points, &self.texels, 0..self.texels.len(), &mut self.rejected, None, &progress);
         if pass.bounce == 0 && self.footprints.is_some() {
             let dc_sums = sums.sums.iter().step_by(pass.channels * pass.coeffs).map(|&s| f64::from(s)).collect();
             if let Some(growth) = self.grow(pass.mesh, &sums.weights, dc_sums, &sums.moments, pass.params) {
@@ -567,11 +604,12 @@ impl TexelState {
     ) -> TexelSums {
         let (mut sums, base_rejected) = base.unwrap_or_else(|| {
             let mut rejected = vec![false; growth.base.len()];
-            let sums = run_texel_pass(pass, &growth.base, &self.texels, range.clone(), &mut rejected, progress);
+            let sums = run_texel_pass(pass, &growth.base, &self.texels, range.clone(), &mut rejected, None, progress);
             (sums, rejected)
         });
         let mut extra_rejected = vec![false; growth.extra.len()];
-        let extra = run_texel_pass(pass, &growth.extra, &self.texels, range.clone(), &mut extra_rejected, progress);
+        let base_sides = (!sums.sides.is_empty()).then_some(&sums.sides[..]);
+        let extra = run_texel_pass(pass, &growth.extra, &self.texels, range.clone(), &mut extra_rejected, base_sides, progress);
         let stride = pass.channels * pass.coeffs;
         for (local, &k) in growth.factors[range.clone()].iter().enumerate() {
             let row = local * stride..(local + 1) * stride;
@@ -637,7 +675,7 @@ impl TexelState {
     /// Bounce `pass.bounce` over covered texels `texels`, the sums left
     /// unnormalised for the merge; bounce 0 marks the points inside geometry.
     pub(crate) fn trace_range(&mut self, pass: &Pass, texels: Range<usize>, progress: &crate::bake::progress::Progress) -> TexelSums {
-        run_texel_pass(pass, &self.points, &self.texels, texels, &mut self.rejected, progress)
+        run_texel_pass(pass, &self.points, &self.texels, texels, &mut self.rejected, None, progress)
     }
 
     /// What a later round gathers at hits on atlas triangles: the merged
