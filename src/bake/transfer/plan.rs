@@ -206,17 +206,14 @@ pub(crate) fn adaptive_range(
     // The extra points, as items of their own (samples n..n + e), traced
     // into their unified slots.
     let extra_items = Items::extras(base, extra, &plan.items, range.clone());
-    // Window mode: an extra item's enclosure verdict pools its triangle's base points too.
-    let mut base_sides = vec![Sides::default(); if pass.splits_sides(0) { range.len() } else { 0 }];
-    for (start, task) in &base_tasks {
-        for (local, sides) in task.sides.iter().enumerate() {
-            base_sides[start + local - range.start] = *sides;
-        }
-    }
-    let extra_base_sides: Vec<Sides> = base_sides.iter().zip(range.clone()).filter(|&(_, k)| extra[k] > 0).map(|(s, _)| *s).collect();
+    // Window mode: an extra item's enclosure verdict pools its triangle's
+    // base points too (the base tasks' counts, per item in item order).
+    let base_sides: Option<Vec<Sides>> = pass.splits_sides(0).then(|| {
+        let per_item = base_tasks.iter().flat_map(|(start, task)| task.sides.iter().enumerate().map(move |(local, s)| (start + local, *s)));
+        per_item.filter(|&(k, _)| extra[k] > 0).map(|(_, s)| s).collect()
+    });
     let extra_tasks = {
-        let base_sides = (!base_sides.is_empty()).then_some(&extra_base_sides[..]);
-        let extra_pass = Pass { items: &extra_items, base_sides, ..plan.pass(0, source, &[], None, record_hits) };
+        let extra_pass = Pass { items: &extra_items, base_sides: base_sides.as_deref(), ..plan.pass(0, source, &[], None, record_hits) };
         trace_tasks_scattered(&extra_pass, &mut records, unified_start, progress)
     };
     // Per item of the range, its extra item's task and place in the task

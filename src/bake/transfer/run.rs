@@ -388,6 +388,49 @@ fn add_point(out: &mut TaskOutput, local: usize, weights: [f32; 3], traced: &Tra
     }
 }
 
+/// Window mode's bounce 0: the points of one triangle (or texel), each
+/// side's light kept apart, waiting for the enclosure verdict pooled over
+/// their rays; `K` is what the caller needs to add a point's estimate.
+pub(crate) struct WaitingPoints<K> {
+    /// What the points' rays met on each side, with the prior counts they started from.
+    pub(crate) sides: Sides,
+    points: Vec<(K, Traced)>,
+    light: Vec<f32>,
+}
+
+impl<K> WaitingPoints<K> {
+    pub(crate) fn new() -> WaitingPoints<K> {
+        WaitingPoints { sides: Sides::default(), points: Vec::new(), light: Vec::new() }
+    }
+
+    /// Starts another triangle or texel, from counts `prior` (its points traced before, if any).
+    pub(crate) fn start(&mut self, prior: Sides) {
+        self.sides = prior;
+        self.points.clear();
+        self.light.clear();
+    }
+
+    /// Holds a point that [`Pass::trace_point`] just traced: its counts and its sides' light.
+    pub(crate) fn hold(&mut self, key: K, traced: Traced, side_light: &[Vec<f32>; 2]) {
+        self.sides.add(&traced.sides);
+        self.points.push((key, traced));
+        self.light.extend_from_slice(&side_light[0]);
+        self.light.extend_from_slice(&side_light[1]);
+    }
+
+    /// Each held point's estimate under the pooled verdict (`result` is the
+    /// buffer it is made in), handed to `add` in the order the points came.
+    pub(crate) fn release(&mut self, pass: &Pass, result: &mut [f32], mut add: impl FnMut(K, &Traced, &[f32])) {
+        let stride = result.len();
+        for (k, (key, mut traced)) in self.points.drain(..).enumerate() {
+            let light = &self.light[2 * k * stride..][..2 * stride];
+            result.fill(0.0);
+            pass.keep_sides(&self.sides, [&light[..stride], &light[stride..]], result, &mut traced);
+            add(key, &traced, result);
+        }
+    }
+}
+
 impl<'a> Pass<'a> {
     /// The same pass over other items (adaptive allocation's base layout).
     pub(crate) fn with_items(self, items: &'a Items) -> Pass<'a> {
@@ -414,8 +457,7 @@ impl Pass<'_> {
         };
         let mut point_result = vec![0.0f32; stride];
         let mut scratch = Scratch { basis: vec![0.0f32; self.coeffs], ..Scratch::default() };
-        let mut waiting: Vec<([f32; 3], Traced)> = Vec::new();
-        let mut waiting_light: Vec<f32> = Vec::new();
+        let mut waiting = WaitingPoints::new();
         for item in start..end {
             let local = item - start;
             match self.items {
@@ -454,9 +496,7 @@ impl Pass<'_> {
                     // Window mode's bounce 0: the points wait, each side's light
                     // apart, for the enclosure verdict pooled over the triangle's points.
                     let pool = self.splits_sides(bounce);
-                    let mut pooled = self.base_sides.map_or(Sides::default(), |base| base[item]);
-                    waiting.clear();
-                    waiting_light.clear();
+                    waiting.start(self.base_sides.map_or(Sides::default(), |base| base[item]));
                     for s in 0..count {
                         let global = first_sample + s;
                         if bounce > 0 && self.rejected[global as usize] {
@@ -483,22 +523,16 @@ impl Pass<'_> {
                             continue;
                         }
                         if pool {
-                            pooled.add(&traced.sides);
-                            waiting.push((b, traced));
-                            waiting_light.extend_from_slice(&scratch.side_light[0]);
-                            waiting_light.extend_from_slice(&scratch.side_light[1]);
+                            waiting.hold(b, traced, &scratch.side_light);
                             continue;
                         }
                         add_point(&mut out, local, point_weights(b, area, weight_count), &traced, &point_result, stride);
                     }
-                    for (k, (b, mut traced)) in waiting.drain(..).enumerate() {
-                        let light = &waiting_light[2 * k * stride..][..2 * stride];
-                        point_result.fill(0.0);
-                        self.keep_sides(&pooled, [&light[..stride], &light[stride..]], &mut point_result, &mut traced);
-                        add_point(&mut out, local, point_weights(b, area, weight_count), &traced, &point_result, stride);
-                    }
                     if pool {
-                        out.sides.push(pooled);
+                        waiting.release(self, &mut point_result, |b, traced, result| {
+                            add_point(&mut out, local, point_weights(b, area, weight_count), traced, result, stride)
+                        });
+                        out.sides.push(waiting.sides);
                     }
                 }
             }

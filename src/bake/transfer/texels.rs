@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use super::normalise::{SourceRows, TexelRows};
 use super::plan::Plan;
-use super::run::{HitRecords, Pass, Point, Scratch, Traced};
+use super::run::{HitRecords, Pass, Point, Scratch, WaitingPoints};
 use crate::atlas::coverage::{clip_to_texel, polygon_area, Coverage};
 use crate::atlas::Atlas;
 use crate::bake::enclosure::Sides;
@@ -266,14 +266,17 @@ pub(crate) fn run_texel_pass(
             // Window mode's bounce 0: a texel's points wait, each side's light
             // apart, for the enclosure verdict pooled over the texel's points.
             let pool = pass.splits_sides(bounce);
-            let mut waiting: Vec<(f32, Traced)> = Vec::new();
-            let mut waiting_light: Vec<f32> = Vec::new();
+            let mut waiting = WaitingPoints::new();
             let mut sides = Vec::new();
+            // Adds a point's estimate, with its weight, to texel `local`.
+            let mut add = |local: usize, weight: f32, back_dc: f32, result: &[f32]| {
+                weights[local] += weight;
+                moments[local].add(weight, result[0], back_dc);
+                sums[local * stride..(local + 1) * stride].iter_mut().zip(result).for_each(|(s, r)| *s += weight * r);
+            };
             for (local, texel) in range.clone().enumerate() {
                 let first_index = points.first_index.get(texel).copied().unwrap_or(0);
-                let mut pooled = base_sides.map_or(Sides::default(), |base| base[texel - first]);
-                waiting.clear();
-                waiting_light.clear();
+                waiting.start(base_sides.map_or(Sides::default(), |base| base[texel - first]));
                 for (k, p) in (points.start[texel]..points.start[texel + 1]).enumerate() {
                     if bounce > 0 && rejected[p as usize] {
                         continue;
@@ -282,9 +285,7 @@ pub(crate) fn run_texel_pass(
                     let tp = points.points[p as usize];
                     if let Some(back_dc) = pass.gather_cached(p as u64, &mut result) {
                         rays += pass.params.rays as u64;
-                        weights[local] += tp.weight;
-                        moments[local].add(tp.weight, result[0], back_dc);
-                        sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
+                        add(local, tp.weight, back_dc, &result);
                         continue;
                     }
                     let [ia, ib, ic] = pass.mesh.triangle(tp.triangle as usize);
@@ -307,26 +308,14 @@ pub(crate) fn run_texel_pass(
                         continue;
                     }
                     if pool {
-                        pooled.add(&point_traced.sides);
-                        waiting.push((tp.weight, point_traced));
-                        waiting_light.extend_from_slice(&scratch.side_light[0]);
-                        waiting_light.extend_from_slice(&scratch.side_light[1]);
+                        waiting.hold(tp.weight, point_traced, &scratch.side_light);
                         continue;
                     }
-                    weights[local] += tp.weight;
-                    moments[local].add(tp.weight, result[0], point_traced.back_dc);
-                    sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += tp.weight * r);
-                }
-                for (k, (weight, mut point_traced)) in waiting.drain(..).enumerate() {
-                    let light = &waiting_light[2 * k * stride..][..2 * stride];
-                    result.fill(0.0);
-                    pass.keep_sides(&pooled, [&light[..stride], &light[stride..]], &mut result, &mut point_traced);
-                    weights[local] += weight;
-                    moments[local].add(weight, result[0], point_traced.back_dc);
-                    sums[local * stride..(local + 1) * stride].iter_mut().zip(&result).for_each(|(s, r)| *s += weight * r);
+                    add(local, tp.weight, point_traced.back_dc, &result);
                 }
                 if pool {
-                    sides.push(pooled);
+                    waiting.release(pass, &mut result, |weight, traced, result| add(local, weight, traced.back_dc, result));
+                    sides.push(waiting.sides);
                 }
             }
             progress.add(rays);
